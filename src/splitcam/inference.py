@@ -1,0 +1,183 @@
+"""Tiled reconstruction: run a network on a large raw image with bounded peak memory.
+
+The image is cut into overlapping tiles that are reconstructed one at a time and written into a
+preallocated result. Two things make the tiled result equal the untiled one up to float error:
+
+- every tile starts at a multiple of the period, because the networks assign position classes
+  from tile-local coordinates (and the packed network groups pixels into cells from there);
+- every output pixel is taken from a tile in which it lies at least ``overlap >=
+  net.receptive_radius`` pixels from each tile edge that is not an image edge, so zero padding at
+  tile edges never reaches it.
+"""
+
+from __future__ import annotations
+
+from numbers import Integral
+from typing import Any, NamedTuple
+
+import torch
+from torch import nn
+
+from splitcam.networks import check_raw
+
+__all__ = ["Span", "reconstruct", "tile_spans"]
+
+
+class Span(NamedTuple):
+    """One tile along one axis: the tile reads ``[start, stop)`` and supplies ``[keep_start,
+    keep_stop)`` of the result."""
+
+    start: int
+    stop: int
+    keep_start: int
+    keep_stop: int
+
+
+def _is_int(value: Any) -> bool:
+    return isinstance(value, Integral) and not isinstance(value, bool)
+
+
+def _ceil_to(value: int, multiple: int) -> int:
+    return -(-value // multiple) * multiple
+
+
+def tile_spans(size: int, tile: int, overlap: int, period: int) -> list[Span]:
+    """Cut one axis of length ``size`` into overlapping tiles.
+
+    Tiles start at multiples of ``period`` and are at most ``tile`` long; the kept parts cover
+    ``[0, size)`` exactly once, and each lies at least ``overlap`` pixels from any end of its tile
+    that is not an end of the axis.
+
+    Args:
+        size: Length of the axis, ``>= 1``.
+        tile: Maximum tile length.
+        overlap: Context to keep on each inner side of a tile.
+        period: The pattern period along this axis.
+
+    Returns:
+        The spans in increasing order; a single span ``(0, size, 0, size)`` if ``size <= tile``.
+
+    Raises:
+        ValueError: ``tile`` is too small to advance by at least one period
+            (``tile < 2 * overlap + period`` when ``size > tile``).
+    """
+    if size <= tile:
+        return [Span(0, size, 0, size)]
+    # The tile after a tile starting at s may start at s + stride and keep from there + overlap,
+    # which the earlier tile still covers with overlap to spare at its far end.
+    stride = (tile - 2 * overlap) // period * period
+    if stride < period:
+        raise ValueError(
+            f"tile={tile} is too small for overlap={overlap} with period {period}: "
+            f"need tile >= {2 * overlap + period}"
+        )
+    spans: list[Span] = []
+    start, keep_start = 0, 0
+    while start + tile < size:
+        keep_stop = start + stride + overlap
+        spans.append(Span(start, start + tile, keep_start, keep_stop))
+        start, keep_start = start + stride, keep_stop
+    # Pull the last tile back so it is as long as allowed; it still starts at a multiple of the
+    # period and no later than the tile it replaces, so its kept part keeps enough context.
+    last_start = _ceil_to(size - tile, period)
+    spans.append(Span(last_start, size, keep_start, size))
+    return spans
+
+
+def _network_period(net: nn.Module) -> tuple[int, int]:
+    period = getattr(net, "period", None)
+    if (
+        not isinstance(period, tuple)
+        or len(period) != 2
+        or not all(isinstance(p, Integral) and p >= 1 for p in period)
+    ):
+        raise TypeError(f"net must have a `period` attribute (Ph, Pw), got {period!r}")
+    return int(period[0]), int(period[1])
+
+
+def _network_device(net: nn.Module, fallback: torch.device) -> torch.device:
+    for tensor in net.parameters():
+        return tensor.device
+    return fallback
+
+
+def reconstruct(
+    net: nn.Module,
+    raw: torch.Tensor,
+    *,
+    tile: int | None = 512,
+    overlap: int | None = None,
+    progress: bool = False,
+) -> torch.Tensor:
+    """Reconstruct RGB from a raw image in overlapping tiles, without autograd.
+
+    The network's mode (train/eval) is left as it is. Tiles are moved to the device of the
+    network's parameters and the result is assembled on the device of ``raw``, so a large image
+    can stay in host memory while a GPU runs the network. All ``N`` images of the batch go through
+    each tile together.
+
+    Args:
+        net: A reconstruction network with ``period`` and ``receptive_radius`` attributes (see
+            :mod:`splitcam.networks`).
+        raw: Raw image batch.
+        tile: Maximum tile height and width in pixels; ``None`` runs the whole image at once, as
+            does an image no larger than one tile.
+        overlap: Context kept around each tile's output; at least ``net.receptive_radius``.
+            Default: ``net.receptive_radius`` rounded up to a multiple of the period (per axis).
+        progress: Show a tqdm progress bar over the tiles.
+
+    Returns:
+        The RGB reconstruction, equal to ``net(raw)`` up to float error.
+
+    Raises:
+        TypeError: ``raw`` is not a floating-point tensor, or ``net`` lacks ``period``.
+        ValueError: ``raw`` has a bad shape, ``tile``/``overlap`` are invalid, ``overlap`` is
+            smaller than the receptive radius, or ``tile`` is too small for the overlap.
+
+    Shape:
+        - raw: ``(N, 1, H, W)``.
+        - Output: ``(N, 3, H, W)``.
+    """
+    check_raw(raw)
+    ph, pw = _network_period(net)
+    radius = int(net.receptive_radius)
+    if tile is not None and (not _is_int(tile) or tile < 1):
+        raise ValueError(f"tile must be a positive integer or None, got {tile!r}")
+    if overlap is None:
+        overlap_h, overlap_w = _ceil_to(radius, ph), _ceil_to(radius, pw)
+    elif not _is_int(overlap) or overlap < radius:
+        raise ValueError(
+            f"overlap must be an integer >= the network's receptive radius {radius}, "
+            f"got {overlap!r}"
+        )
+    else:
+        overlap_h = overlap_w = int(overlap)
+
+    n, _, h, w = raw.shape
+    device = _network_device(net, raw.device)
+    with torch.inference_mode():
+        if tile is None or (h <= tile and w <= tile):
+            return net(raw.to(device)).to(raw.device)
+        rows = tile_spans(h, tile, overlap_h, ph)
+        cols = tile_spans(w, tile, overlap_w, pw)
+        out: torch.Tensor | None = None
+        jobs = [(r, c) for r in rows for c in cols]
+        for r, c in _maybe_progress(jobs, progress):
+            rgb = net(raw[:, :, r.start : r.stop, c.start : c.stop].to(device))
+            if out is None:
+                out = torch.empty((n, rgb.shape[1], h, w), dtype=rgb.dtype, device=raw.device)
+            out[:, :, r.keep_start : r.keep_stop, c.keep_start : c.keep_stop] = rgb[
+                :,
+                :,
+                r.keep_start - r.start : r.keep_stop - r.start,
+                c.keep_start - c.start : c.keep_stop - c.start,
+            ]
+    return out
+
+
+def _maybe_progress(items: list[Any], progress: bool) -> Any:
+    if not progress:
+        return items
+    from tqdm.auto import tqdm
+
+    return tqdm(items, desc="reconstruct", unit="tile")

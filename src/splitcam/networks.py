@@ -1,0 +1,385 @@
+"""Reconstruction networks: raw single-channel sensor images to RGB.
+
+Two architectures share the same convolutional trunk (head conv, ``blocks`` residual blocks, a
+conv, a long skip from the head, tail conv; all 3x3, zero padding, biases, no output activation):
+
+- :class:`ReconNet` (``arch="paper"``, the network of the paper's Fig. 2) first spreads the raw
+  image over ``Ph * Pw`` channels by position class (:class:`PeriodicSampling`) and runs the trunk
+  at full resolution.
+- :class:`PackedReconNet` (``arch="packed"``) rearranges each period cell into channels
+  (:func:`period_unshuffle`), runs the trunk at ``1 / (Ph * Pw)`` of the pixels and rearranges the
+  ``3 * Ph * Pw`` output channels back (:func:`period_shuffle`).
+
+Both store ``period``, report ``receptive_radius`` (what :func:`splitcam.inference.reconstruct`
+needs to tile exactly) and round-trip through ``config()`` / :func:`build_network`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from numbers import Integral
+from typing import Any
+
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+__all__ = [
+    "ARCHITECTURES",
+    "PackedReconNet",
+    "PeriodicSampling",
+    "ReconNet",
+    "build_network",
+    "check_raw",
+    "period_shuffle",
+    "period_unshuffle",
+]
+
+
+def _is_int(value: Any) -> bool:
+    return isinstance(value, Integral) and not isinstance(value, bool)
+
+
+def _as_period(period: Any) -> tuple[int, int]:
+    if (
+        not isinstance(period, (tuple, list))
+        or len(period) != 2
+        or not all(_is_int(p) and p >= 1 for p in period)
+    ):
+        raise ValueError(f"period must be two positive integers (Ph, Pw), got {period!r}")
+    return int(period[0]), int(period[1])
+
+
+def _as_count(value: Any, name: str, minimum: int) -> int:
+    if not _is_int(value) or value < minimum:
+        raise ValueError(f"{name} must be an integer >= {minimum}, got {value!r}")
+    return int(value)
+
+
+def check_raw(raw: Any) -> None:
+    """Raise if ``raw`` is not a floating-point raw image batch.
+
+    Args:
+        raw: The candidate input.
+
+    Raises:
+        TypeError: ``raw`` is not a tensor, or its dtype is not floating point.
+        ValueError: ``raw`` is not of shape ``(N, 1, H, W)`` with ``H, W >= 1``.
+
+    Shape:
+        - raw: ``(N, 1, H, W)``.
+    """
+    if not isinstance(raw, torch.Tensor):
+        raise TypeError(f"expected a torch.Tensor of shape (N, 1, H, W), got {type(raw).__name__}")
+    shape = tuple(raw.shape)
+    if raw.ndim != 4 or shape[1] != 1:
+        raise ValueError(f"expected (N, 1, H, W), got {shape}")
+    if shape[2] < 1 or shape[3] < 1:
+        raise ValueError(f"expected (N, 1, H, W) with H, W >= 1, got {shape}")
+    if not raw.is_floating_point():
+        raise TypeError(f"expected a floating-point raw image, got dtype {raw.dtype}")
+
+
+class PeriodicSampling(nn.Module):
+    """Spread a raw image over one channel per position class of the period.
+
+    Channel ``i * Pw + j`` holds the raw value at every pixel ``(y, x)`` with ``y % Ph == i`` and
+    ``x % Pw == j`` and 0 elsewhere. Classes are counted from the top-left pixel of the input, so
+    a crop must start at a multiple of the period to keep them.
+
+    Args:
+        period: ``(Ph, Pw)``.
+
+    Shape:
+        - Input: ``(N, 1, H, W)``, any ``H, W >= 1``.
+        - Output: ``(N, Ph * Pw, H, W)``.
+    """
+
+    def __init__(self, period: tuple[int, int]) -> None:
+        super().__init__()
+        self.period = _as_period(period)
+
+    def forward(self, raw: torch.Tensor) -> torch.Tensor:
+        ph, pw = self.period
+        h, w = raw.shape[-2:]
+        # A mask costs as much as the multiply it feeds, far less than one conv layer, so it is
+        # rebuilt per call rather than cached for every tile size a tiled run produces.
+        rows = torch.arange(h, device=raw.device) % ph
+        cols = torch.arange(w, device=raw.device) % pw
+        position_class = rows[:, None] * pw + cols[None, :]
+        classes = torch.arange(ph * pw, device=raw.device)[:, None, None]
+        mask = (position_class[None] == classes).to(raw.dtype)
+        return raw * mask
+
+    def extra_repr(self) -> str:
+        return f"period={self.period}"
+
+
+def _rearrange(x: torch.Tensor, period: tuple[int, int], inverse: bool) -> torch.Tensor:
+    """Move period cells into channels (``inverse=False``) or back (``inverse=True``).
+
+    Uses the channel order of :func:`torch.nn.functional.pixel_unshuffle`: channel
+    ``c * Ph * Pw + i * Pw + j`` of cell ``(u, v)`` is pixel ``(u * Ph + i, v * Pw + j)`` of
+    channel ``c``.
+    """
+    ph, pw = period
+    n, c, h, w = x.shape
+    if ph == pw:
+        return F.pixel_shuffle(x, ph) if inverse else F.pixel_unshuffle(x, ph)
+    if inverse:
+        x = x.reshape(n, c // (ph * pw), ph, pw, h, w).permute(0, 1, 4, 2, 5, 3)
+        return x.reshape(n, c // (ph * pw), h * ph, w * pw)
+    x = x.reshape(n, c, h // ph, ph, w // pw, pw).permute(0, 1, 3, 5, 2, 4)
+    return x.reshape(n, c * ph * pw, h // ph, w // pw)
+
+
+def period_unshuffle(x: torch.Tensor, period: tuple[int, int]) -> torch.Tensor:
+    """Pixel-unshuffle with possibly rectangular factors ``(Ph, Pw)``.
+
+    Equals ``F.pixel_unshuffle(x, P)`` when ``Ph == Pw == P``.
+
+    Args:
+        x: Tensor whose height and width are multiples of ``Ph`` and ``Pw``.
+        period: ``(Ph, Pw)``.
+
+    Returns:
+        The rearranged tensor.
+
+    Raises:
+        ValueError: The spatial size is not a multiple of the period.
+
+    Shape:
+        - x: ``(N, C, H, W)``.
+        - Output: ``(N, C * Ph * Pw, H / Ph, W / Pw)``.
+    """
+    period = _as_period(period)
+    if x.ndim != 4 or x.shape[2] % period[0] or x.shape[3] % period[1]:
+        raise ValueError(
+            f"expected (N, C, H, W) with H, W multiples of the period {period}, "
+            f"got {tuple(x.shape)}"
+        )
+    return _rearrange(x, period, inverse=False)
+
+
+def period_shuffle(x: torch.Tensor, period: tuple[int, int]) -> torch.Tensor:
+    """Inverse of :func:`period_unshuffle`.
+
+    Args:
+        x: Tensor whose channel count is a multiple of ``Ph * Pw``.
+        period: ``(Ph, Pw)``.
+
+    Returns:
+        The rearranged tensor.
+
+    Raises:
+        ValueError: The channel count is not a multiple of ``Ph * Pw``.
+
+    Shape:
+        - x: ``(N, C * Ph * Pw, h, w)``.
+        - Output: ``(N, C, h * Ph, w * Pw)``.
+    """
+    period = _as_period(period)
+    if x.ndim != 4 or x.shape[1] % (period[0] * period[1]):
+        raise ValueError(
+            f"expected (N, C * {period[0] * period[1]}, h, w) for the period {period}, "
+            f"got {tuple(x.shape)}"
+        )
+    return _rearrange(x, period, inverse=True)
+
+
+def _conv3x3(in_channels: int, out_channels: int) -> nn.Conv2d:
+    return nn.Conv2d(in_channels, out_channels, kernel_size=3, padding=1, bias=True)
+
+
+def _reach(conv: nn.Conv2d) -> int:
+    """Pixels of context one conv adds on each side (the larger of the two axes)."""
+    return max((k - 1) // 2 * d for k, d in zip(conv.kernel_size, conv.dilation, strict=True))
+
+
+class ResidualBlock(nn.Module):
+    """``x + conv(relu(conv(x)))`` with 3x3 convs keeping ``features`` channels.
+
+    Args:
+        features: Channel count.
+
+    Shape:
+        - Input: ``(N, features, H, W)``.
+        - Output: ``(N, features, H, W)``.
+    """
+
+    def __init__(self, features: int) -> None:
+        super().__init__()
+        self.conv1 = _conv3x3(features, features)
+        self.conv2 = _conv3x3(features, features)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return x + self.conv2(F.relu(self.conv1(x)))
+
+    @property
+    def reach(self) -> int:
+        return _reach(self.conv1) + _reach(self.conv2)
+
+
+class _Trunk(nn.Module):
+    """Head conv, residual blocks, a conv, long skip from the head, tail conv."""
+
+    def __init__(self, in_channels: int, out_channels: int, features: int, blocks: int) -> None:
+        super().__init__()
+        self.head = _conv3x3(in_channels, features)
+        self.blocks = nn.Sequential(*(ResidualBlock(features) for _ in range(blocks)))
+        self.body_out = _conv3x3(features, features)
+        self.tail = _conv3x3(features, out_channels)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        head = self.head(x)
+        return self.tail(head + self.body_out(self.blocks(head)))
+
+    @property
+    def reach(self) -> int:
+        # The skips only shorten paths, so the longest one runs through every conv.
+        body = sum(block.reach for block in self.blocks)
+        return _reach(self.head) + body + _reach(self.body_out) + _reach(self.tail)
+
+
+class ReconNet(nn.Module):
+    """The paper's reconstruction network (Fig. 2): periodic sampling, then a residual CNN.
+
+    Args:
+        period: Splitter pattern period ``(Ph, Pw)``.
+        features: Channels ``F`` of the hidden layers.
+        blocks: Number ``K`` of residual blocks.
+
+    Raises:
+        ValueError: A bad period, ``features < 1`` or ``blocks < 0``.
+
+    Shape:
+        - Input: ``(N, 1, H, W)`` raw image, floating point, any ``H, W >= 1``.
+        - Output: ``(N, 3, H, W)`` RGB.
+    """
+
+    arch = "paper"
+
+    def __init__(self, period: tuple[int, int], features: int = 64, blocks: int = 10) -> None:
+        super().__init__()
+        self.period = _as_period(period)
+        self.features = _as_count(features, "features", 1)
+        self.num_blocks = _as_count(blocks, "blocks", 0)
+        ph, pw = self.period
+        self.sampling = PeriodicSampling(self.period)
+        self.trunk = _Trunk(ph * pw, 3, self.features, self.num_blocks)
+
+    def forward(self, raw: torch.Tensor) -> torch.Tensor:
+        check_raw(raw)
+        return self.trunk(self.sampling(raw))
+
+    @property
+    def receptive_radius(self) -> int:
+        """Pixels of context on each side that can influence an output pixel."""
+        return self.trunk.reach
+
+    def config(self) -> dict[str, Any]:
+        """JSON-serialisable description that :func:`build_network` turns back into this net."""
+        return {
+            "arch": self.arch,
+            "period": list(self.period),
+            "features": self.features,
+            "blocks": self.num_blocks,
+        }
+
+
+class PackedReconNet(nn.Module):
+    """Reconstruction at cell resolution: period cells packed into channels, then the trunk.
+
+    The raw image is zero-padded at the bottom and right up to multiples of the period, each
+    ``Ph x Pw`` cell becomes a ``Ph * Pw``-channel pixel, the trunk maps those to ``3 * Ph * Pw``
+    channels, which are unpacked to RGB cells and cropped back to ``H x W``.
+
+    Args:
+        period: Splitter pattern period ``(Ph, Pw)``.
+        features: Channels ``F`` of the hidden layers.
+        blocks: Number ``K`` of residual blocks.
+
+    Raises:
+        ValueError: A bad period, ``features < 1`` or ``blocks < 0``.
+
+    Shape:
+        - Input: ``(N, 1, H, W)`` raw image, floating point, any ``H, W >= 1``.
+        - Output: ``(N, 3, H, W)`` RGB.
+    """
+
+    arch = "packed"
+
+    def __init__(self, period: tuple[int, int], features: int = 64, blocks: int = 10) -> None:
+        super().__init__()
+        self.period = _as_period(period)
+        self.features = _as_count(features, "features", 1)
+        self.num_blocks = _as_count(blocks, "blocks", 0)
+        ph, pw = self.period
+        self.trunk = _Trunk(ph * pw, 3 * ph * pw, self.features, self.num_blocks)
+
+    def forward(self, raw: torch.Tensor) -> torch.Tensor:
+        check_raw(raw)
+        ph, pw = self.period
+        h, w = raw.shape[-2:]
+        padded = F.pad(raw, (0, -w % pw, 0, -h % ph))
+        cells = _rearrange(padded, self.period, inverse=False)
+        rgb = _rearrange(self.trunk(cells), self.period, inverse=True)
+        return rgb[..., :h, :w]
+
+    @property
+    def receptive_radius(self) -> int:
+        """Pixels of context on each side that can influence an output pixel.
+
+        ``L`` cells of context at cell resolution reach from the far corner of the output's cell
+        to the far corner of a cell ``L`` cells away: ``(L + 1) * P - 1`` pixels along an axis of
+        period ``P``; the larger axis is reported.
+        """
+        return (self.trunk.reach + 1) * max(self.period) - 1
+
+    def config(self) -> dict[str, Any]:
+        """JSON-serialisable description that :func:`build_network` turns back into this net."""
+        return {
+            "arch": self.arch,
+            "period": list(self.period),
+            "features": self.features,
+            "blocks": self.num_blocks,
+        }
+
+
+#: Network classes by their ``config()["arch"]`` name.
+ARCHITECTURES: dict[str, type[nn.Module]] = {
+    ReconNet.arch: ReconNet,
+    PackedReconNet.arch: PackedReconNet,
+}
+
+
+def build_network(config: Mapping[str, Any]) -> nn.Module:
+    """Build an (untrained) network from a ``config()`` dictionary.
+
+    Args:
+        config: ``{"arch": "paper" | "packed", "period": [Ph, Pw], "features": F,
+            "blocks": K}``; ``features`` and ``blocks`` default to 64 and 10.
+
+    Returns:
+        The network, freshly initialised; load a state dict to restore weights.
+
+    Raises:
+        ValueError: ``config`` is not a mapping, names an unknown architecture, lacks the period,
+            has unknown keys or a bad value.
+    """
+    if not isinstance(config, Mapping):
+        raise ValueError(f"network config must be a mapping, got {type(config).__name__}")
+    arch = config.get("arch")
+    if not isinstance(arch, str) or arch not in ARCHITECTURES:
+        known = ", ".join(repr(a) for a in ARCHITECTURES)
+        raise ValueError(f"unknown network arch {arch!r}; expected one of {known}")
+    unknown = sorted(set(config) - {"arch", "period", "features", "blocks"})
+    if unknown:
+        raise ValueError(f"unknown network config field(s): {', '.join(map(str, unknown))}")
+    if "period" not in config:
+        raise ValueError("network config needs a 'period' [Ph, Pw]")
+    return ARCHITECTURES[arch](
+        period=config["period"],
+        features=config.get("features", 64),
+        blocks=config.get("blocks", 10),
+    )

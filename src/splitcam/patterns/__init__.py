@@ -1,0 +1,54 @@
+"""Splitter patterns: the :class:`Pattern` type, the built-in library, pattern files, measures.
+
+>>> from splitcam import patterns
+>>> patterns.get("d").name
+'D'
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from .core import COLOURS, Pattern, PatternError, kernel_offsets
+from .files import load, save
+from .library import BUILTIN_FACTORIES
+from .measures import PatternMeasures, measure
+
+__all__ = [
+    "COLOURS",
+    "Pattern",
+    "PatternError",
+    "PatternMeasures",
+    "get",
+    "kernel_offsets",
+    "load",
+    "measure",
+    "names",
+    "save",
+]
+
+
+def names() -> list[str]:
+    """Names of the built-in patterns, in library order."""
+    return list(BUILTIN_FACTORIES)
+
+
+def get(name: str | Path | Pattern) -> Pattern:
+    """A built-in pattern by name (case-insensitive), or a pattern loaded from a file path.
+
+    Raises:
+        PatternError: Unknown name; the message lists the valid names.
+    """
+    if isinstance(name, Pattern):
+        return name
+    key = str(name)
+    for builtin, factory in BUILTIN_FACTORIES.items():
+        if builtin.lower() == key.strip().lower():
+            return factory()
+    path = Path(key)
+    if path.suffix.lower() in (".json", ".toml") or path.exists():
+        return load(path)
+    raise PatternError(
+        f"unknown pattern {key!r}; valid names: {', '.join(names())} "
+        f"(or the path of a .json/.toml pattern file)"
+    )

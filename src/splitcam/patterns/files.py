@@ -1,0 +1,77 @@
+"""Pattern files: JSON or TOML, the same fields as :meth:`Pattern.to_dict`.
+
+A pattern file looks like (TOML)::
+
+    name = "my-pattern"
+    provenance = "user"
+    description = "what it is"
+    reference = "where it comes from"
+    layout = [[0, 1], [2, 3]]
+
+    [[kernels]]          # splitter 0; one table per splitter, kh x kw lists per colour
+    R = [[0, 1, 0]]
+    G = [[0, 1, 0]]
+    B = [[0, 1, 0]]
+
+Kernels may also be given as one 4-D list ``(S, 3, kh, kw)``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+from pathlib import Path
+
+from .core import Pattern, PatternError
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover - exercised on Python 3.10 only
+    import tomli as tomllib
+
+SUFFIXES = (".json", ".toml")
+
+
+def _suffix(path: Path) -> str:
+    suffix = path.suffix.lower()
+    if suffix not in SUFFIXES:
+        raise PatternError(
+            f"pattern file {str(path)!r}: expected a .json or .toml file, got {suffix or 'none'!r}"
+        )
+    return suffix
+
+
+def load(path: str | os.PathLike) -> Pattern:
+    """Read and validate a pattern file.
+
+    Raises:
+        PatternError: Missing file, bad syntax, or an invalid pattern; the message names the file.
+    """
+    path = Path(path)
+    suffix = _suffix(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise PatternError(f"pattern file {str(path)!r} not found") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise PatternError(f"cannot read pattern file {str(path)!r}: {exc}") from None
+    try:
+        data = json.loads(text) if suffix == ".json" else tomllib.loads(text)
+    except (json.JSONDecodeError, tomllib.TOMLDecodeError) as exc:
+        raise PatternError(f"pattern file {str(path)!r} is not valid {suffix[1:]}: {exc}") from None
+    return Pattern.from_dict(data, source=f"pattern file {str(path)!r}")
+
+
+def save(pattern: Pattern, path: str | os.PathLike) -> Path:
+    """Write ``pattern`` as JSON or TOML (by the file suffix), atomically."""
+    import tomli_w
+
+    path = Path(path)
+    suffix = _suffix(path)
+    data = pattern.to_dict()
+    text = json.dumps(data, indent=2) + "\n" if suffix == ".json" else tomli_w.dumps(data)
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(text, encoding="utf-8")
+    os.replace(tmp, path)
+    return path

@@ -1,0 +1,379 @@
+"""The differentiable image-formation model of a splitter sensor (paper Eq. 1, Eq. 2, adjoint).
+
+The maths lives in pure functions (:func:`splitter_forward`, :func:`pixel_gather`,
+:func:`splitter_adjoint`, :func:`pixel_kernels`); :class:`SplitterSensor` is the ``nn.Module``
+shell that holds a pattern, and :class:`LearnableSplitterSensor` adds the softmax-parameterised
+kernels of the joint optimisation (paper Eq. 5).
+
+Why not the paper's literal algorithm (one masked full-size image and one transposed convolution
+per splitter)? It touches ``S`` full-size images and runs ``S`` single-output transposed
+convolutions, most of whose multiplications are by the zeros of the mask. Because the layout is
+periodic, every sensor pixel of phase ``(i', j')`` collects light through the same taps from the
+same phases of its neighbours, so Eq. 1 is one *strided* convolution: a ``conv2d`` from the 3
+colours to ``Ph * Pw`` output phases with stride ``(Ph, Pw)`` and a kernel of size
+``(Ph + kh - 1, Pw + kw - 1)``, followed by a depth-to-space rearrangement of the phases. The image
+is read once, in place, by one optimised library call; the adjoint is the matching
+``conv_transpose2d``. The strided kernel is gathered from the splitter kernels by an index table,
+so gradients reach the kernels through plain indexing.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+from .patterns import Pattern, PatternError, get
+
+__all__ = [
+    "LearnableSplitterSensor",
+    "SplitterSensor",
+    "pixel_gather",
+    "pixel_kernels",
+    "splitter_adjoint",
+    "splitter_forward",
+]
+
+
+def _check(x: torch.Tensor, channels: int, what: str) -> None:
+    """Validate a public input; messages read "expected ..., got ..."."""
+    if not isinstance(x, torch.Tensor):
+        raise TypeError(f"expected {what} as a torch.Tensor, got {type(x).__name__}")
+    if x.ndim != 4 or x.shape[1] != channels:
+        raise ValueError(
+            f"expected {what} of shape (N, {channels}, H, W), got {tuple(x.shape)}"
+        )
+    if not x.is_floating_point():
+        raise TypeError(f"expected {what} with a floating dtype (float32/float64), got {x.dtype}")
+    if x.shape[0] == 0 or x.shape[2] == 0 or x.shape[3] == 0:
+        raise ValueError(f"expected {what} with N, H, W >= 1, got {tuple(x.shape)}")
+
+
+def _layout_key(layout: torch.Tensor | np.ndarray) -> tuple[tuple[int, ...], ...]:
+    arr = layout.detach().cpu().numpy() if isinstance(layout, torch.Tensor) else layout
+    return tuple(tuple(int(v) for v in row) for row in np.asarray(arr))
+
+
+@functools.lru_cache(maxsize=64)
+def _strided_index(
+    layout: tuple[tuple[int, ...], ...], num_splitters: int, kh: int, kw: int
+) -> torch.Tensor:
+    """Index table that gathers the strided kernel from the flattened splitter kernels.
+
+    The strided kernel ``K`` has shape ``(Ph * Pw, 3, Ph + kh - 1, Pw + kw - 1)``. Output channel
+    ``i' * Pw + j'`` is the sensor phase; tap ``(u, v)`` reads the scene pixel at offset
+    ``(u - kh//2, v - kw//2)`` from the top-left pixel of the sensor pixel's period block. That
+    pixel has phase ``((u - kh//2) mod Ph, (v - kw//2) mod Pw)``, so its splitter is fixed, and
+    it reaches phase ``(i', j')`` through splitter tap ``a = i' - u + 2 * (kh//2)`` (likewise
+    ``b``). Entries no tap maps to point at one extra zero slot.
+    """
+    lay = np.asarray(layout, dtype=np.int64)
+    ph, pw = lay.shape
+    rh, rw = kh // 2, kw // 2
+    index = np.full((ph * pw, 3, ph + kh - 1, pw + kw - 1), num_splitters * 3 * kh * kw)
+    for i2 in range(ph):
+        for j2 in range(pw):
+            for u in range(ph + kh - 1):
+                a = i2 - u + 2 * rh
+                if not 0 <= a < kh:
+                    continue
+                for v in range(pw + kw - 1):
+                    b = j2 - v + 2 * rw
+                    if not 0 <= b < kw:
+                        continue
+                    s = lay[(u - rh) % ph, (v - rw) % pw]
+                    for c in range(3):
+                        index[i2 * pw + j2, c, u, v] = ((s * 3 + c) * kh + a) * kw + b
+    return torch.from_numpy(index)
+
+
+def _strided_kernel(weights: torch.Tensor, layout: torch.Tensor | np.ndarray) -> torch.Tensor:
+    s, _, kh, kw = weights.shape
+    index = _strided_index(_layout_key(layout), s, kh, kw)
+    flat = torch.cat([weights.reshape(-1), weights.new_zeros(1)])
+    return flat[index.to(weights.device)]
+
+
+def _to_blocks(x: torch.Tensor, period: tuple[int, int]) -> torch.Tensor:
+    """``(N, C, H, W)`` → ``(N, C * Ph * Pw, ceil(H/Ph), ceil(W/Pw))``, zero-padding H and W."""
+    n, c, h, w = x.shape
+    ph, pw = period
+    hb, wb = -(-h // ph), -(-w // pw)
+    x = F.pad(x, (0, wb * pw - w, 0, hb * ph - h))
+    x = x.reshape(n, c, hb, ph, wb, pw).permute(0, 1, 3, 5, 2, 4)
+    return x.reshape(n, c * ph * pw, hb, wb)
+
+
+def _from_blocks(x: torch.Tensor, period: tuple[int, int], size: tuple[int, int]) -> torch.Tensor:
+    """Inverse of :func:`_to_blocks`, cropping back to ``size = (H, W)``."""
+    n, cp, hb, wb = x.shape
+    ph, pw = period
+    c = cp // (ph * pw)
+    x = x.reshape(n, c, ph, pw, hb, wb).permute(0, 1, 4, 2, 5, 3)
+    return x.reshape(n, c, hb * ph, wb * pw)[:, :, : size[0], : size[1]]
+
+
+def _period(layout: torch.Tensor | np.ndarray) -> tuple[int, int]:
+    return (int(layout.shape[0]), int(layout.shape[1]))
+
+
+def splitter_forward(
+    rgb: torch.Tensor, weights: torch.Tensor, layout: torch.Tensor | np.ndarray
+) -> torch.Tensor:
+    r"""Raw image of a splitter sensor, paper Eq. 1 (noise-free).
+
+    .. math:: g = \sum_{s} (f \downarrow_s) \star w_s
+
+    Light of colour ``c`` arriving at ``(y, x)`` (splitter ``s = L[y mod Ph, x mod Pw]``) puts
+    ``w[s, c, a, b]`` of itself on pixel ``(y + a - kh//2, x + b - kw//2)``; light leaving the
+    sensor is lost. Linear in ``rgb`` and in ``weights``; differentiable in both.
+
+    Args:
+        rgb: Scene, linear values (8-bit / 255 in the paper's protocol).
+        weights: Splitter kernels.
+        layout: Integer grid of splitter indices.
+
+    Shape:
+        - rgb: ``(N, 3, H, W)``, any ``H, W >= 1``.
+        - weights: ``(S, 3, kh, kw)``, odd ``kh, kw``.
+        - layout: ``(Ph, Pw)``.
+        - output: ``(N, 1, H, W)``.
+    """
+    _check(rgb, 3, "an RGB image")
+    ph, pw = _period(layout)
+    kh, kw = weights.shape[-2:]
+    h, w = rgb.shape[-2:]
+    kernel = _strided_kernel(weights.to(rgb.dtype), layout)
+    hp, wp = -(-h // ph) * ph, -(-w // pw) * pw
+    if (hp, wp) == (h, w):
+        raw = F.conv2d(rgb, kernel, stride=(ph, pw), padding=(kh // 2, kw // 2))
+    else:
+        # Zero rows/columns up to whole periods: they carry no light, and what lands on them
+        # is cropped away, exactly like light that leaves the sensor.
+        pad = (kw // 2, kw // 2 + wp - w, kh // 2, kh // 2 + hp - h)
+        raw = F.conv2d(F.pad(rgb, pad), kernel, stride=(ph, pw))
+    return _from_blocks(raw, (ph, pw), (h, w))
+
+
+def splitter_adjoint(
+    raw: torch.Tensor, weights: torch.Tensor, layout: torch.Tensor | np.ndarray
+) -> torch.Tensor:
+    r"""Exact adjoint of :func:`splitter_forward` in the image.
+
+    .. math:: (A^T g)[c, y, x] = \sum_{a,b} w[s(y,x), c, a, b]\, g[y + a - kh//2, x + b - kw//2]
+
+    with ``g`` zero outside the sensor.
+
+    Shape:
+        - raw: ``(N, 1, H, W)``.
+        - output: ``(N, 3, H, W)``.
+    """
+    _check(raw, 1, "a raw image")
+    ph, pw = _period(layout)
+    kh, kw = weights.shape[-2:]
+    kernel = _strided_kernel(weights.to(raw.dtype), layout)
+    rgb = F.conv_transpose2d(
+        _to_blocks(raw, (ph, pw)), kernel, stride=(ph, pw), padding=(kh // 2, kw // 2)
+    )
+    return rgb[:, :, : raw.shape[-2], : raw.shape[-1]]
+
+
+@functools.lru_cache(maxsize=64)
+def _pixel_kernel_index(
+    layout: tuple[tuple[int, ...], ...], num_splitters: int, kh: int, kw: int
+) -> torch.Tensor:
+    lay = np.asarray(layout, dtype=np.int64)
+    ph, pw = lay.shape
+    rh, rw = kh // 2, kw // 2
+    index = np.empty((ph, pw, 3, kh, kw), dtype=np.int64)
+    for i in range(ph):
+        for j in range(pw):
+            for c in range(3):
+                for a in range(kh):
+                    for b in range(kw):
+                        # Source pixel at offset (a - rh, b - rw) from the sensor pixel; the
+                        # splitter there sends light back by tap (rh - dy, rw - dx).
+                        dy, dx = a - rh, b - rw
+                        s = lay[(i + dy) % ph, (j + dx) % pw]
+                        index[i, j, c, a, b] = ((s * 3 + c) * kh + (rh - dy)) * kw + (rw - dx)
+    return torch.from_numpy(index)
+
+
+def pixel_kernels(weights: torch.Tensor, layout: torch.Tensor | np.ndarray) -> torch.Tensor:
+    """Per-pixel gather kernels ``k_p`` of paper Eq. 2, derived from the splitter kernels.
+
+    ``k[i, j, c, a, b]`` is the fraction of colour ``c`` at scene pixel
+    ``(y + a - kh//2, x + b - kw//2)`` that a sensor pixel ``(y, x)`` of phase ``(i, j)`` collects:
+    what each pixel sees. ``k.sum((-1, -2))`` is the pixel's spectral response to a flat scene.
+
+    Shape:
+        - weights: ``(S, 3, kh, kw)``; layout: ``(Ph, Pw)``.
+        - output: ``(Ph, Pw, 3, kh, kw)``.
+    """
+    s, _, kh, kw = weights.shape
+    index = _pixel_kernel_index(_layout_key(layout), s, kh, kw).to(weights.device)
+    return weights.reshape(-1)[index]
+
+
+def pixel_gather(
+    rgb: torch.Tensor, weights: torch.Tensor, layout: torch.Tensor | np.ndarray
+) -> torch.Tensor:
+    r"""Raw image by paper Eq. 2: each pixel correlates the scene with its own kernel.
+
+    .. math:: g = \sum_{p} ((f * k_p) \downarrow_p)
+
+    A separate code path from :func:`splitter_forward` (gather instead of scatter): convolve the
+    scene with every phase's kernel, then keep, at each pixel, the response of its own phase.
+
+    Shape:
+        - rgb: ``(N, 3, H, W)``; output ``(N, 1, H, W)``.
+    """
+    _check(rgb, 3, "an RGB image")
+    ph, pw = _period(layout)
+    k = pixel_kernels(weights.to(rgb.dtype), layout)
+    kh, kw = k.shape[-2:]
+    response = F.conv2d(rgb, k.reshape(ph * pw, 3, kh, kw), padding=(kh // 2, kw // 2))
+    h, w = rgb.shape[-2:]
+    yy = torch.arange(h, device=rgb.device) % ph
+    xx = torch.arange(w, device=rgb.device) % pw
+    phase = (yy[:, None] * pw + xx[None, :]).expand(rgb.shape[0], 1, h, w)
+    return response.gather(1, phase)
+
+
+class SplitterSensor(nn.Module):
+    """A sensor behind a fixed splitter (or filter) pattern: ``sensor(rgb)`` is Eq. 1.
+
+    The kernels and layout are buffers, so ``.to(device)``, ``state_dict()`` and saving work;
+    computations follow the input's device and dtype.
+
+    Args:
+        pattern: A :class:`~splitcam.patterns.Pattern` or a registered name / pattern file path.
+
+    Shape:
+        - forward / gather input: ``(N, 3, H, W)``; output ``(N, 1, H, W)``.
+        - adjoint input: ``(N, 1, H, W)``; output ``(N, 3, H, W)``.
+    """
+
+    layout: torch.Tensor
+
+    def __init__(self, pattern: Pattern | str) -> None:
+        super().__init__()
+        pattern = get(pattern) if isinstance(pattern, str) else pattern
+        self._meta = pattern
+        self.register_buffer("layout", torch.as_tensor(pattern.layout, dtype=torch.long))
+        self._init_kernels(pattern)
+
+    def _init_kernels(self, pattern: Pattern) -> None:
+        self.register_buffer("kernels", torch.as_tensor(pattern.kernels, dtype=torch.float64))
+
+    @property
+    def period(self) -> tuple[int, int]:
+        return _period(self.layout)
+
+    def weights(self) -> torch.Tensor:
+        """The splitter kernels ``(S, 3, kh, kw)`` currently in use."""
+        return self.kernels
+
+    def forward(self, rgb: torch.Tensor) -> torch.Tensor:
+        return splitter_forward(rgb, self.weights(), self.layout)
+
+    def gather(self, rgb: torch.Tensor) -> torch.Tensor:
+        """Same raw image by the pixel (gather) form, Eq. 2."""
+        return pixel_gather(rgb, self.weights(), self.layout)
+
+    def adjoint(self, raw: torch.Tensor) -> torch.Tensor:
+        """``A^T raw``, the exact adjoint of :meth:`forward`."""
+        return splitter_adjoint(raw, self.weights(), self.layout)
+
+    def pixel_kernels(self) -> torch.Tensor:
+        """What each pixel phase sees, ``(Ph, Pw, 3, kh, kw)`` (see :func:`pixel_kernels`)."""
+        return pixel_kernels(self.weights(), self.layout)
+
+    def to_pattern(self, name: str | None = None) -> Pattern:
+        """The pattern this sensor currently implements (learned kernels included)."""
+        return self._meta
+
+    def extra_repr(self) -> str:
+        return f"pattern={self._meta.name!r}, period={self.period}"
+
+
+class LearnableSplitterSensor(SplitterSensor):
+    """A splitter sensor whose kernels are learned: ``w = softmax(z)`` over the taps (Eq. 5).
+
+    Each ``(s, c)`` kernel is a softmax over its ``kh * kw`` taps, so it is non-negative and sums
+    to 1 by construction: a learned splitter can neither create nor absorb light. The layout and
+    kernel size stay those of the starting pattern.
+
+    Args:
+        pattern: Starting pattern (name, path or Pattern). Colour filters (kernel sums below 1,
+            such as ``bayer``) are refused: a softmax cannot represent absorbed light.
+        init: ``"support"`` (the authors' choice: ``z = support_logit`` where the pattern is
+            non-zero, 0 elsewhere), ``"exact"`` (``z = log(max(w, eps))``, so ``softmax(z)``
+            reproduces the pattern up to ``eps``) or ``"random"`` (``z ~ N(0, 1)``, the paper's
+            "Optimized-R" ablation).
+        generator: Seeded generator for ``"random"``.
+        support_logit: The logit on the support for ``"support"`` (5 in the paper).
+        eps: Floor for ``"exact"``.
+    """
+
+    INITS = ("support", "exact", "random")
+
+    def __init__(
+        self,
+        pattern: Pattern | str,
+        init: str = "support",
+        *,
+        generator: torch.Generator | None = None,
+        support_logit: float = 5.0,
+        eps: float = 1e-6,
+    ) -> None:
+        self._init = init
+        self._generator = generator
+        self._support_logit = support_logit
+        self._eps = eps
+        super().__init__(pattern)
+
+    def _init_kernels(self, pattern: Pattern) -> None:
+        if self._init not in self.INITS:
+            raise ValueError(
+                f"expected init to be one of {', '.join(self.INITS)}, got {self._init!r}"
+            )
+        if pattern.absorbs_light:
+            raise PatternError(
+                f"pattern {pattern.name!r} absorbs light (some kernels sum to less than 1, as in "
+                f"a colour filter), but learned kernels are a softmax that always sums to 1 "
+                f"(light conserved); start from a splitter pattern such as A or D instead"
+            )
+        w = torch.as_tensor(pattern.kernels, dtype=torch.float64)
+        if self._init == "support":
+            z = torch.where(w > 0, self._support_logit, 0.0)
+        elif self._init == "exact":
+            z = torch.log(w.clamp_min(self._eps))
+        else:
+            z = torch.randn(w.shape, generator=self._generator, dtype=torch.float64)
+        self.logits = nn.Parameter(z.float())
+
+    def weights(self) -> torch.Tensor:
+        z = self.logits
+        return torch.softmax(z.reshape(*z.shape[:2], -1), dim=-1).reshape(z.shape)
+
+    def to_pattern(self, name: str | None = None) -> Pattern:
+        """Export the learned kernels (softmax in float64) as a fixed :class:`Pattern`."""
+        z = self.logits.detach().double().cpu()
+        w = torch.softmax(z.reshape(*z.shape[:2], -1), dim=-1).reshape(z.shape)
+        base = self._meta
+        return Pattern(
+            name=name or f"{base.name}-learned",
+            layout=base.layout,
+            kernels=w.numpy(),
+            provenance="learned",
+            description=f"learned from pattern {base.name} ({self._init} initialisation)",
+            reference="Liu & Lam, joint optimisation of splitter pattern and reconstruction",
+            metadata={"start": base.name, "init": self._init},
+        )
+
+    def extra_repr(self) -> str:
+        return f"start={self._meta.name!r}, init={self._init!r}, period={self.period}"
