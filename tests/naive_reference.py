@@ -5,6 +5,7 @@ Used by the tests as the reference and by ``benchmarks/bench_sensor.py`` as the 
 
 from __future__ import annotations
 
+import numpy as np
 import torch
 import torch.nn.functional as F
 
@@ -13,7 +14,7 @@ def naive_splitter_forward(rgb: torch.Tensor, weights: torch.Tensor, layout) -> 
     """Paper Eq. 1 as written: for each splitter, sample the image at its sites (zeros
     elsewhere), scatter with a transposed convolution, crop to the sensor, and sum."""
     n, _, h, w = rgb.shape
-    layout = torch.as_tensor(layout)
+    layout = torch.tensor(np.asarray(layout))
     ph, pw = layout.shape
     kh, kw = weights.shape[-2:]
     yy = torch.arange(h) % ph

@@ -263,11 +263,11 @@ class SplitterSensor(nn.Module):
         super().__init__()
         pattern = get(pattern) if isinstance(pattern, str) else pattern
         self._meta = pattern
-        self.register_buffer("layout", torch.as_tensor(pattern.layout, dtype=torch.long))
+        self.register_buffer("layout", torch.tensor(pattern.layout, dtype=torch.long))
         self._init_kernels(pattern)
 
     def _init_kernels(self, pattern: Pattern) -> None:
-        self.register_buffer("kernels", torch.as_tensor(pattern.kernels, dtype=torch.float64))
+        self.register_buffer("kernels", torch.tensor(pattern.kernels, dtype=torch.float64))
 
     @property
     def period(self) -> tuple[int, int]:
@@ -347,7 +347,7 @@ class LearnableSplitterSensor(SplitterSensor):
                 f"a colour filter), but learned kernels are a softmax that always sums to 1 "
                 f"(light conserved); start from a splitter pattern such as A or D instead"
             )
-        w = torch.as_tensor(pattern.kernels, dtype=torch.float64)
+        w = torch.tensor(pattern.kernels, dtype=torch.float64)
         if self._init == "support":
             z = torch.where(w > 0, self._support_logit, 0.0)
         elif self._init == "exact":
