@@ -1,0 +1,172 @@
+"""The pattern library, pattern files, validation and the design-principle measures."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from splitcam import patterns
+from splitcam.patterns import Pattern, PatternError
+
+
+def _valid() -> dict:
+    return patterns.get("D").to_dict()
+
+
+def test_registry_names_and_case_insensitive_lookup():
+    assert patterns.names() == ["A", "B", "C", "D", "E", "bayer"]
+    assert patterns.get("d").name == "D"
+    assert patterns.get("BAYER").name == "bayer"
+    with pytest.raises(PatternError, match="unknown pattern 'F'; valid names: A, B, C, D, E, bayer"):
+        patterns.get("F")
+
+
+def test_library_values_follow_the_spec():
+    a = patterns.get("A")
+    assert a.period == (2, 2) and a.kernel_size == (3, 3) and a.provenance == "authors' code"
+    # A: green light at the R site goes to the four edge neighbours, a quarter each.
+    assert a.kernels[0, 1].tolist() == [[0, 0.25, 0], [0.25, 0, 0.25], [0, 0.25, 0]]
+    d = patterns.get("D")
+    assert d.kernel_size == (1, 3) and d.kernels[1, 0].tolist() == [[0.5, 0, 0.5]]
+    assert d.kernels[2, 2].tolist() == [[0.5, 0, 0.5]]
+    c = patterns.get("C")
+    assert c.layout.tolist() == [[0, 1, 2]] and c.kernel_size == (1, 5)
+    e = patterns.get("E")
+    assert e.layout.tolist() == [[0, 1, 0]]
+    for name in ["A", "B", "C", "D", "E"]:
+        p = patterns.get(name)
+        assert np.allclose(p.kernels.sum(axis=(2, 3)), 1.0), name  # splitters are lossless
+        assert p.description and p.reference
+    bayer = patterns.get("bayer")
+    assert bayer.absorbs_light and bayer.kernel_size == (1, 1)
+    assert bayer.provenance == "standard"
+    assert patterns.get("B").provenance.startswith("modelled")
+
+
+def test_pattern_b_two_green_pixels_of_a_cell_read_the_same():
+    """SPEC: B pools each cell's green half/half into its two G sub-pixels."""
+    import torch
+
+    from splitcam.sensor import SplitterSensor
+
+    f = torch.rand(1, 3, 8, 8, generator=torch.Generator().manual_seed(0), dtype=torch.float64)
+    raw = SplitterSensor("B")(f)[0, 0]
+    torch.testing.assert_close(raw[0::2, 1::2], raw[1::2, 0::2])
+
+
+@pytest.mark.parametrize("suffix", [".json", ".toml"])
+@pytest.mark.parametrize("name", patterns.names())
+def test_file_round_trip(tmp_path, name, suffix):
+    p = patterns.get(name)
+    path = patterns.save(p, tmp_path / f"p{suffix}")
+    q = patterns.load(path)
+    assert q.equals(p) and q.name == p.name and q.provenance == p.provenance
+    assert q.description == p.description and q.reference == p.reference
+    assert patterns.get(str(path)).equals(p)
+
+
+def test_toml_written_by_hand(tmp_path):
+    path = tmp_path / "mine.toml"
+    path.write_text(
+        'name = "stripe"\nlayout = [[0, 1]]\n'
+        '[[kernels]]\nR = [[0, 1, 0]]\nG = [[0, 1, 0]]\nB = [[0, 1, 0]]\n'
+        '[[kernels]]\nR = [[1, 0, 0]]\nG = [[0, 1, 0]]\nB = [[0, 0.5, 0]]\n'
+    )
+    p = patterns.load(path)
+    assert p.period == (1, 2) and p.num_splitters == 2 and p.absorbs_light
+    assert p.kernels[1, 0, 0].tolist() == [1, 0, 0]
+
+
+def test_4d_kernel_list_accepted():
+    data = _valid()
+    data["kernels"] = patterns.get("D").kernels.tolist()
+    assert Pattern.from_dict(data).equals(patterns.get("D"))
+
+
+@pytest.mark.parametrize(
+    "change, message",
+    [
+        (lambda d: d["kernels"][0].update(R=[[0, 1]]), "mismatched sizes"),
+        (lambda d: [k.update(R=[[0, 1]], G=[[0, 1]], B=[[0, 1]]) for k in d["kernels"]],
+         "kernel size must be odd in both directions.*got 1x2"),
+        (lambda d: d.update(layout=[[0, 1], [2, 4]]),
+         r"layout index 4 at position \(1, 1\) is out of range for 4 splitters"),
+        (lambda d: d.update(layout=[[0, -1], [2, 3]]), "layout index -1"),
+        (lambda d: d.update(layout=[0, 1, 2, 3]), "layout must be a 2-D grid of integers"),
+        (lambda d: d.update(layout=[[[0]]]), "layout must be a 2-D grid of integers"),
+        (lambda d: d.update(layout=[[0, 1], [2]]), "layout has mismatched sizes"),
+        (lambda d: d.update(layout=[[0, 1.5], [2, 3]]), "layout must be a 2-D grid of integers"),
+        (lambda d: d.update(layout=[["a", 1], [2, 3]]), "layout must be a 2-D grid of integers"),
+        (lambda d: d["kernels"][1].update(G=[[0, -0.5, 1.5]]),
+         "splitter 1, colour G at \\(0, 1\\) is negative"),
+        (lambda d: d["kernels"][1].update(G=[[0, float("nan"), 0]]), "is not finite"),
+        (lambda d: d["kernels"][1].update(G=[[0, float("inf"), 0]]), "is not finite"),
+        (lambda d: d["kernels"][2].update(B=[[0.5, 1, 0.5]]),
+         "splitter 2, colour B sums to 2 > 1.*create light"),
+        (lambda d: d.update(kernels=np.zeros((4, 2, 1, 3)).tolist()),
+         "kernels must have 3 colours"),
+        (lambda d: d.update(kernels=np.zeros((4, 4, 1, 3)).tolist()),
+         "kernels must have 3 colours .* got 4"),
+        (lambda d: d["kernels"][0].pop("B"), "splitter 0 must give exactly the colours R, G, B"),
+        (lambda d: d.update(kernels=[[0, 1, 0]]), "kernels must have shape"),
+        (lambda d: d.pop("layout"), "missing field.*layout"),
+        (lambda d: d.update(colour="red"), "unknown field.*colour"),
+        (lambda d: d.update(name=""), "non-empty name"),
+    ],
+)
+def test_invalid_patterns_are_refused(change, message):
+    data = _valid()
+    change(data)
+    with pytest.raises(PatternError, match=message):
+        Pattern.from_dict(data)
+
+
+def test_kernels_constructor_errors():
+    with pytest.raises(PatternError, match="kernels must be numbers"):
+        Pattern("x", [[0]], [[[["a"]]] * 3])
+
+
+def test_file_errors(tmp_path):
+    with pytest.raises(PatternError, match="not found"):
+        patterns.load(tmp_path / "missing.json")
+    with pytest.raises(PatternError, match="expected a .json or .toml file, got '.yaml'"):
+        patterns.load(tmp_path / "p.yaml")
+    bad = tmp_path / "bad.json"
+    bad.write_text("{not json")
+    with pytest.raises(PatternError, match="is not valid json"):
+        patterns.load(bad)
+    bad_toml = tmp_path / "bad.toml"
+    bad_toml.write_text("name = \n")
+    with pytest.raises(PatternError, match="is not valid toml"):
+        patterns.load(bad_toml)
+    invalid = tmp_path / "invalid.json"
+    data = _valid()
+    data["layout"] = [[0, 9], [2, 3]]
+    invalid.write_text(json.dumps(data))
+    with pytest.raises(PatternError, match="invalid.json.*layout index 9"):
+        patterns.get(str(invalid))
+
+
+def test_measures_match_hand_computation():
+    m = {n: patterns.measure(patterns.get(n)) for n in patterns.names()}
+    # D: the red deflector moves all its red (1 of 12 colour-sites of light), the blue one its
+    # blue: 2/12 of the incident light leaves its pixel.
+    assert m["D"].split_fraction == pytest.approx(2 / 12)
+    assert m["D"].spread == pytest.approx(1.0)
+    # A: only R at R sites, G at G sites and B at B sites stay: 4 of 12 stay.
+    assert m["A"].split_fraction == pytest.approx(8 / 12)
+    assert m["A"].spread == pytest.approx(np.sqrt(2))
+    # E: 2 of 9 colour-sites of light move (R and B of the splitter pixel).
+    assert m["E"].split_fraction == pytest.approx(2 / 9)
+    assert m["C"].spread == pytest.approx(2.0)
+    assert m["bayer"].efficiency == pytest.approx((0.25, 0.5, 0.25))
+    assert m["A"].efficiency == pytest.approx((1.0, 1.0, 1.0))
+    assert [n for n in m if m[n].pooling] == ["B", "C"]
+    assert m["B"].pooling_unit == 4 and m["C"].pooling_unit == 3
+    # A's mean distance travelled, per period: R moves 1 unit by 1 px from each of the two G
+    # sites and 1 unit by sqrt2 from the B site; G moves 1 unit by 1 px from the R and B sites;
+    # B like R; divided by the 12 units of light.
+    travel = (2 * (2 + np.sqrt(2)) + 2) / 12
+    assert m["A"].mean_travel == pytest.approx(travel)
