@@ -24,8 +24,10 @@ __all__ = ["Span", "reconstruct", "tile_spans"]
 
 
 class Span(NamedTuple):
-    """One tile along one axis: the tile reads ``[start, stop)`` and supplies ``[keep_start,
-    keep_stop)`` of the result."""
+    """One tile along one axis.
+
+    The tile reads input ``[start, stop)`` and supplies output ``[keep_start, keep_stop)``.
+    """
 
     start: int
     stop: int

@@ -1,0 +1,129 @@
+"""Draw a pattern: its unit cell and, for each site and colour, where the light goes (the paper's
+Fig. 3), plus what each pixel ends up recording."""
+
+from __future__ import annotations
+
+import os
+import textwrap
+from pathlib import Path
+
+import numpy as np
+
+from .core import COLOURS, Pattern
+from .measures import measure
+
+_RGB = {"R": (0.84, 0.15, 0.16), "G": (0.17, 0.63, 0.17), "B": (0.12, 0.37, 0.84)}
+
+
+def _fmt(v: float) -> str:
+    text = f"{v:.2f}".rstrip("0").rstrip(".")
+    return text[1:] if text.startswith("0.") else text
+
+
+def pixel_response(pattern: Pattern) -> np.ndarray:
+    """``(Ph, Pw, 3)``: what each pixel of the unit cell records of a white scene, per colour."""
+    ph, pw = pattern.period
+    kh, kw = pattern.kernel_size
+    response = np.zeros((ph, pw, 3))
+    for i in range(ph):
+        for j in range(pw):
+            for a in range(kh):
+                for b in range(kw):
+                    # Light reaching (i, j) through tap (a, b) left from (i - dy, j - dx).
+                    s = pattern.layout[(i - a + kh // 2) % ph, (j - b + kw // 2) % pw]
+                    response[i, j] += pattern.kernels[s, :, a, b]
+    return response
+
+
+def draw_pattern(pattern: Pattern, out: str | os.PathLike | None = None, *, dpi: int = 130):
+    """Draw ``pattern`` and return the matplotlib figure (saved to ``out`` if given).
+
+    Left: the unit cell, each pixel labelled with its splitter and filled with the colour mixture
+    it records from a white scene (the sums of its Eq. 2 kernel). Right: one row per site of the
+    cell and one column per colour; each small grid is the neighbourhood of the site (outlined
+    centre = the pixel the light arrives at), shaded by the fraction of that colour's light that
+    lands on each pixel, with the fraction written in.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.patches import Rectangle
+
+    ph, pw = pattern.period
+    kh, kw = pattern.kernel_size
+    sites = [(i, j) for i in range(ph) for j in range(pw)]
+    unit = 0.42  # inches per kernel cell
+    mini_w, mini_h = max(kw, 3) * unit, max(kh, 1) * unit
+    left_w = max(2.6, pw * 0.9)
+    fig_w = left_w + 3 * (mini_w + 0.35) + 1.4
+    fig_h = max(len(sites) * (mini_h + 0.45), ph * 0.9 + 1.2) + 1.6
+    fig = plt.figure(figsize=(fig_w, fig_h))
+
+    def box(x0: float, y0: float, w: float, h: float):
+        return fig.add_axes((x0 / fig_w, y0 / fig_h, w / fig_w, h / fig_h))
+
+    top = fig_h - 1.25
+    response = pixel_response(pattern)
+    peak = max(float(response.max()), 1e-12)
+    cell = min(0.9, (left_w - 0.4) / pw)
+    ax = box(0.3, top - ph * cell - 0.05, pw * cell, ph * cell)
+    for i, j in sites:
+        rgb = response[i, j] / peak
+        ax.add_patch(Rectangle((j, i), 1, 1, fc=rgb, ec="black", lw=1.2))
+        text = f"s{pattern.layout[i, j]}\n" + " ".join(
+            f"{c}{_fmt(v)}" for c, v in zip(COLOURS, response[i, j])
+        )
+        ax.text(j + 0.5, i + 0.5, text, ha="center", va="center", fontsize=7,
+                color="white" if rgb.mean() < 0.5 else "black")
+    ax.set_xlim(0, pw)
+    ax.set_ylim(ph, 0)
+    ax.set_axis_off()
+    ax.set_title("unit cell: splitter and\nwhat each pixel records", fontsize=8)
+
+    x0 = left_w + 0.7
+    for r, (i, j) in enumerate(sites):
+        y0 = top - (r + 1) * (mini_h + 0.45) + 0.1
+        s = pattern.layout[i, j]
+        fig.text((x0 - 0.15) / fig_w, (y0 + mini_h / 2) / fig_h, f"site ({i},{j})\ns{s}",
+                 ha="right", va="center", fontsize=8)
+        for c, colour in enumerate(COLOURS):
+            ax = box(x0 + c * (mini_w + 0.35), y0, mini_w, mini_h)
+            k = pattern.kernels[s, c]
+            ox = (max(kw, 3) - kw) / 2
+            for a in range(kh):
+                for b in range(kw):
+                    f = float(k[a, b])
+                    shade = np.array(_RGB[colour]) * f + np.ones(3) * (1 - f)
+                    centre = (a, b) == (kh // 2, kw // 2)
+                    ax.add_patch(Rectangle((ox + b, a), 1, 1, fc=shade,
+                                           ec="black" if centre else "#aaaaaa",
+                                           lw=1.6 if centre else 0.6, zorder=2 if centre else 1))
+                    if f > 1e-3:
+                        ax.text(ox + b + 0.5, a + 0.5, _fmt(f), ha="center", va="center",
+                                fontsize=7, color="white" if f > 0.55 else "black", zorder=3)
+            ax.set_xlim(0, max(kw, 3))
+            ax.set_ylim(kh, 0)
+            ax.set_aspect("equal")
+            ax.set_axis_off()
+            if r == 0:
+                ax.set_title(f"{colour} light goes to", fontsize=8, color=_RGB[colour])
+
+    m = measure(pattern)
+    eff = "/".join(_fmt(e) for e in m.efficiency)
+    width = int(fig_w * 13)
+    lines = [
+        *textwrap.wrap(f"Pattern {pattern.name}: {pattern.description}", width),
+        *textwrap.wrap(f"{pattern.provenance}; {pattern.reference}", width),
+        f"efficiency R/G/B {eff} · split {m.split_fraction:.2f} · spread {m.spread:.2f} px · "
+        + (f"pools light in {m.pooling_unit}-pixel units" if m.pooling else "no pooling"),
+    ]
+    fig.text(0.5, 1 - 0.1 / fig_h, "\n".join(lines), ha="center", va="top", fontsize=8.5)
+    fig.text(0.5, 0.12 / fig_h, "Outlined centre: the pixel where the light arrives; other cells: "
+             "its neighbours. Numbers: fraction of that colour's light.", ha="center",
+             fontsize=7, color="#555555")
+    if out is not None:
+        Path(out).parent.mkdir(parents=True, exist_ok=True)
+        fig.savefig(out, dpi=dpi)
+        plt.close(fig)
+    return fig
