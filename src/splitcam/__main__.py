@@ -1,0 +1,7 @@
+"""``python -m splitcam`` (also what ``torchrun -m splitcam`` runs)."""
+
+import sys
+
+from .cli import main
+
+sys.exit(main())
