@@ -14,7 +14,6 @@ import argparse
 import sys
 
 import torch
-
 from common import ROOT, machine, timeit
 
 sys.path.insert(0, str(ROOT / "tests"))
@@ -41,15 +40,15 @@ def main() -> None:
                 results = {}
                 for label, fn in [("naive", naive_splitter_forward), ("fast", splitter_forward)]:
                     if kind == "forward":
-                        def run(fn=fn):
+                        def run(fn=fn, f=f, w=w, layout=p.layout):
                             with torch.no_grad():
-                                fn(f, w, p.layout)
+                                fn(f, w, layout)
                     else:
                         fg = f.clone().requires_grad_(True)
                         wg = w.clone().requires_grad_(True)
 
-                        def run(fn=fn, fg=fg, wg=wg):
-                            fn(fg, wg, p.layout).square().sum().backward()
+                        def run(fn=fn, fg=fg, wg=wg, layout=p.layout):
+                            fn(fg, wg, layout).square().sum().backward()
                     results[label] = timeit(run, repeat=args.repeat)
                 ratio = results["naive"] / results["fast"]
                 worst = min(worst, ratio)

@@ -19,7 +19,7 @@ def test_registry_names_and_case_insensitive_lookup():
     assert patterns.names() == ["A", "B", "C", "D", "E", "bayer"]
     assert patterns.get("d").name == "D"
     assert patterns.get("BAYER").name == "bayer"
-    with pytest.raises(PatternError, match="unknown pattern 'F'; valid names: A, B, C, D, E, bayer"):
+    with pytest.raises(PatternError, match="unknown pattern 'F'; valid names: A, B, C, D, E, bay"):
         patterns.get("F")
 
 

@@ -198,7 +198,8 @@ def test_state_dict_round_trip():
 @pytest.mark.parametrize(
     "bad, message",
     [
-        (torch.rand(2, 4, 8, 8), r"expected an RGB image of shape \(N, 3, H, W\), got \(2, 4, 8, 8\)"),
+        (torch.rand(2, 4, 8, 8),
+         r"expected an RGB image of shape \(N, 3, H, W\), got \(2, 4, 8, 8\)"),
         (torch.rand(3, 8, 8), r"expected an RGB image of shape \(N, 3, H, W\), got \(3, 8, 8\)"),
         (torch.rand(1, 3, 0, 8), r"expected an RGB image with N, H, W >= 1"),
     ],
@@ -209,7 +210,7 @@ def test_bad_image_shape(bad, message):
 
 
 def test_bad_image_dtype_and_type():
-    with pytest.raises(TypeError, match="expected an RGB image with a floating dtype.*got torch.int64"):
+    with pytest.raises(TypeError, match="expected an RGB image with a floating dtype.*torch.int64"):
         SplitterSensor("A")(torch.ones(1, 3, 4, 4, dtype=torch.int64))
     with pytest.raises(TypeError, match="expected an RGB image as a torch.Tensor, got ndarray"):
         SplitterSensor("A")(np.ones((1, 3, 4, 4)))

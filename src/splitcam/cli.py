@@ -84,6 +84,117 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     return 0
 
 
+# Command-line flag -> configuration key. Flags left out keep the config file's (or the
+# default) value, so a config file and the command line combine predictably.
+TRAIN_FLAGS: dict[str, tuple[str, type | None, str]] = {
+    "pattern": ("pattern.name", str, "pattern name or file (default D)"),
+    "learn_pattern": ("pattern.learn", None, "optimise the pattern jointly with the network"),
+    "init": ("pattern.init", str, "learned-pattern initialisation: support, exact, random"),
+    "pattern_lr": ("pattern.lr", float, "learning rate of the pattern (default: --lr)"),
+    "data": ("data.train", str, "folder of training images"),
+    "val": ("data.val", str, "folder of validation images"),
+    "val_split": ("data.val_split", int, "hold out the last N training images for validation"),
+    "val_images": ("data.val_max_images", int, "at most this many validation images"),
+    "val_sigmas": ("data.val_sigmas", float, "validation noise levels (default 0 15)"),
+    "patch_size": ("data.patch_size", int, "patch size (default 64)"),
+    "batch_size": ("data.batch_size", int, "batch size (default 80)"),
+    "arch": ("network.arch", str, "network: paper or packed"),
+    "features": ("network.features", int, "network width (default 64)"),
+    "blocks": ("network.blocks", int, "residual blocks (default 10)"),
+    "steps": ("optim.steps", int, "training steps (default 10^6)"),
+    "lr": ("optim.lr", float, "Adam learning rate (default 1e-4)"),
+    "per_sample_sigma": ("optim.per_sample_sigma", None, "one noise sigma per patch"),
+    "out": ("run.out", str, "run folder (default runs/default)"),
+    "device": ("run.device", str, "auto, cpu, cuda, cuda:N or mps"),
+    "seed": ("run.seed", int, "random seed (default 0)"),
+    "log_every": ("run.log_every", int, "log every N steps"),
+    "val_every": ("run.val_every", int, "validate every N steps"),
+    "checkpoint_every": ("run.checkpoint_every", int, "checkpoint every N steps"),
+    "threads": ("run.threads", int, "torch CPU threads"),
+    "time_limit": ("run.time_limit", float, "stop and save after this many minutes"),
+    "tensorboard": ("run.tensorboard", None, "also log to TensorBoard (if installed)"),
+    "channels_last": ("run.channels_last", None, "channels-last memory format"),
+    "bf16": ("run.bf16", None, "bfloat16 autocast for the network"),
+}
+
+
+def cmd_train(args: argparse.Namespace) -> int:
+    from .training import TrainConfig, train
+    from .training.checkpoint import load as load_checkpoint
+
+    if args.resume and not args.config:
+        # Continue with the run's own settings; flags given now override them.
+        out = args.out or "runs/default"
+        config = TrainConfig.from_dict(load_checkpoint(out).meta["config"])
+    else:
+        config = TrainConfig.from_file(args.config) if args.config else TrainConfig()
+    overrides = {}
+    for flag, (key, _, _) in TRAIN_FLAGS.items():
+        value = getattr(args, flag, None)
+        if value is not None:
+            overrides[key] = value
+    config = config.override(overrides)
+    result = train(config, resume=args.resume, progress=not args.quiet)
+    summary = ", ".join(f"{k} {v:.4g}" for k, v in result.last_metrics.items()
+                        if k in ("loss", "train_psnr", "val_psnr"))
+    state = "interrupted at" if result.interrupted else "finished at"
+    print(f"{state} step {result.step}: {summary}; run folder {result.run_dir}")
+    return 130 if result.interrupted else 0
+
+
+def cmd_plot(args: argparse.Namespace) -> int:
+    from .training.plots import plot_run
+
+    out = plot_run(args.run, args.out)
+    print(f"wrote {out}")
+    return 0
+
+
+def cmd_reconstruct(args: argparse.Namespace) -> int:
+    import torch
+
+    from .imageio import read_image, read_raw, write_image
+    from .inference import reconstruct
+    from .noise import add_evaluation_noise
+    from .training import load_system
+
+    if (args.image is None) == (args.raw is None):
+        raise ValueError("give exactly one of --image (simulate, then reconstruct) or --raw")
+    system = load_system(args.checkpoint)
+    if args.image:
+        rgb = torch.from_numpy(read_image(args.image)).permute(2, 0, 1)[None]
+        with torch.no_grad():
+            raw = add_evaluation_noise(system.sensor(rgb), Path(args.image).stem, args.sigma)
+    else:
+        raw = torch.from_numpy(read_raw(args.raw))[None, None]
+    out = reconstruct(system.network, raw, tile=args.tile, progress=not args.quiet)
+    write_image(args.out, out[0].clamp(0, 1))
+    print(f"wrote {args.out} ({out.shape[-1]}x{out.shape[-2]})")
+    return 0
+
+
+def _add_train_parser(sub) -> None:
+    p = sub.add_parser(
+        "train", help="train a reconstruction network (optionally with the pattern)",
+        description="Train the reconstruction network for a pattern, or the pattern and the "
+        "network jointly (--learn-pattern). Settings: defaults (the paper's recipe) < --config "
+        "FILE (TOML/YAML/JSON) < flags. Ctrl-C saves a checkpoint and exits; --resume "
+        "continues a run.",
+    )
+    p.add_argument("--config", help="TOML, YAML or JSON configuration file")
+    p.add_argument("--resume", action="store_true", help="continue the run in --out")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    for flag, (_, kind, help_text) in TRAIN_FLAGS.items():
+        name = "--" + flag.replace("_", "-")
+        if kind is None:
+            p.add_argument(name, action="store_const", const=True, default=None, help=help_text)
+        elif flag == "val_sigmas":
+            p.add_argument(name, type=kind, nargs="+", default=None, help=help_text)
+        else:
+            p.add_argument(name, type=kind, default=None, help=help_text)
+    p.set_defaults(handler=cmd_train)
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="splitcam",
@@ -117,6 +228,28 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, help="raw output, .png or .npy")
     p.add_argument("--preview", help="preview PNG (default: <out>_preview.png)")
     p.set_defaults(handler=cmd_simulate)
+
+    _add_train_parser(sub)
+
+    p = sub.add_parser("plot", help="draw a run's loss and validation PSNR curves")
+    p.add_argument("run", help="run folder (with metrics.jsonl)")
+    p.add_argument("--out", help="PNG (default: RUN/curves.png)")
+    p.set_defaults(handler=cmd_plot)
+
+    p = sub.add_parser(
+        "reconstruct", help="reconstruct a colour image with a trained run",
+        description="--image: simulate the sensor on a colour image (with --sigma noise), then "
+        "reconstruct; --raw: reconstruct a raw image (.png written by `simulate`, or .npy). "
+        "Large images are processed in overlapping tiles.",
+    )
+    p.add_argument("--checkpoint", required=True, help="run folder or checkpoint file")
+    p.add_argument("--image", help="colour image to simulate and reconstruct")
+    p.add_argument("--raw", help="raw image to reconstruct")
+    p.add_argument("--sigma", type=float, default=0.0, help="noise sigma for --image")
+    p.add_argument("--tile", type=int, default=512, help="tile size in pixels (default 512)")
+    p.add_argument("--out", required=True, help="output PNG")
+    p.add_argument("--quiet", action="store_true")
+    p.set_defaults(handler=cmd_reconstruct)
     return parser
 
 

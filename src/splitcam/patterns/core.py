@@ -47,7 +47,9 @@ def _as_layout(layout: Any) -> np.ndarray:
     flat = arr.reshape(-1).tolist()
     for v in flat:
         is_int = isinstance(v, Integral) and not isinstance(v, bool)
-        is_integral_float = isinstance(v, Real) and not isinstance(v, bool) and float(v).is_integer()
+        is_integral_float = (
+            isinstance(v, Real) and not isinstance(v, bool) and float(v).is_integer()
+        )
         if not (is_int or (isinstance(layout, np.ndarray) and is_integral_float)):
             raise PatternError(f"layout must be a 2-D grid of integers, got the entry {v!r}")
     return np.asarray(flat, dtype=np.int64).reshape(shape)

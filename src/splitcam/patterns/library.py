@@ -93,7 +93,8 @@ def _pattern_d() -> Pattern:
         layout=np.array(_LAYOUT_2X2),
         kernels=np.array(kernels, dtype=np.float64),
         provenance="authors' code",
-        description="Micro colour splitters: red and blue deflectors give W+R, W-R, W-B, W+B pixels",
+        description="Micro colour splitters: red and blue deflectors give W+R, W-R, W-B, W+B "
+        "pixels",
         reference="Nishiwaki et al., Nature Photonics 7, 2013",
     )
 

@@ -52,14 +52,13 @@ class PatternMeasures:
 
 
 def _targets(pattern: Pattern, i: int, j: int, c: int, oy: int, ox: int) -> frozenset:
-    """Absolute sensor pixels reached by colour ``c`` from position ``(i, j)`` of period (oy, ox)."""
+    """Sensor pixels reached by colour ``c`` from position ``(i, j)`` of the period (oy, ox)."""
     ph, pw = pattern.period
     k = pattern.kernels[pattern.layout[i, j], c]
     dy, dx = kernel_offsets(*k.shape)
     y0, x0 = oy * ph + i, ox * pw + j
-    return frozenset(
-        (y0 + int(a), x0 + int(b)) for a, b in zip(dy[k > SUPPORT_EPS], dx[k > SUPPORT_EPS])
-    )
+    on = k > SUPPORT_EPS
+    return frozenset((y0 + int(a), x0 + int(b)) for a, b in zip(dy[on], dx[on], strict=True))
 
 
 def _pooling_unit(pattern: Pattern) -> int:

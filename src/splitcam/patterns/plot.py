@@ -72,7 +72,7 @@ def draw_pattern(pattern: Pattern, out: str | os.PathLike | None = None, *, dpi:
         rgb = response[i, j] / peak
         ax.add_patch(Rectangle((j, i), 1, 1, fc=rgb, ec="black", lw=1.2))
         text = f"s{pattern.layout[i, j]}\n" + " ".join(
-            f"{c}{_fmt(v)}" for c, v in zip(COLOURS, response[i, j])
+            f"{c}{_fmt(v)}" for c, v in zip(COLOURS, response[i, j], strict=True)
         )
         ax.text(j + 0.5, i + 0.5, text, ha="center", va="center", fontsize=7,
                 color="white" if rgb.mean() < 0.5 else "black")

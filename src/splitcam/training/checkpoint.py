@@ -1,0 +1,156 @@
+"""Checkpoints: one safetensors file that rebuilds a run alone, plus a readable JSON copy of its
+metadata.
+
+``RUN/checkpoint.safetensors`` holds every tensor (network, sensor, optimiser moments, RNG
+states) and, in the safetensors header, a JSON document with the configuration, the current
+pattern (learned kernels included), the network architecture, the step and the optimiser's
+hyper-parameters. Nothing is ever unpickled. Files are written to a temporary name, flushed and
+renamed, so a killed process leaves either the previous checkpoint or the new one, never a
+damaged one.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import torch
+
+FORMAT = "splitcam-checkpoint"
+VERSION = 1
+CHECKPOINT_NAME = "checkpoint.safetensors"
+
+
+class CheckpointError(ValueError):
+    """A checkpoint is missing, damaged, or does not fit what it is loaded into."""
+
+
+@dataclass
+class Checkpoint:
+    """What a checkpoint file holds."""
+
+    meta: dict[str, Any]
+    tensors: dict[str, torch.Tensor]
+
+    def section(self, prefix: str) -> dict[str, torch.Tensor]:
+        """Tensors under ``prefix/`` with the prefix removed."""
+        cut = len(prefix) + 1
+        return {k[cut:]: v for k, v in self.tensors.items() if k.startswith(prefix + "/")}
+
+
+def resolve(path: str | os.PathLike) -> Path:
+    """A run folder or a checkpoint file → the checkpoint file."""
+    path = Path(path)
+    return path / CHECKPOINT_NAME if path.is_dir() else path
+
+
+def optimizer_tensors(optimizer: torch.optim.Optimizer) -> tuple[dict[str, torch.Tensor], dict]:
+    """Split an optimiser state into tensors and JSON-able hyper-parameters."""
+    state = optimizer.state_dict()
+    tensors = {}
+    for index, slots in state["state"].items():
+        for key, value in slots.items():
+            value = value if isinstance(value, torch.Tensor) else torch.tensor(value)
+            tensors[f"optim/{index}/{key}"] = value
+    return tensors, {"param_groups": state["param_groups"]}
+
+
+def load_optimizer(optimizer: torch.optim.Optimizer, ckpt: Checkpoint) -> None:
+    state: dict[int, dict[str, torch.Tensor]] = {}
+    for key, value in ckpt.section("optim").items():
+        index, name = key.split("/", 1)
+        state.setdefault(int(index), {})[name] = value
+    groups = ckpt.meta["optimizer"]["param_groups"]
+    try:
+        optimizer.load_state_dict({"state": state, "param_groups": groups})
+    except (ValueError, KeyError) as exc:
+        raise CheckpointError(f"optimiser state does not fit this run: {exc}") from None
+
+
+def save(path: str | os.PathLike, meta: dict[str, Any], tensors: dict[str, torch.Tensor]) -> Path:
+    """Write ``tensors`` and ``meta`` atomically to ``path`` (and ``meta`` to ``path.json``)."""
+    from safetensors.torch import save_file
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    meta = {"format": FORMAT, "version": VERSION, **meta}
+    text = json.dumps(meta, indent=2)
+    # safetensors refuses shared or non-contiguous storage; clone into plain CPU tensors.
+    plain = {k: v.detach().to("cpu").contiguous().clone() for k, v in tensors.items()}
+    tmp = path.with_name(path.name + ".tmp")
+    save_file(plain, str(tmp), metadata={"splitcam": text})
+    with open(tmp, "rb") as fh:
+        os.fsync(fh.fileno())
+    os.replace(tmp, path)
+    json_tmp = path.with_suffix(".json.tmp")
+    json_tmp.write_text(text + "\n", encoding="utf-8")
+    os.replace(json_tmp, path.with_suffix(".json"))
+    return path
+
+
+def load(path: str | os.PathLike) -> Checkpoint:
+    """Read a checkpoint file (or the one in a run folder).
+
+    Raises:
+        CheckpointError: Missing, truncated or otherwise damaged file, or not a splitcam
+            checkpoint.
+    """
+    from safetensors import safe_open
+
+    path = resolve(path)
+    if not path.is_file():
+        raise CheckpointError(f"no checkpoint at {str(path)!r}")
+    try:
+        with safe_open(str(path), framework="pt") as fh:
+            header = fh.metadata() or {}
+            tensors = {k: fh.get_tensor(k) for k in fh.keys()}  # noqa: SIM118 - not a dict
+    except Exception as exc:  # safetensors raises its own error types for damaged files
+        raise CheckpointError(
+            f"checkpoint {str(path)!r} is damaged or not a safetensors file ({exc})"
+        ) from None
+    try:
+        meta = json.loads(header["splitcam"])
+    except (KeyError, json.JSONDecodeError):
+        raise CheckpointError(f"{str(path)!r} is not a splitcam checkpoint") from None
+    if meta.get("format") != FORMAT or meta.get("version") != VERSION:
+        raise CheckpointError(
+            f"{str(path)!r}: expected {FORMAT} version {VERSION}, got "
+            f"{meta.get('format')} version {meta.get('version')}"
+        )
+    return Checkpoint(meta=meta, tensors=tensors)
+
+
+def load_module(
+    module: torch.nn.Module, ckpt: Checkpoint, prefix: str = "model", child: str = ""
+) -> None:
+    """Load ``module``'s parameters and buffers, refusing any mismatch with a clear message.
+
+    ``child`` selects a submodule's entries of the saved state (e.g. ``"network"``).
+    """
+    state = ckpt.section(prefix)
+    if child:
+        cut = len(child) + 1
+        state = {k[cut:]: v for k, v in state.items() if k.startswith(child + ".")}
+    own = module.state_dict()
+    missing = sorted(set(own) - set(state))
+    unexpected = sorted(set(state) - set(own))
+    wrong = sorted(k for k in set(own) & set(state) if own[k].shape != state[k].shape)
+    if missing or unexpected or wrong:
+        details = []
+        if missing:
+            details.append(f"missing {', '.join(missing[:4])}")
+        if unexpected:
+            details.append(f"unexpected {', '.join(unexpected[:4])}")
+        if wrong:
+            k = wrong[0]
+            details.append(
+                f"{k} has shape {tuple(state[k].shape)} in the checkpoint, "
+                f"{tuple(own[k].shape)} here"
+            )
+        raise CheckpointError(
+            "checkpoint belongs to another architecture: " + "; ".join(details)
+        )
+    module.load_state_dict(state)

@@ -1,0 +1,62 @@
+"""Training curves from a run's ``metrics.jsonl``."""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+
+def read_metrics(run: str | os.PathLike) -> list[dict]:
+    path = Path(run) / "metrics.jsonl" if Path(run).is_dir() else Path(run)
+    if not path.is_file():
+        raise FileNotFoundError(f"no metrics.jsonl in {str(run)!r}")
+    rows = []
+    for line in path.read_text(encoding="utf-8").splitlines():
+        try:
+            rows.append(json.loads(line))
+        except json.JSONDecodeError:
+            continue  # a line cut short by a killed process
+    if not rows:
+        raise ValueError(f"{str(path)!r} holds no logged steps yet")
+    return rows
+
+
+def plot_run(run: str | os.PathLike, out: str | os.PathLike | None = None) -> Path:
+    """Loss (log scale) and training/validation PSNR against step, saved as a PNG."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    rows = read_metrics(run)
+    folder = Path(run) if Path(run).is_dir() else Path(run).parent
+    out = Path(out) if out else folder / "curves.png"
+    train = [r for r in rows if "loss" in r]
+    val = [r for r in rows if "val_psnr" in r]
+    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(11, 4))
+    ax1.plot([r["step"] for r in train], [r["loss"] for r in train], lw=1)
+    ax1.set_yscale("log")
+    ax1.set_xlabel("step")
+    ax1.set_ylabel("training loss (MSE)")
+    ax1.grid(alpha=0.3)
+    ax2.plot([r["step"] for r in train], [r["train_psnr"] for r in train], lw=0.8, alpha=0.6,
+             label="training batches (noisy, all sigmas)")
+    sigmas = sorted({k for r in val for k in r if k.startswith("val_psnr_")},
+                    key=lambda k: float(k.rsplit("_", 1)[1]))
+    for key in sigmas:
+        ax2.plot([r["step"] for r in val], [r[key] for r in val], marker="o", ms=3,
+                 label=f"validation, sigma {key.rsplit('_', 1)[1]}")
+    ax2.set_xlabel("step")
+    ax2.set_ylabel("PSNR (dB)")
+    ax2.grid(alpha=0.3)
+    ax2.legend(fontsize=8)
+    last = val[-1] if val else train[-1]
+    name = Path(run).name if Path(run).is_dir() else Path(run).parent.name
+    fig.suptitle(f"run {name}: step {last['step']}"
+                 + (f", validation PSNR {last['val_psnr']:.2f} dB" if val else ""))
+    fig.tight_layout()
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=120)
+    plt.close(fig)
+    return out

@@ -1,0 +1,470 @@
+"""The training loop: fixed or joint (pattern + network) optimisation, checkpoints, resume,
+validation, logs, and DistributedDataParallel when started by ``torchrun``."""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import math
+import os
+import signal
+import time
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import torch
+import torch.nn.functional as F
+
+from .. import patterns
+from ..data import ImageCache, PatchSampler, list_images
+from ..metrics import psnr
+from ..networks import build_network
+from ..noise import GaussianNoise, add_evaluation_noise
+from ..sensor import LearnableSplitterSensor, SplitterSensor
+from ..system import ImagingSystem
+from . import checkpoint as ckpt_io
+from .config import ConfigError, TrainConfig
+
+METRICS_NAME = "metrics.jsonl"
+
+
+@dataclass
+class DistInfo:
+    rank: int = 0
+    world_size: int = 1
+    local_rank: int = 0
+
+    @property
+    def is_main(self) -> bool:
+        return self.rank == 0
+
+
+def init_distributed(device_kind: str) -> DistInfo:
+    """Join the process group ``torchrun`` set up (gloo on CPU, nccl on CUDA), if any."""
+    world = int(os.environ.get("WORLD_SIZE", "1"))
+    if world <= 1:
+        return DistInfo()
+    import torch.distributed as dist
+
+    if not dist.is_initialized():
+        dist.init_process_group(backend="nccl" if device_kind == "cuda" else "gloo")
+    return DistInfo(dist.get_rank(), dist.get_world_size(), int(os.environ.get("LOCAL_RANK", 0)))
+
+
+def resolve_device(name: str, local_rank: int = 0) -> torch.device:
+    if name == "auto":
+        if torch.cuda.is_available():
+            return torch.device("cuda", local_rank)
+        mps = getattr(torch.backends, "mps", None)
+        if mps is not None and mps.is_available():
+            return torch.device("mps")
+        return torch.device("cpu")
+    try:
+        device = torch.device(name)
+    except RuntimeError:
+        raise ConfigError(f"unknown device {name!r}; use auto, cpu, cuda, cuda:N or mps") from None
+    if device.type == "cuda" and not torch.cuda.is_available():
+        raise ConfigError("device 'cuda' requested but no CUDA device is available")
+    if device.type == "cuda" and device.index is None:
+        device = torch.device("cuda", local_rank)
+    return device
+
+
+def build_system(config: TrainConfig, pattern: patterns.Pattern | None = None) -> ImagingSystem:
+    """Sensor + network from a configuration (network weights freshly initialised)."""
+    pattern = pattern or patterns.get(config.pattern.name)
+    if config.pattern.learn:
+        gen = torch.Generator().manual_seed(config.run.seed + 17)
+        sensor: SplitterSensor = LearnableSplitterSensor(
+            pattern, init=config.pattern.init, generator=gen
+        )
+    else:
+        sensor = SplitterSensor(pattern)
+    net = build_network({
+        "arch": config.network.arch,
+        "period": list(pattern.period),
+        "features": config.network.features,
+        "blocks": config.network.blocks,
+    })
+    return ImagingSystem(sensor, net)
+
+
+def _sensor_pattern(system: ImagingSystem) -> dict[str, Any]:
+    return system.sensor.to_pattern().to_dict()
+
+
+def _val_images(config: TrainConfig) -> list[tuple[str, torch.Tensor]]:
+    """Validation images: the held-out split or the --val folder, centre-cropped."""
+    data = config.data
+    if data.val:
+        source: Any = data.val
+    elif data.val_split and data.train:
+        source = list_images(data.train)[-data.val_split:]
+    else:
+        return []
+    cache = ImageCache(source, min_size=1, max_images=data.val_max_images, progress=False)
+    images = []
+    for i, name in enumerate(cache.names):
+        img = cache.image(i)
+        if data.val_crop:
+            h, w = img.shape[-2:]
+            c = data.val_crop
+            top, left = max(0, (h - c) // 2), max(0, (w - c) // 2)
+            img = img[:, top:top + c, left:left + c]
+        images.append((name, img.contiguous()))
+    return images
+
+
+def _train_source(config: TrainConfig) -> Any:
+    if not config.data.train:
+        raise ConfigError("no training data: give --data DIR (or data.train in the config)")
+    if config.data.val_split and not config.data.val:
+        files = list_images(config.data.train)
+        if config.data.val_split >= len(files):
+            raise ConfigError(
+                f"data.val_split {config.data.val_split} leaves no training images "
+                f"(the folder has {len(files)})"
+            )
+        return files[: -config.data.val_split]
+    return config.data.train
+
+
+@torch.no_grad()
+def validate(
+    system: ImagingSystem, images: list[tuple[str, torch.Tensor]], sigmas: list[float],
+    device: torch.device,
+) -> dict[str, float]:
+    """Mean PSNR (8-bit, SPEC section 7) per sigma with the deterministic evaluation noise."""
+    was_training = system.training
+    system.eval()
+    out: dict[str, float] = {}
+    for sigma in sigmas:
+        scores = []
+        for name, img in images:
+            rgb = img[None].to(device)
+            raw = add_evaluation_noise(system.sensor(rgb), name, sigma)
+            pred = system.network(raw)
+            scores.append(psnr(pred[0].float().cpu().clamp(0, 1), img))
+        finite = [s for s in scores if math.isfinite(s)]
+        out[f"val_psnr_{sigma:g}"] = sum(finite) / max(len(finite), 1)
+    out["val_psnr"] = sum(out.values()) / len(sigmas)
+    system.train(was_training)
+    return out
+
+
+class _StopFlag:
+    """Ctrl-C (SIGINT) or SIGTERM: finish the current step, save, and exit cleanly."""
+
+    def __init__(self) -> None:
+        self.requested = False
+        self._previous: dict[int, Any] = {}
+
+    def __enter__(self) -> _StopFlag:
+        def handler(signum, frame):  # noqa: ARG001
+            if self.requested:  # a second Ctrl-C stops at once
+                raise KeyboardInterrupt
+            self.requested = True
+
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            with contextlib.suppress(ValueError):  # not in the main thread
+                self._previous[sig] = signal.signal(sig, handler)
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        for sig, previous in self._previous.items():
+            signal.signal(sig, previous)
+
+
+def _truncate_metrics(path: Path, step: int) -> None:
+    """Drop log lines after ``step`` (steps a killed run did after its last checkpoint)."""
+    if not path.is_file():
+        return
+    kept = []
+    for line in path.read_text(encoding="utf-8").splitlines():
+        try:
+            if json.loads(line).get("step", 0) <= step:
+                kept.append(line)
+        except json.JSONDecodeError:
+            continue  # a line cut by a kill
+    path.write_text("".join(k + "\n" for k in kept), encoding="utf-8")
+
+
+@dataclass
+class TrainResult:
+    run_dir: Path
+    step: int
+    interrupted: bool
+    last_metrics: dict[str, float]
+
+
+def train(config: TrainConfig, *, resume: bool = False, progress: bool = True) -> TrainResult:
+    """Train (or resume) a run; see :class:`~splitcam.training.config.TrainConfig`.
+
+    The run folder gets ``config.json`` (the resolved configuration), ``metrics.jsonl`` (one
+    JSON object per logged step), ``checkpoint.safetensors`` (+ ``.json``), and, for a learned
+    pattern, ``pattern.toml``.
+    """
+    config.validate()
+    run_dir = Path(config.run.out)
+    ckpt_path = run_dir / ckpt_io.CHECKPOINT_NAME
+    loaded = None
+    if resume:
+        loaded = ckpt_io.load(ckpt_path)
+        saved = TrainConfig.from_dict(loaded.meta["config"], source=str(ckpt_path))
+        _check_resume_compatible(saved, config)
+    elif ckpt_path.exists():
+        raise ConfigError(
+            f"{str(run_dir)!r} already holds a checkpoint; use --resume to continue it or "
+            f"choose another --out"
+        )
+    if config.run.threads:
+        torch.set_num_threads(config.run.threads)
+    device_kind = "cuda" if config.run.device.startswith("cuda") or (
+        config.run.device == "auto" and torch.cuda.is_available()) else "cpu"
+    dist_info = init_distributed(device_kind)
+    device = resolve_device(config.run.device, dist_info.local_rank)
+    torch.manual_seed(config.run.seed)
+
+    pattern = patterns.Pattern.from_dict(loaded.meta["start_pattern"]) if loaded else None
+    system = build_system(config, pattern).to(device)
+    start_pattern = system.sensor._meta.to_dict()
+    if config.run.channels_last:
+        system.channels_last = True
+        system.network.to(memory_format=torch.channels_last)
+    net_params = list(system.network.parameters())
+    groups = [{"params": net_params, "lr": config.optim.lr}]
+    sensor_params = list(system.sensor.parameters())
+    if sensor_params:
+        groups.append({"params": sensor_params, "lr": config.pattern.lr or config.optim.lr})
+    optimizer = torch.optim.Adam(
+        groups, lr=config.optim.lr, betas=tuple(config.optim.betas),
+        foreach=device.type != "cpu" or None,
+    )
+
+    cache = ImageCache(_train_source(config), min_size=config.data.patch_size,
+                       max_images=config.data.max_images, progress=progress and dist_info.is_main)
+    sampler = PatchSampler(cache, patch_size=config.data.patch_size, seed=config.run.seed,
+                           rank=dist_info.rank, world_size=dist_info.world_size)
+    noise = GaussianNoise((config.optim.sigma_min, config.optim.sigma_max),
+                          per_sample=config.optim.per_sample_sigma,
+                          seed=config.run.seed * 7919 + 1 + 104729 * dist_info.rank)
+    val_images = _val_images(config) if dist_info.is_main else []
+
+    step = 0
+    if loaded is not None:
+        ckpt_io.load_module(system, loaded)
+        ckpt_io.load_optimizer(optimizer, loaded)
+        step = int(loaded.meta["step"])
+        _restore_rng(loaded, sampler, noise, dist_info)
+
+    model: torch.nn.Module = system
+    if dist_info.world_size > 1:
+        from torch.nn.parallel import DistributedDataParallel
+
+        model = DistributedDataParallel(
+            system, device_ids=[device.index] if device.type == "cuda" else None
+        )
+
+    metrics_path = run_dir / METRICS_NAME
+    writer = None
+    if dist_info.is_main:
+        run_dir.mkdir(parents=True, exist_ok=True)
+        config.write(run_dir / "config.json")
+        if resume:
+            _truncate_metrics(metrics_path, step)
+        if config.run.tensorboard:
+            writer = _tensorboard(run_dir)
+
+    def save() -> None:
+        rng = _gather_rng(sampler, noise, dist_info)
+        if not dist_info.is_main:
+            return
+        opt_tensors, opt_meta = ckpt_io.optimizer_tensors(optimizer)
+        tensors = {f"model/{k}": v for k, v in system.state_dict().items()}
+        tensors.update(opt_tensors)
+        tensors.update(rng)
+        meta = {
+            "config": config.to_dict(),
+            "step": step,
+            "network": system.network.config(),
+            "pattern": _sensor_pattern(system),
+            "start_pattern": start_pattern,
+            "optimizer": opt_meta,
+            "world_size": dist_info.world_size,
+            "time": time.strftime("%Y-%m-%dT%H:%M:%S"),
+        }
+        ckpt_io.save(ckpt_path, meta, tensors)
+        if config.pattern.learn:
+            patterns.save(system.sensor.to_pattern(f"{start_pattern['name']}-learned"),
+                          run_dir / "pattern.toml")
+
+    bar = None
+    if progress and dist_info.is_main:
+        from tqdm import tqdm
+
+        bar = tqdm(total=config.optim.steps, initial=step, unit="step", dynamic_ncols=True,
+                   desc=f"train {Path(config.run.out).name}")
+    autocast = (
+        torch.autocast(device.type, dtype=torch.bfloat16) if config.run.bf16
+        else contextlib.nullcontext()
+    )
+    last: dict[str, float] = {}
+    window_loss, window_n, data_time = 0.0, 0, 0.0
+    t_window = time.perf_counter()
+    interrupted = False
+    if step == 0 and val_images and dist_info.is_main:
+        with open(metrics_path, "a", encoding="utf-8") as fh:
+            start = validate(system, val_images, config.data.val_sigmas, device)
+            fh.write(json.dumps({"step": 0, **start, "time": time.time()}) + "\n")
+    deadline = (time.monotonic() + 60 * config.run.time_limit) if config.run.time_limit else None
+    timed_out = False
+    with _StopFlag() as stop:
+        while step < config.optim.steps:
+            t0 = time.perf_counter()
+            batch = sampler.sample(config.data.batch_size).to(device, non_blocking=True)
+            data_time += time.perf_counter() - t0
+            with autocast:
+                pred = model(batch, noise)
+            loss = F.mse_loss(pred.float(), batch)
+            optimizer.zero_grad(set_to_none=True)
+            loss.backward()
+            optimizer.step()
+            step += 1
+            window_loss += loss.item()
+            window_n += 1
+            if bar is not None:
+                bar.update(1)
+            if deadline is not None and time.monotonic() > deadline:
+                timed_out = True
+            final = step == config.optim.steps or timed_out
+            log_now = step % config.run.log_every == 0 or final
+            val_now = val_images and (step % config.run.val_every == 0 or final)
+            if log_now and dist_info.is_main:
+                elapsed = time.perf_counter() - t_window
+                mean = window_loss / window_n
+                last = {
+                    "step": step,
+                    "loss": mean,
+                    "train_psnr": 10 * math.log10(1 / max(mean, 1e-12)),
+                    "steps_per_s": window_n / elapsed,
+                    "patches_per_s": window_n * config.data.batch_size
+                    * dist_info.world_size / elapsed,
+                    "data_frac": data_time / elapsed,
+                    "lr": optimizer.param_groups[0]["lr"],
+                }
+            if val_now and dist_info.is_main:
+                t_val = time.perf_counter()
+                last.update(validate(system, val_images, config.data.val_sigmas, device))
+                last["step"] = step
+                t_window += time.perf_counter() - t_val  # keep steps/s about training only
+            if (log_now or val_now) and dist_info.is_main:
+                last["time"] = time.time()
+                with open(metrics_path, "a", encoding="utf-8") as fh:
+                    fh.write(json.dumps(last) + "\n")
+                if writer is not None:
+                    for key, value in last.items():
+                        if key not in ("step", "time"):
+                            writer.add_scalar(key, value, step)
+                if bar is not None:
+                    post = {"loss": f"{last['loss']:.2e}", "psnr": f"{last['train_psnr']:.2f}"}
+                    if "val_psnr" in last:
+                        post["val"] = f"{last['val_psnr']:.2f}"
+                    bar.set_postfix(post, refresh=False)
+            if log_now:
+                window_loss, window_n, data_time = 0.0, 0, 0.0
+                t_window = time.perf_counter()
+            if _agree(stop.requested or timed_out, dist_info):
+                interrupted = not timed_out
+                break
+            if step % config.run.checkpoint_every == 0 and step < config.optim.steps:
+                save()
+        save()
+    if bar is not None:
+        bar.close()
+    if writer is not None:
+        writer.close()
+    if (interrupted or timed_out) and dist_info.is_main:
+        why = "time limit reached" if timed_out else "interrupted"
+        print(f"{why}: saved step {step} to {ckpt_path}; continue with --resume")
+    return TrainResult(run_dir, step, interrupted, last)
+
+
+def _agree(flag: bool, dist_info: DistInfo) -> bool:
+    """All ranks stop on the same step (else the others would wait forever in all-reduce)."""
+    if dist_info.world_size == 1:
+        return flag
+    import torch.distributed as dist
+
+    t = torch.tensor([1.0 if flag else 0.0])
+    dist.all_reduce(t)
+    return bool(t.item() > 0)
+
+
+def _gather_rng(sampler: PatchSampler, noise: GaussianNoise, dist_info: DistInfo):
+    """RNG states of every rank (collected on rank 0) so a resume draws the same batches."""
+    mine = torch.cat([sampler.generator.get_state(), noise.generator.get_state()])
+    n_sampler = sampler.generator.get_state().numel()
+    states = [mine]
+    if dist_info.world_size > 1:
+        import torch.distributed as dist
+
+        states = [torch.empty_like(mine) for _ in range(dist_info.world_size)]
+        dist.all_gather(states, mine)
+    out = {"rng/torch": torch.get_rng_state()}
+    for rank, state in enumerate(states):
+        out[f"rng/sampler/{rank}"] = state[:n_sampler].clone()
+        out[f"rng/noise/{rank}"] = state[n_sampler:].clone()
+    return out
+
+
+def _restore_rng(loaded: ckpt_io.Checkpoint, sampler: PatchSampler, noise: GaussianNoise,
+                 dist_info: DistInfo) -> None:
+    key = f"rng/sampler/{dist_info.rank}"
+    if key in loaded.tensors:
+        sampler.generator.set_state(loaded.tensors[key])
+        noise.generator.set_state(loaded.tensors[f"rng/noise/{dist_info.rank}"])
+    else:
+        # Resumed with more processes than the run had: reseed this rank from the step.
+        warnings.warn(f"checkpoint has no RNG state for rank {dist_info.rank}; reseeding",
+                      stacklevel=2)
+        sampler.generator.manual_seed(sampler.seed + 7 * int(loaded.meta["step"]) + dist_info.rank)
+    torch.set_rng_state(loaded.tensors["rng/torch"])
+
+
+def _check_resume_compatible(saved: TrainConfig, new: TrainConfig) -> None:
+    """Settings that define the model must not change on resume."""
+    fixed = {
+        "pattern.name": (saved.pattern.name, new.pattern.name),
+        "pattern.learn": (saved.pattern.learn, new.pattern.learn),
+        "network.arch": (saved.network.arch, new.network.arch),
+        "network.features": (saved.network.features, new.network.features),
+        "network.blocks": (saved.network.blocks, new.network.blocks),
+    }
+    for key, (a, b) in fixed.items():
+        if a != b:
+            raise ckpt_io.CheckpointError(
+                f"cannot resume: the checkpoint was trained with {key}={a!r}, got {b!r}"
+            )
+
+
+def _tensorboard(run_dir: Path):
+    try:
+        from torch.utils.tensorboard import SummaryWriter
+    except ImportError:
+        warnings.warn("TensorBoard is not installed; logging to metrics.jsonl only",
+                      stacklevel=2)
+        return None
+    return SummaryWriter(str(run_dir / "tensorboard"))
+
+
+def load_system(path: str | os.PathLike, device: str | torch.device = "cpu") -> ImagingSystem:
+    """The trained system of a run folder or checkpoint, with the sensor fixed to the pattern
+    it had at that step (a learned pattern is loaded as a fixed one), in eval mode."""
+    loaded = ckpt_io.load(path)
+    pattern = patterns.Pattern.from_dict(loaded.meta["pattern"])
+    network = build_network(loaded.meta["network"])
+    ckpt_io.load_module(network, loaded, child="network")
+    system = ImagingSystem(SplitterSensor(pattern), network)
+    return system.to(device).eval()
