@@ -1,0 +1,233 @@
+"""Training: learning happens, checkpoints resume exactly, damage and kills are survived."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+import torch
+from PIL import Image
+
+from splitcam import patterns
+from splitcam.cli import main
+from splitcam.training import CheckpointError, ConfigError, TrainConfig, load_system, train
+from splitcam.training import checkpoint as ckpt_io
+
+
+@pytest.fixture(scope="module")
+def image_folder(tmp_path_factory):
+    """Eight smooth random colour images (learnable in a few steps)."""
+    folder = tmp_path_factory.mktemp("images")
+    rng = np.random.default_rng(0)
+    for i in range(8):
+        small = rng.random((6, 6, 3))
+        img = np.kron(small, np.ones((8, 8, 1)))  # blocky, 48x48
+        Image.fromarray((img * 255).astype(np.uint8)).save(folder / f"im{i}.png")
+    return folder
+
+
+def tiny(folder, out, **changes) -> TrainConfig:
+    settings = {
+        "data.train": str(folder), "data.val_split": 2, "data.val_max_images": 2,
+        "data.val_crop": 32, "data.patch_size": 16, "data.batch_size": 4,
+        "network.features": 8, "network.blocks": 1, "optim.steps": 6, "optim.lr": 1e-3,
+        "run.out": str(out), "run.log_every": 1, "run.val_every": 3,
+        "run.checkpoint_every": 3, "run.threads": 1,
+    }
+    settings.update(changes)
+    return TrainConfig().override(settings)
+
+
+def losses(run) -> list[float]:
+    rows = [json.loads(line) for line in (run / "metrics.jsonl").read_text().splitlines()]
+    return [r["loss"] for r in rows if "loss" in r]
+
+
+def test_a_few_steps_lower_the_loss(image_folder, tmp_path):
+    result = train(tiny(image_folder, tmp_path / "r", **{"optim.steps": 40}), progress=False)
+    values = losses(tmp_path / "r")
+    assert len(values) == 40 and result.step == 40
+    assert np.mean(values[-5:]) < 0.5 * np.mean(values[:5])
+    rows = [json.loads(line) for line in (tmp_path / "r/metrics.jsonl").read_text().splitlines()]
+    val = [r for r in rows if "val_psnr" in r]
+    assert val[0]["step"] == 0 and val[-1]["step"] == 40
+    assert val[-1]["val_psnr"] > val[0]["val_psnr"]
+    assert json.loads((tmp_path / "r/config.json").read_text())["optim"]["steps"] == 40
+
+
+def test_resume_equals_the_uninterrupted_run(image_folder, tmp_path):
+    train(tiny(image_folder, tmp_path / "full"), progress=False)
+    train(tiny(image_folder, tmp_path / "split", **{"optim.steps": 3}), progress=False)
+    train(tiny(image_folder, tmp_path / "split"), resume=True, progress=False)
+    assert losses(tmp_path / "split") == losses(tmp_path / "full")
+    a = ckpt_io.load(tmp_path / "full").tensors
+    b = ckpt_io.load(tmp_path / "split").tensors
+    assert a.keys() == b.keys()
+    for key in a:
+        assert torch.equal(a[key], b[key]), key
+
+
+def test_joint_training_changes_the_pattern_and_keeps_it_valid(image_folder, tmp_path):
+    cfg = tiny(image_folder, tmp_path / "joint", **{"pattern.learn": True, "pattern.lr": 0.05})
+    train(cfg, progress=False)
+    learned = patterns.load(tmp_path / "joint/pattern.toml")
+    start = patterns.get("D")
+    assert not learned.equals(start, atol=1e-3)
+    assert np.all(learned.kernels >= 0)
+    np.testing.assert_allclose(learned.kernels.sum(axis=(2, 3)), 1.0, atol=1e-6)
+    ckpt = ckpt_io.load(tmp_path / "joint")
+    assert patterns.Pattern.from_dict(ckpt.meta["pattern"]).equals(learned, atol=1e-9)
+    # The learned pattern is what a loaded system senses with.
+    system = load_system(tmp_path / "joint")
+    np.testing.assert_allclose(system.sensor.kernels.numpy(), learned.kernels, atol=1e-9)
+
+    train(tiny(image_folder, tmp_path / "fixed"), progress=False)
+    fixed = patterns.Pattern.from_dict(ckpt_io.load(tmp_path / "fixed").meta["pattern"])
+    assert fixed.equals(start)
+
+
+def test_damaged_and_foreign_checkpoints_are_refused(image_folder, tmp_path):
+    train(tiny(image_folder, tmp_path / "r", **{"optim.steps": 2}), progress=False)
+    path = tmp_path / "r" / ckpt_io.CHECKPOINT_NAME
+    data = path.read_bytes()
+    path.write_bytes(data[: len(data) // 2])
+    with pytest.raises(CheckpointError, match="damaged"):
+        ckpt_io.load(path)
+    with pytest.raises(CheckpointError, match="damaged"):
+        train(tiny(image_folder, tmp_path / "r"), resume=True, progress=False)
+    path.write_bytes(b"\x00" * 64)
+    with pytest.raises(CheckpointError, match="damaged"):
+        load_system(tmp_path / "r")
+    path.write_bytes(data)
+    with pytest.raises(CheckpointError, match="network.features=8, got 16"):
+        train(tiny(image_folder, tmp_path / "r", **{"network.features": 16}), resume=True,
+              progress=False)
+    ckpt = ckpt_io.load(path)
+    bigger = torch.nn.Conv2d(1, 1, 3)
+    with pytest.raises(CheckpointError, match="another architecture"):
+        ckpt_io.load_module(bigger, ckpt)
+    with pytest.raises(CheckpointError, match="no checkpoint"):
+        ckpt_io.load(tmp_path / "nothing")
+    with pytest.raises(ConfigError, match="already holds a checkpoint"):
+        train(tiny(image_folder, tmp_path / "r"), progress=False)
+
+
+def _spawn(image_folder, out, steps, every):
+    argv = [
+        sys.executable, "-m", "splitcam", "train", "--data", str(image_folder),
+        "--val-split", "2", "--patch-size", "16", "--batch-size", "4", "--features", "8",
+        "--blocks", "1", "--steps", str(steps), "--checkpoint-every", str(every),
+        "--log-every", "1", "--val-every", "1000", "--threads", "1", "--out", str(out), "--quiet",
+    ]
+    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+    return subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env)
+
+
+def _wait_for_step(out, step, proc, timeout=120.0):
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        assert proc.poll() is None, proc.stderr.read().decode()
+        path = out / ckpt_io.CHECKPOINT_NAME
+        if path.exists():
+            try:
+                if ckpt_io.load(path).meta["step"] >= step:
+                    return
+            except CheckpointError:
+                pass
+        time.sleep(0.05)
+    raise AssertionError("training subprocess made no progress")
+
+
+def test_sigkill_loses_only_the_steps_since_the_last_checkpoint(image_folder, tmp_path):
+    out = tmp_path / "killed"
+    proc = _spawn(image_folder, out, steps=100000, every=2)
+    _wait_for_step(out, 4, proc)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    ckpt = ckpt_io.load(out)  # never damaged
+    saved = ckpt.meta["step"]
+    assert saved >= 4 and saved % 2 == 0
+    assert not list(out.glob("*.tmp"))
+    train(tiny(image_folder, out, **{"optim.steps": saved + 2}), resume=True, progress=False)
+    steps = [json.loads(x)["step"] for x in (out / "metrics.jsonl").read_text().splitlines()]
+    assert steps == sorted(set(steps)) and steps[-1] == saved + 2  # no duplicated steps
+
+
+def test_ctrl_c_saves_and_exits_cleanly(image_folder, tmp_path):
+    out = tmp_path / "interrupted"
+    proc = _spawn(image_folder, out, steps=100000, every=1000)
+    deadline = time.monotonic() + 120
+    while not (out / "metrics.jsonl").exists() and time.monotonic() < deadline:
+        time.sleep(0.05)
+    proc.send_signal(signal.SIGINT)
+    stdout, stderr = proc.communicate(timeout=120)
+    assert proc.returncode == 130, stderr.decode()
+    assert b"Traceback" not in stderr
+    assert b"--resume" in stdout
+    step = ckpt_io.load(out).meta["step"]
+    assert step >= 1 and step == json.loads(
+        (out / "metrics.jsonl").read_text().splitlines()[-1])["step"]
+
+
+def test_config_files_and_overrides(tmp_path, image_folder):
+    toml = tmp_path / "c.toml"
+    toml.write_text('[pattern]\nname = "A"\nlearn = true\n[optim]\nlr = 2e-4\n')
+    cfg = TrainConfig.from_file(toml)
+    assert cfg.pattern.name == "A" and cfg.pattern.learn and cfg.optim.lr == 2e-4
+    assert cfg.data.batch_size == 80 and cfg.optim.sigma_max == 30  # paper defaults kept
+    yaml_file = tmp_path / "c.yaml"
+    yaml_file.write_text("network:\n  features: 32\n")
+    assert TrainConfig.from_file(yaml_file).network.features == 32
+    bad = [
+        ('[pattern]\nnmae = "A"\n', "unknown setting.*'nmae'.*valid: init, learn, lr, name"),
+        ("[optim]\nsteps = 1.5\n", "optim.steps: expected an integer, got 1.5"),
+        ('[pattern]\nlearn = "False"\n', "pattern.learn: expected true or false"),
+        ("[nope]\nx = 1\n", "unknown setting"),
+        ("[optim\n", "not valid"),
+    ]
+    for text, message in bad:
+        toml.write_text(text)
+        with pytest.raises(ConfigError, match=message):
+            TrainConfig.from_file(toml)
+    with pytest.raises(ConfigError, match="pattern.init must be support, exact or random"):
+        TrainConfig().override({"pattern.init": "zeros"}).validate()
+    with pytest.raises(ConfigError, match="no training data"):
+        train(TrainConfig().override({"run.out": str(tmp_path / "x")}), progress=False)
+
+
+def test_cli_train_plot_reconstruct(image_folder, tmp_path, capsys):
+    cfg = tmp_path / "c.toml"
+    cfg.write_text(f'[data]\ntrain = "{image_folder}"\nval_split = 2\npatch_size = 16\n'
+                   'batch_size = 4\nval_crop = 32\n[network]\nfeatures = 8\nblocks = 1\n'
+                   '[run]\nthreads = 1\nval_every = 2\n')
+    out = tmp_path / "run"
+    assert main(["train", "--config", str(cfg), "--steps", "4", "--out", str(out),
+                 "--quiet", "--lr", "1e-3"]) == 0
+    saved = json.loads((out / "config.json").read_text())
+    assert saved["optim"]["lr"] == 1e-3 and saved["data"]["batch_size"] == 4
+    assert main(["train", "--out", str(out), "--resume", "--steps", "6", "--quiet"]) == 0
+    assert ckpt_io.load(out).meta["step"] == 6
+    assert main(["plot", str(out)]) == 0
+    assert (out / "curves.png").stat().st_size > 1000
+    photo = image_folder / "im0.png"
+    rec = tmp_path / "rec.png"
+    assert main(["reconstruct", "--checkpoint", str(out), "--image", str(photo),
+                 "--sigma", "5", "--out", str(rec), "--quiet"]) == 0
+    with Image.open(rec) as im:
+        assert im.size == (48, 48) and im.mode == "RGB"
+    raw = tmp_path / "raw.npy"
+    assert main(["simulate", str(photo), "--pattern", "D", "--out", str(raw)]) == 0
+    assert main(["reconstruct", "--checkpoint", str(out), "--raw", str(raw),
+                 "--out", str(tmp_path / "rec2.png"), "--quiet"]) == 0
+    capsys.readouterr()
+    assert main(["reconstruct", "--checkpoint", str(tmp_path / "none"), "--raw", str(raw),
+                 "--out", str(rec)]) == 1
+    assert "no checkpoint" in capsys.readouterr().err
+    assert main(["train", "--out", str(tmp_path / "new"), "--quiet"]) == 1
+    assert "no training data" in capsys.readouterr().err
