@@ -173,6 +173,60 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
     return 0
 
 
+def build_methods(args: argparse.Namespace) -> list:
+    """Evaluation methods from --checkpoint / --method / --patterns (see `evaluate --help`)."""
+    from .baselines import LMMSE, ClassicalDemosaic
+    from .evaluation import NetworkMethod
+    from .weights import shipped_lmmse
+
+    methods: list = [NetworkMethod.from_checkpoint(c, tile=args.tile) for c in args.checkpoint]
+    requested = args.method or ([] if methods else ["lmmse", "malvar2004"])
+    for name in requested:
+        key = name.lower()
+        if key in ClassicalDemosaic.METHODS:
+            method = ClassicalDemosaic(key)
+            method.name = f"bayer+{key}"
+            methods.append(method)
+        elif key == "lmmse":
+            for pattern in args.patterns:
+                if args.lmmse_train:
+                    lmmse = LMMSE.fit(pattern, args.lmmse_train, progress=not args.quiet)
+                else:
+                    lmmse = shipped_lmmse(pattern)
+                lmmse.name = f"lmmse-{lmmse.pattern.name}"
+                methods.append(lmmse)
+        else:
+            valid = ", ".join([*ClassicalDemosaic.METHODS, "lmmse"])
+            raise ValueError(f"unknown method {name!r}; valid: {valid} (or give --checkpoint)")
+    return methods
+
+
+def load_datasets(spec: str | None, max_images: int | None) -> list:
+    """``[(dataset name, [(image name, rgb)])]`` for a comma-separated list of names/folders."""
+    from .datasets import default_images, load_images
+
+    if not spec or spec == "default":
+        images = default_images()
+        return [("skimage", images[:max_images] if max_images else images)]
+    out = []
+    for item in (s.strip() for s in spec.split(",") if s.strip()):
+        images = load_images(item)
+        out.append((Path(item).name or item, images[:max_images] if max_images else images))
+    return out
+
+
+def cmd_evaluate(args: argparse.Namespace) -> int:
+    from .evaluation import evaluate, markdown_tables, summarise
+
+    methods = build_methods(args)
+    datasets = load_datasets(args.datasets, args.max_images)
+    rows = evaluate(methods, datasets, args.sigmas, args.out, save_images=args.save_images,
+                    zoom_images=args.zoom or None, progress=not args.quiet)
+    print(markdown_tables(summarise(rows)))
+    print(f"wrote {args.out}/per_image.csv, summary.json and table.md")
+    return 0
+
+
 def _add_train_parser(sub) -> None:
     p = sub.add_parser(
         "train", help="train a reconstruction network (optionally with the pattern)",
@@ -230,6 +284,40 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(handler=cmd_simulate)
 
     _add_train_parser(sub)
+
+    p = sub.add_parser(
+        "evaluate", help="score trained runs and baselines with the paper's protocol",
+        description="Simulates every test image with each method's pattern, adds the same "
+        "deterministic noise for every method, reconstructs, and scores PSNR, SSIM and "
+        "CIEDE2000 on 8-bit images. With no --checkpoint and no --method: the training-free "
+        "baselines (LMMSE for every pattern, bayer + Malvar 2004).",
+    )
+    p.add_argument("--checkpoint", action="append", default=[], metavar="RUN",
+                   help="a trained run (repeatable)")
+    p.add_argument("--method", action="append", metavar="NAME",
+                   help="baseline: bilinear, malvar2004, menon2007 (bayer) or lmmse (repeatable)")
+    p.add_argument("--patterns", type=lambda s: [x for x in s.split(",") if x],
+                   default=["A", "B", "C", "D", "E", "bayer"],
+                   help="patterns for lmmse, comma-separated names or files (default: all)")
+    p.add_argument("--lmmse-train", metavar="DIR",
+                   help="fit LMMSE on these training images (default: the shipped fits)")
+    p.add_argument("--datasets", default="default",
+                   help="comma-separated: kodak24, mcmaster, folders; default: the sample photos "
+                   "shipped with scikit-image")
+    p.add_argument("--sigmas", type=float, nargs="+", default=[0.0, 5.0, 10.0, 15.0, 20.0])
+    p.add_argument("--max-images", type=int, help="use at most N images per dataset")
+    p.add_argument("--out", default="results", help="output folder (default: results)")
+    p.add_argument("--save-images", action="store_true",
+                   help="write reconstructions and zoomed side-by-side crops")
+    p.add_argument("--zoom", action="append", metavar="IMAGE",
+                   help="image names for zoomed crops (default: first of each dataset)")
+    p.add_argument("--tile", type=int, default=512, help="network tile size")
+    p.add_argument("--quiet", action="store_true")
+    p.set_defaults(handler=cmd_evaluate)
+
+    from .datasets import add_cli as add_data_cli
+
+    add_data_cli(sub)
 
     p = sub.add_parser("plot", help="draw a run's loss and validation PSNR curves")
     p.add_argument("run", help="run folder (with metrics.jsonl)")
