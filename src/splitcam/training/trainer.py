@@ -314,13 +314,13 @@ def train(config: TrainConfig, *, resume: bool = False, progress: bool = True) -
     window_loss, window_n, data_time = 0.0, 0, 0.0
     t_window = time.perf_counter()
     interrupted = False
-    if step == 0 and val_images and dist_info.is_main:
-        with open(metrics_path, "a", encoding="utf-8") as fh:
-            start = validate(system, val_images, config.data.val_sigmas, device)
-            fh.write(json.dumps({"step": 0, **start, "time": time.time()}) + "\n")
     deadline = (time.monotonic() + 60 * config.run.time_limit) if config.run.time_limit else None
     timed_out = False
     with _StopFlag() as stop:
+        if step == 0 and val_images and dist_info.is_main:
+            start = validate(system, val_images, config.data.val_sigmas, device)
+            with open(metrics_path, "a", encoding="utf-8") as fh:
+                fh.write(json.dumps({"step": 0, **start, "time": time.time()}) + "\n")
         while step < config.optim.steps:
             t0 = time.perf_counter()
             batch = sampler.sample(config.data.batch_size).to(device, non_blocking=True)
