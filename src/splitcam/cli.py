@@ -7,6 +7,7 @@ line, ``splitcam <command>: error: ...``, with exit status 1; ``--debug`` shows 
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -135,6 +136,8 @@ def cmd_train(args: argparse.Namespace) -> int:
             overrides[key] = value
     config = config.override(overrides)
     result = train(config, resume=args.resume, progress=not args.quiet)
+    if int(os.environ.get("RANK", "0")) != 0:
+        return 0  # under torchrun only rank 0 reports
     summary = ", ".join(f"{k} {v:.4g}" for k, v in result.last_metrics.items()
                         if k in ("loss", "train_psnr", "val_psnr"))
     state = "interrupted at" if result.interrupted else "finished at"

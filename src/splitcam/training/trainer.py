@@ -279,6 +279,7 @@ def train(config: TrainConfig, *, resume: bool = False, progress: bool = True) -
 
     def save() -> None:
         rng = _gather_rng(sampler, noise, dist_info)
+        replicas = _replica_report(system, last_batch, dist_info)
         if not dist_info.is_main:
             return
         opt_tensors, opt_meta = ckpt_io.optimizer_tensors(optimizer)
@@ -293,6 +294,7 @@ def train(config: TrainConfig, *, resume: bool = False, progress: bool = True) -
             "start_pattern": start_pattern,
             "optimizer": opt_meta,
             "world_size": dist_info.world_size,
+            "replicas": replicas,
             "time": time.strftime("%Y-%m-%dT%H:%M:%S"),
         }
         ckpt_io.save(ckpt_path, meta, tensors)
@@ -311,6 +313,7 @@ def train(config: TrainConfig, *, resume: bool = False, progress: bool = True) -
         else contextlib.nullcontext()
     )
     last: dict[str, float] = {}
+    last_batch: torch.Tensor | None = None
     window_loss, window_n, data_time = 0.0, 0, 0.0
     t_window = time.perf_counter()
     interrupted = False
@@ -324,6 +327,7 @@ def train(config: TrainConfig, *, resume: bool = False, progress: bool = True) -
         while step < config.optim.steps:
             t0 = time.perf_counter()
             batch = sampler.sample(config.data.batch_size).to(device, non_blocking=True)
+            last_batch = batch
             data_time += time.perf_counter() - t0
             with autocast:
                 pred = model(batch, noise)
@@ -400,6 +404,32 @@ def _agree(flag: bool, dist_info: DistInfo) -> bool:
     t = torch.tensor([1.0 if flag else 0.0])
     dist.all_reduce(t)
     return bool(t.item() > 0)
+
+
+def _replica_report(system: ImagingSystem, batch: torch.Tensor | None,
+                    dist_info: DistInfo) -> dict[str, Any]:
+    """Per rank: a fingerprint of the model (network + sensor) and of the last batch drawn.
+
+    Under DistributedDataParallel the models must be identical on every rank and the batches
+    different; recording both in the checkpoint makes that checkable after the fact.
+    """
+    with torch.no_grad():
+        params = [p.detach().double().flatten() for p in system.parameters()]
+        weights = system.sensor.weights().detach().double().flatten()
+        vec = torch.cat([*params, weights])
+        ramp = torch.arange(1, vec.numel() + 1, dtype=torch.float64, device=vec.device)
+        drawn = batch.double().sum() if batch is not None else vec.new_zeros(())
+        fingerprint = torch.stack([vec.sum(), (vec * ramp).sum(), drawn.to(vec.device)]).cpu()
+    rows = [fingerprint]
+    if dist_info.world_size > 1:
+        import torch.distributed as dist
+
+        rows = [torch.empty_like(fingerprint) for _ in range(dist_info.world_size)]
+        dist.all_gather(rows, fingerprint)
+    return {
+        "model_fingerprints": [[float(r[0]), float(r[1])] for r in rows],
+        "batch_sums": [float(r[2]) for r in rows],
+    }
 
 
 def _gather_rng(sampler: PatchSampler, noise: GaussianNoise, dist_info: DistInfo):
