@@ -236,6 +236,8 @@ def markdown_tables(summary: dict) -> str:
     CIEDE2000 likewise."""
     methods = list(summary)
     groups = list(dict.fromkeys(g for m in methods for g in summary[m] if g != "pattern"))
+    if len(groups) == 2:  # one image set: "all" would repeat it
+        groups = groups[:1]
     sigmas = list(dict.fromkeys(s for m in methods for g in groups for s in summary[m].get(g, {})))
     lines: list[str] = []
     for group in groups:
