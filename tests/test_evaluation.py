@@ -1,0 +1,140 @@
+"""The evaluation protocol: same noise for every method, reproducible numbers, result files."""
+
+from __future__ import annotations
+
+import csv
+import json
+
+import numpy as np
+import pytest
+import torch
+from PIL import Image
+
+from splitcam import patterns
+from splitcam.cli import main
+from splitcam.evaluation import NetworkMethod, detail_region, evaluate, summarise
+from splitcam.metrics import psnr
+from splitcam.sensor import SplitterSensor
+from splitcam.training import TrainConfig, train
+
+
+class Spy:
+    """Records the raw image it is given and returns a fixed guess."""
+
+    def __init__(self, name: str, pattern: str = "D") -> None:
+        self.name = name
+        self.pattern = patterns.get(pattern)
+        self.seen: list[torch.Tensor] = []
+
+    def reconstruct(self, raw: torch.Tensor, sigma: float) -> torch.Tensor:
+        self.seen.append(raw.clone())
+        return raw.expand(-1, 3, -1, -1) / 4
+
+
+class Oracle:
+    """Knows the answer: PSNR is infinite."""
+
+    def __init__(self, images) -> None:
+        self.name = "oracle"
+        self.pattern = patterns.get("A")
+        self._answers = iter([img[None] for _, img in images for _ in range(2)])
+
+    def reconstruct(self, raw: torch.Tensor, sigma: float) -> torch.Tensor:
+        return next(self._answers)
+
+
+def _images(n=2, size=(20, 24)):
+    gen = torch.Generator().manual_seed(0)
+    return [(f"img{i}", torch.rand(3, *size, generator=gen)) for i in range(n)]
+
+
+def test_every_method_sees_the_same_noise():
+    images = _images()
+    a, b, c = Spy("a"), Spy("b"), Spy("c", pattern="A")
+    evaluate([a, b, c], [("set", images)], [0, 10], progress=False)
+    assert len(a.seen) == 4
+    for x, y in zip(a.seen, b.seen, strict=True):
+        assert torch.equal(x, y)
+    # Another pattern: different raw image, identical noise on top of it.
+    for k, (name, img) in enumerate(images):
+        for j in range(2):
+            i = 2 * k + j
+            noise_d = a.seen[i] - SplitterSensor("D")(img[None].double()).float()
+            noise_a = c.seen[i] - SplitterSensor("A")(img[None].double()).float()
+            torch.testing.assert_close(noise_d, noise_a, rtol=0, atol=1e-6)
+    assert torch.equal(a.seen[0], SplitterSensor("D")(images[0][1][None].double()).float())
+    assert a.seen[1].std() > 0
+
+
+def test_results_files_and_infinite_psnr(tmp_path):
+    images = _images()
+    rows = evaluate([Oracle(images), Spy("spy")], [("set", images)], [0, 5], tmp_path,
+                    progress=False)
+    assert all(r.psnr == float("inf") for r in rows if r.method == "oracle")
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    oracle = summary["oracle"]["all"]["5"]
+    assert oracle["n_infinite"] == 2 and oracle["n_images"] == 2 and oracle["ssim"] == 1.0
+    with open(tmp_path / "per_image.csv") as fh:
+        table = list(csv.DictReader(fh))
+    assert len(table) == 8
+    spy = [r for r in table if r["method"] == "spy" and r["sigma"] == "5"]
+    mean = np.mean([float(r["psnr"]) for r in spy])
+    assert summary["spy"]["set"]["5"]["psnr"] == pytest.approx(mean, abs=1e-3)
+    md = (tmp_path / "table.md").read_text()
+    assert "| oracle | A | inf / 1.0000 | inf / 1.0000 |" in md
+
+
+def test_psnr_in_rows_is_the_metric_of_the_clamped_output():
+    images = _images(1)
+    spy = Spy("spy")
+    rows = evaluate([spy], [("set", images)], [0], progress=False)
+    expected = psnr((spy.seen[0].expand(-1, 3, -1, -1) / 4)[0].clamp(0, 1), images[0][1])
+    assert rows[0].psnr == pytest.approx(expected)
+
+
+def test_tiny_checkpoint_evaluates_reproducibly(tmp_path):
+    folder = tmp_path / "train"
+    folder.mkdir()
+    rng = np.random.default_rng(0)
+    for i in range(4):
+        img = np.kron(rng.random((5, 5, 3)), np.ones((8, 8, 1)))
+        Image.fromarray((img * 255).astype(np.uint8)).save(folder / f"t{i}.png")
+    cfg = TrainConfig().override({
+        "data.train": str(folder), "data.patch_size": 16, "data.batch_size": 2,
+        "network.features": 4, "network.blocks": 1, "optim.steps": 2,
+        "run.out": str(tmp_path / "run"), "run.threads": 1,
+    })
+    train(cfg, progress=False)
+    images = _images(2, size=(16, 18))
+    first = evaluate([NetworkMethod.from_checkpoint(tmp_path / "run")], [("s", images)], [0, 10],
+                     tmp_path / "e1", progress=False)
+    second = evaluate([NetworkMethod.from_checkpoint(tmp_path / "run")], [("s", images)],
+                      [0, 10], tmp_path / "e2", progress=False)
+    assert first == second
+    assert (tmp_path / "e1/summary.json").read_text() == (tmp_path / "e2/summary.json").read_text()
+    assert summarise(first)["run"]["pattern"] == "D"
+
+
+def test_detail_region_finds_the_textured_part():
+    img = torch.zeros(3, 100, 120)
+    img[:, 60:90, 10:40] = torch.rand(3, 30, 30, generator=torch.Generator().manual_seed(1))
+    top, left, h, w = detail_region(img, size=30)
+    assert (h, w) == (30, 30) and abs(top - 60) <= 1 and abs(left - 10) <= 1
+
+
+def test_evaluate_cli_with_images_and_zoom(tmp_path, capsys):
+    folder = tmp_path / "photos"
+    folder.mkdir()
+    for name, img in _images(2, size=(40, 44)):
+        Image.fromarray((img.permute(1, 2, 0).numpy() * 255).astype(np.uint8)).save(
+            folder / f"{name}.png")
+    out = tmp_path / "out"
+    assert main(["evaluate", "--method", "bilinear", "--method", "lmmse", "--patterns", "D",
+                 "--datasets", str(folder), "--sigmas", "0", "10", "--out", str(out),
+                 "--save-images", "--quiet"]) == 0
+    printed = capsys.readouterr().out
+    assert "| bayer+bilinear | bayer |" in printed and "| lmmse-D | D |" in printed
+    assert (out / "images/lmmse-D/photos/img0_sigma10.png").is_file()
+    assert (out / "zoom/photos_img0_sigma0.png").is_file()
+    assert main(["evaluate", "--method", "nonsense", "--datasets", str(folder)]) == 1
+    assert "unknown method 'nonsense'" in capsys.readouterr().err
