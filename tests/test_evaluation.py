@@ -138,3 +138,23 @@ def test_evaluate_cli_with_images_and_zoom(tmp_path, capsys):
     assert (out / "zoom/photos_img0_sigma0.png").is_file()
     assert main(["evaluate", "--method", "nonsense", "--datasets", str(folder)]) == 1
     assert "unknown method 'nonsense'" in capsys.readouterr().err
+
+
+def test_report_puts_results_beside_the_paper(tmp_path, capsys):
+    from splitcam.report import make_report
+    from splitcam.sensor import LearnableSplitterSensor
+
+    learned = Spy("learned")
+    learned.pattern = LearnableSplitterSensor("A", init="random").to_pattern("A-opt")
+    evaluate([Spy("plain-D"), learned, Spy("bayerish", pattern="bayer")],
+             [("set", _images(1))], [0, 10], tmp_path / "res", progress=False)
+    report = make_report([tmp_path / "res"], tmp_path / "rep").read_text()
+    summary = json.loads((tmp_path / "res/summary.json").read_text())
+    ours = summary["plain-D"]["all"]["0"]["psnr"]
+    assert f"{ours:.2f} / " in report and f"(40.35, {ours - 40.35:+.2f})" in report
+    assert "(40.33, " in report  # a pattern learned from A is compared with "A optimised"
+    assert (tmp_path / "rep/patterns/A-opt.png").is_file()
+    assert (tmp_path / "rep/patterns/D.png").is_file()
+    assert (tmp_path / "rep/sigma_curves.png").stat().st_size > 10_000
+    assert main(["report", str(tmp_path / "nothing"), "--out", str(tmp_path / "r2")]) == 1
+    assert "no summary.json" in capsys.readouterr().err

@@ -230,6 +230,15 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_report(args: argparse.Namespace) -> int:
+    from .report import make_report
+
+    path = make_report(args.results, args.out)
+    print(path.read_text(encoding="utf-8"))
+    print(f"wrote {path} with pattern figures and {Path(args.out) / 'sigma_curves.png'}")
+    return 0
+
+
 def _add_train_parser(sub) -> None:
     p = sub.add_parser(
         "train", help="train a reconstruction network (optionally with the pattern)",
@@ -317,6 +326,16 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--tile", type=int, default=512, help="network tile size")
     p.add_argument("--quiet", action="store_true")
     p.set_defaults(handler=cmd_evaluate)
+
+    p = sub.add_parser(
+        "report", help="one report over evaluation results, beside the paper's numbers",
+        description="Takes folders written by `splitcam evaluate` and writes DIR/report.md (all "
+        "methods side by side with the paper's Table 1-3 and the differences), a figure of "
+        "every pattern (learned ones too) and a chart of PSNR and CIEDE2000 against sigma.",
+    )
+    p.add_argument("results", nargs="+", metavar="RESULTS", help="folders from `evaluate`")
+    p.add_argument("--out", default="report", help="output folder (default: report)")
+    p.set_defaults(handler=cmd_report)
 
     from .datasets import add_cli as add_data_cli
 

@@ -156,6 +156,12 @@ def evaluate(
         bar.close()
     if out_dir is not None:
         write_results(rows, out_dir)
+        # The patterns go with the results, so a report can draw (learned) patterns later.
+        from .patterns import save
+
+        (out_dir / "patterns").mkdir(parents=True, exist_ok=True)
+        for method in methods:
+            save(method.pattern, out_dir / "patterns" / f"{method.name}.json")
     return rows
 
 

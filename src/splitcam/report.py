@@ -1,0 +1,149 @@
+"""Reports: evaluation results side by side with the paper's numbers, pattern figures and
+PSNR/CIEDE2000-against-sigma charts (the paper's Table 1-3, Fig. 6 and Fig. 9)."""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+from . import patterns
+from .patterns.plot import draw_pattern
+
+#: SPEC section 8: mean over Kodak24 and McMaster (42 images), PSNR dB / SSIM, from 10^6 GPU
+#: training steps on DIV2K (Liu & Lam, Tables 1-3).
+PAPER = {
+    "A": [(40.02, .9764), (37.58, .9569), (35.72, .9376), (34.44, .9207), (33.47, .9052)],
+    "B": [(32.93, .9198), (32.70, .9132), (32.33, .9035), (31.93, .8937), (31.54, .8836)],
+    "C": [(31.53, .9159), (31.37, .9088), (31.08, .8986), (30.77, .8881), (30.45, .8773)],
+    "D": [(40.35, .9773), (38.56, .9650), (36.62, .9491), (35.17, .9341), (34.02, .9195)],
+    "E": [(35.65, .9674), (34.84, .9552), (33.89, .9404), (33.08, .9264), (32.37, .9125)],
+    "A optimised": [(40.33, .9772), (38.38, .9631), (36.57, .9468), (35.27, .9319),
+                    (34.25, .9178)],
+    "D optimised": [(41.03, .9797), (38.98, .9668), (36.96, .9508), (35.49, .9361),
+                    (34.34, .9219)],
+}
+PAPER_SIGMAS = ("0", "5", "10", "15", "20")
+
+
+def paper_row(pattern: patterns.Pattern) -> str | None:
+    """The paper's row for a pattern: its name, or "X optimised" for one learned from X."""
+    if pattern.provenance == "learned":
+        start = str(pattern.metadata.get("start", ""))
+        key = f"{start} optimised"
+    else:
+        key = pattern.name
+    return key if key in PAPER else None
+
+
+def _load(results: list[str | os.PathLike]) -> list[tuple[str, str, dict, patterns.Pattern]]:
+    """``(folder, method, summary entry, pattern)`` for every method of every result folder."""
+    out = []
+    for folder in results:
+        folder = Path(folder)
+        summary_path = folder / "summary.json"
+        if not summary_path.is_file():
+            raise FileNotFoundError(
+                f"{str(folder)!r} has no summary.json; give folders written by `splitcam evaluate`"
+            )
+        summary = json.loads(summary_path.read_text(encoding="utf-8"))
+        for method, entry in summary.items():
+            pattern_file = folder / "patterns" / f"{method}.json"
+            pattern = (patterns.load(pattern_file) if pattern_file.is_file()
+                       else patterns.get(entry["pattern"]))
+            out.append((folder.name, method, entry, pattern))
+    if not out:
+        raise ValueError("no methods found in the given result folders")
+    return out
+
+
+def make_report(results: list[str | os.PathLike], out: str | os.PathLike) -> Path:
+    """Write ``report.md``, ``patterns/*.png`` and ``sigma_curves.png`` into ``out``."""
+    out = Path(out)
+    (out / "patterns").mkdir(parents=True, exist_ok=True)
+    entries = _load(results)
+    lines = [
+        "# splitcam report",
+        "",
+        "Ours: mean over all images evaluated (`all`); the paper: mean over Kodak24 + McMaster "
+        "(42 images) after 10^6 GPU training steps on DIV2K. Cells: ours PSNR dB / SSIM, then "
+        "(paper PSNR, difference ours − paper). B, C and E are modelled patterns (SPEC "
+        "section 2), so their gaps are not only a matter of training budget.",
+        "",
+    ]
+    sigmas = list(dict.fromkeys(s for _, _, e, _ in entries for s in e["all"]))
+    lines.append("| result | method | pattern | images | " +
+                 " | ".join(f"σ={s}" for s in sigmas) + " |")
+    lines.append("|---|---|---|---|" + "---|" * len(sigmas))
+    for folder, method, entry, pattern in entries:
+        ref = paper_row(pattern)
+        cells = []
+        for s in sigmas:
+            st = entry["all"].get(s)
+            if st is None:
+                cells.append("–")
+                continue
+            cell = f"{st['psnr']:.2f} / {st['ssim']:.4f}"
+            if ref and s in PAPER_SIGMAS:
+                p_psnr = PAPER[ref][PAPER_SIGMAS.index(s)][0]
+                cell += f" ({p_psnr:.2f}, {st['psnr'] - p_psnr:+.2f})"
+            cells.append(cell)
+        n = max(st["n_images"] for st in entry["all"].values())
+        lines.append(f"| {folder} | {method} | {pattern.name} | {n} | " + " | ".join(cells) + " |")
+    lines += ["", "## CIEDE2000 (lower is better)", ""]
+    lines.append("| result | method | " + " | ".join(f"σ={s}" for s in sigmas) + " |")
+    lines.append("|---|---|" + "---|" * len(sigmas))
+    for folder, method, entry, _ in entries:
+        cells = [f"{entry['all'][s]['ciede2000']:.3f}" if s in entry["all"] else "–"
+                 for s in sigmas]
+        lines.append(f"| {folder} | {method} | " + " | ".join(cells) + " |")
+    lines += ["", "## Patterns", ""]
+    drawn: set[str] = set()
+    for *_, pattern in entries:
+        key = f"{pattern.name}-{pattern.provenance}"
+        if key in drawn:
+            continue
+        drawn.add(key)
+        path = out / "patterns" / f"{pattern.name}.png"
+        draw_pattern(pattern, path)
+        lines.append(f"![pattern {pattern.name}](patterns/{path.name})")
+    chart = sigma_chart(entries, out / "sigma_curves.png")
+    lines += ["", "## PSNR and CIEDE2000 against noise", "", f"![curves]({chart.name})", ""]
+    report = out / "report.md"
+    report.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    return report
+
+
+def sigma_chart(entries, path: Path) -> Path:
+    """PSNR and CIEDE2000 against sigma for every method, the paper's PSNR dashed (Fig. 9)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(12, 4.6))
+    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    for i, (folder, method, entry, pattern) in enumerate(entries):
+        colour = colours[i % len(colours)]
+        sig = sorted(entry["all"], key=float)
+        xs = [float(s) for s in sig]
+        label = method if len({f for f, *_ in entries}) == 1 else f"{folder}: {method}"
+        ax1.plot(xs, [entry["all"][s]["psnr"] for s in sig], "o-", color=colour, label=label)
+        ax2.plot(xs, [entry["all"][s]["ciede2000"] for s in sig], "o-", color=colour, label=label)
+        ref = paper_row(pattern)
+        if ref:
+            ax1.plot([float(s) for s in PAPER_SIGMAS], [p for p, _ in PAPER[ref]], "--",
+                     color=colour, alpha=0.6, lw=1)
+    ax1.set_xlabel("noise σ (8-bit units)")
+    ax1.set_ylabel("PSNR (dB)")
+    ax1.set_title("PSNR (dashed: the paper's network, same pattern)", fontsize=10)
+    ax2.set_xlabel("noise σ (8-bit units)")
+    ax2.set_ylabel("CIEDE2000 (lower is better)")
+    ax2.set_title("colour error", fontsize=10)
+    for ax in (ax1, ax2):
+        ax.grid(alpha=0.3)
+    ax2.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1))
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
