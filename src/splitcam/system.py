@@ -39,7 +39,10 @@ class ImagingSystem(nn.Module):
         self.channels_last = False
 
     def forward(self, rgb: torch.Tensor, noise: NoiseFn | None = None) -> torch.Tensor:
-        raw = self.sensor(rgb)
+        # The physics stays in full precision under a mixed-precision autocast: only the
+        # network runs in reduced precision.
+        with torch.autocast(rgb.device.type, enabled=False):
+            raw = self.sensor(rgb)
         if noise is not None:
             raw, _ = noise(raw)
         if self.channels_last:
