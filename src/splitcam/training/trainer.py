@@ -459,7 +459,9 @@ def _restore_rng(loaded: ckpt_io.Checkpoint, sampler: PatchSampler, noise: Gauss
         # Resumed with more processes than the run had: reseed this rank from the step.
         warnings.warn(f"checkpoint has no RNG state for rank {dist_info.rank}; reseeding",
                       stacklevel=2)
-        sampler.generator.manual_seed(sampler.seed + 7 * int(loaded.meta["step"]) + dist_info.rank)
+        step = int(loaded.meta["step"])
+        sampler.generator.manual_seed(sampler.seed + 1_000_003 * dist_info.rank + 7919 * step)
+        noise.generator.manual_seed(sampler.seed + 2_000_003 * dist_info.rank + 7919 * step)
     torch.set_rng_state(loaded.tensors["rng/torch"])
 
 
