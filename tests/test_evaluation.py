@@ -88,8 +88,11 @@ def test_psnr_in_rows_is_the_metric_of_the_clamped_output():
     images = _images(1)
     spy = Spy("spy")
     rows = evaluate([spy], [("set", images)], [0], progress=False)
-    expected = psnr((spy.seen[0].expand(-1, 3, -1, -1) / 4)[0].clamp(0, 1), images[0][1])
-    assert rows[0].psnr == pytest.approx(expected)
+    guess = (spy.seen[0].expand(-1, 3, -1, -1) / 4)[0].clamp(0, 1)
+    assert rows[0].psnr == pytest.approx(psnr(guess, images[0][1]))
+    cropped = evaluate([spy], [("set", images)], [0], crop=3, progress=False)
+    assert cropped[0].psnr == pytest.approx(psnr(guess, images[0][1], crop=3))
+    assert cropped[0].psnr != pytest.approx(rows[0].psnr)
 
 
 def test_tiny_checkpoint_evaluates_reproducibly(tmp_path):

@@ -224,7 +224,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     methods = build_methods(args)
     datasets = load_datasets(args.datasets, args.max_images)
     rows = evaluate(methods, datasets, args.sigmas, args.out, save_images=args.save_images,
-                    zoom_images=args.zoom or None, progress=not args.quiet)
+                    zoom_images=args.zoom or None, crop=args.crop, progress=not args.quiet)
     print(markdown_tables(summarise(rows)))
     print(f"wrote {args.out}/per_image.csv, summary.json and table.md")
     return 0
@@ -318,6 +318,8 @@ def build_parser() -> argparse.ArgumentParser:
                    "shipped with scikit-image")
     p.add_argument("--sigmas", type=float, nargs="+", default=[0.0, 5.0, 10.0, 15.0, 20.0])
     p.add_argument("--max-images", type=int, help="use at most N images per dataset")
+    p.add_argument("--crop", type=int, default=0,
+                   help="border pixels left out of the scores (default 0, as in the paper)")
     p.add_argument("--out", default="results", help="output folder (default: results)")
     p.add_argument("--save-images", action="store_true",
                    help="write reconstructions and zoomed side-by-side crops")

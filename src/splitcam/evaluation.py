@@ -106,6 +106,7 @@ def evaluate(
     *,
     save_images: bool = False,
     zoom_images: Sequence[str] | None = None,
+    crop: int = 0,
     progress: bool = True,
 ) -> list[EvalRow]:
     """Score every method on every image at every sigma, and write the results to ``out``.
@@ -113,7 +114,8 @@ def evaluate(
     Writes ``per_image.csv``, ``summary.json`` and ``table.md`` (see :func:`write_results`);
     with ``save_images``, the reconstructions under ``images/`` and, for each image in
     ``zoom_images`` (default: the first image of each dataset), a side-by-side zoom of its most
-    detailed region for all methods (the paper's Figs. 4, 5, 7, 8).
+    detailed region for all methods (the paper's Figs. 4, 5, 7, 8). ``crop`` removes that many
+    border pixels before scoring (0, the paper's convention, by default).
     """
     if not methods:
         raise ValueError("expected at least one method to evaluate")
@@ -141,7 +143,7 @@ def evaluate(
                         raw = sensor(rgb[None].double()).float()
                         noisy = add_evaluation_noise(raw, image_name, sigma)
                         pred = method.reconstruct(noisy, sigma)[0].float().clamp(0, 1)
-                    scores = compute_all(pred, rgb)
+                    scores = compute_all(pred, rgb, crop=crop)
                     rows.append(EvalRow(method.name, method.pattern.name, dataset, image_name,
                                         float(sigma), **scores))
                     outputs[method.name] = (pred, scores)
