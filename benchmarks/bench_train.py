@@ -86,19 +86,24 @@ def train_step_time(arch: str, batch: torch.Tensor, steps: int, channels_last=Fa
 
 def large_image_memory(arch: str) -> dict:
     """Reconstruct a 4000x3000 raw image in tiles in a fresh process; report its peak RSS."""
+    # VmHWM (peak resident memory of this process image) rather than ru_maxrss: Linux carries
+    # ru_maxrss over exec() from the parent, so it would report the benchmark's own peak.
     code = f"""
-import json, resource, time, torch
+import json, time, torch
 from splitcam.inference import reconstruct
 from splitcam.networks import build_network
+def hwm():
+    for line in open("/proc/self/status"):
+        if line.startswith("VmHWM"):
+            return int(line.split()[1]) / 1024
 torch.manual_seed(0)
 net = build_network({{"arch": "{arch}", "period": [2, 2]}}).eval()
 raw = torch.rand(1, 1, 3000, 4000)
-base = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+base = hwm()
 t = time.perf_counter()
 out = reconstruct(net, raw, tile=512, bf16=True, channels_last=True)
 print(json.dumps({{"seconds": time.perf_counter() - t, "shape": list(out.shape),
-    "peak_rss_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
-    "rss_before_mib": base / 1024}}))
+    "peak_rss_mib": hwm(), "rss_before_mib": base}}))
 """
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     return json.loads(out.stdout.strip().splitlines()[-1])
@@ -131,6 +136,8 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=3, help="timed training steps per setting")
     parser.add_argument("--batch-size", type=int, default=80)
     parser.add_argument("--skip-large", action="store_true", help="skip the 4000x3000 run")
+    parser.add_argument("--only", choices=["train", "inference", "large", "accuracy"],
+                        help="run one part only")
     parser.add_argument("--accuracy-steps", type=int, default=0,
                         help="also train float32 vs optimised for N steps and compare PSNR")
     args = parser.parse_args()
@@ -144,7 +151,10 @@ def main() -> None:
     batch = sampler.sample(args.batch_size)
     print(f"data: {data_s * 1e3:.2f} ms per batch of {args.batch_size}x3x64x64")
 
-    for arch in ["paper", "packed"]:
+    def want(part: str) -> bool:
+        return args.only is None or args.only == part
+
+    for arch in ["paper", "packed"] if want("train") else []:
         base, flops = train_step_time(arch, batch, args.steps)
         fast, _ = train_step_time(arch, batch, args.steps, **OPTIMISED)
         b = args.batch_size
@@ -157,7 +167,7 @@ def main() -> None:
               f"{100 * data_s / fast:.2f}% of an optimised step")
 
     torch.manual_seed(0)
-    for arch in ["paper", "packed"]:
+    for arch in ["paper", "packed"] if want("inference") else []:
         net = build_network({"arch": arch, "period": [2, 2]}).eval()
         raw = torch.rand(1, 1, 512, 768)
 
@@ -173,13 +183,13 @@ def main() -> None:
         print(f"inference {arch:6} 768x512: baseline {tb:.2f} s, optimised {to:.2f} s, "
               f"ratio {tb / to:.2f}x")
 
-    if not args.skip_large:
+    if not args.skip_large and want("large"):
         for arch in ["paper"]:
             r = large_image_memory(arch)
             print(f"tiled 4000x3000 ({arch}, optimised, tile 512): {r['seconds']:.1f} s, "
                   f"peak RSS {r['peak_rss_mib']:.0f} MiB (process start {r['rss_before_mib']:.0f}"
                   f" MiB)")
-    if args.accuracy_steps:
+    if args.accuracy_steps and want("accuracy"):
         acc = accuracy(args.accuracy_steps)
         a, o = acc["float32"], acc["optimised"]
         print(f"accuracy after {args.accuracy_steps} steps (batch 16, seed 0, 8 held-out "

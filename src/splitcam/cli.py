@@ -182,7 +182,8 @@ def build_methods(args: argparse.Namespace) -> list:
     from .evaluation import NetworkMethod
     from .weights import shipped_lmmse
 
-    methods: list = [NetworkMethod.from_checkpoint(c, tile=args.tile) for c in args.checkpoint]
+    methods: list = [NetworkMethod.from_checkpoint(c, tile=args.tile, fast=args.fast)
+                     for c in args.checkpoint]
     requested = args.method or ([] if methods else ["lmmse", "malvar2004"])
     for name in requested:
         key = name.lower()
@@ -326,6 +327,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--zoom", action="append", metavar="IMAGE",
                    help="image names for zoomed crops (default: first of each dataset)")
     p.add_argument("--tile", type=int, default=512, help="network tile size")
+    p.add_argument("--fast", action="store_true",
+                   help="bfloat16 + channels-last network inference (see README for its cost)")
     p.add_argument("--quiet", action="store_true")
     p.set_defaults(handler=cmd_evaluate)
 

@@ -45,28 +45,31 @@ class NetworkMethod:
         system: From :func:`splitcam.training.load_system`.
         name: Label in tables (default: the run folder's name).
         tile: Tile size for :func:`splitcam.inference.reconstruct`.
+        fast: bfloat16 autocast and channels-last inference (see ``reconstruct``).
     """
 
-    def __init__(self, system, name: str, tile: int | None = 512) -> None:
+    def __init__(self, system, name: str, tile: int | None = 512, fast: bool = False) -> None:
         self.system = system
         self.name = name
         self.pattern = system.sensor.to_pattern()
         self.tile = tile
+        self.fast = fast
 
     def reconstruct(self, raw: torch.Tensor, sigma: float) -> torch.Tensor:
         from .inference import reconstruct
 
-        return reconstruct(self.system.network, raw, tile=self.tile)
+        return reconstruct(self.system.network, raw, tile=self.tile, bf16=self.fast,
+                           channels_last=self.fast)
 
     @classmethod
     def from_checkpoint(cls, path: str | os.PathLike, name: str | None = None,
-                        tile: int | None = 512) -> NetworkMethod:
+                        tile: int | None = 512, fast: bool = False) -> NetworkMethod:
         from .training import load_system
         from .training.checkpoint import resolve
 
         path = Path(path)
         label = name or (path.name if path.is_dir() else resolve(path).parent.name)
-        return cls(load_system(path), label, tile)
+        return cls(load_system(path), label, tile, fast)
 
 
 @dataclass
