@@ -37,7 +37,6 @@ import torch.nn.functional as F
 from .data import ImageCache, PatchSampler, load_validation
 from .metrics import compute_all, mean_over_images, psnr
 from .networks import check_raw
-from .noise import add_evaluation_noise
 from .patterns import Pattern, PatternError, get
 from .sensor import SplitterSensor
 
@@ -630,7 +629,9 @@ def evaluate_method(
 
     Each image goes through the method's sensor (float32), gets the evaluation noise of its
     name and sigma (:func:`~splitcam.noise.add_evaluation_noise`, the same for every method),
-    is reconstructed, and is compared with PSNR, SSIM and CIEDE2000 without border crop.
+    is reconstructed (:func:`splitcam.evaluation.simulate_and_reconstruct`, the step
+    ``splitcam evaluate`` uses), and is compared with PSNR, SSIM and CIEDE2000 without border
+    crop.
 
     Args:
         method: The method to score.
@@ -643,6 +644,8 @@ def evaluate_method(
         Rows ``{"image", "sigma", "psnr", "ssim", "ciede2000", "psnr_crop<c>"..., "seconds"}``;
         ``seconds`` is the time of sensor, noise and reconstruction (not the metrics).
     """
+    from .evaluation import simulate_and_reconstruct
+
     sensor = SplitterSensor(method.pattern)
     rows = []
     data = _test_images(images)
@@ -650,10 +653,7 @@ def evaluate_method(
         sigma = _check_sigma(sigma)
         for name, img in data:
             start = time.perf_counter()
-            with torch.no_grad():
-                rgb = img.unsqueeze(0).float()
-                raw = add_evaluation_noise(sensor(rgb), name, sigma)
-                out = method.reconstruct(raw, sigma)[0]
+            out = simulate_and_reconstruct(method, sensor, name, img.float(), sigma)
             seconds = time.perf_counter() - start
             row: dict[str, Any] = {"image": name, "sigma": sigma, **compute_all(out, img)}
             for crop in psnr_crops:

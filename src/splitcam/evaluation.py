@@ -84,6 +84,20 @@ class EvalRow:
     ciede2000: float
 
 
+def simulate_and_reconstruct(method: Method, sensor: SplitterSensor, image_name: str,
+                             rgb: torch.Tensor, sigma: float) -> torch.Tensor:
+    """One step of the protocol: the raw image of ``rgb`` through ``sensor`` (float64), the
+    evaluation noise of ``image_name`` and ``sigma``, and the method's reconstruction, clamped.
+
+    Shape:
+        - rgb: ``(3, H, W)``; output ``(3, H, W)`` float32 in [0, 1].
+    """
+    with torch.no_grad():
+        raw = sensor(rgb[None].double()).float()
+        noisy = add_evaluation_noise(raw, image_name, sigma)
+        return method.reconstruct(noisy, sigma)[0].float().clamp(0, 1)
+
+
 def detail_region(rgb: torch.Tensor, size: int = 96) -> tuple[int, int, int, int]:
     """The ``size``-square window of the ground truth with the most detail (gradient energy):
     where reconstruction differences show. Chosen from the scene alone, so it is the same for
@@ -142,10 +156,7 @@ def evaluate(
                 outputs = {}
                 for method in methods:
                     sensor = sensors.setdefault(id(method), SplitterSensor(method.pattern))
-                    with torch.no_grad():
-                        raw = sensor(rgb[None].double()).float()
-                        noisy = add_evaluation_noise(raw, image_name, sigma)
-                        pred = method.reconstruct(noisy, sigma)[0].float().clamp(0, 1)
+                    pred = simulate_and_reconstruct(method, sensor, image_name, rgb, sigma)
                     scores = compute_all(pred, rgb, crop=crop)
                     rows.append(EvalRow(method.name, method.pattern.name, dataset, image_name,
                                         float(sigma), **scores))
