@@ -56,7 +56,7 @@ def test_every_method_sees_the_same_noise():
     for x, y in zip(a.seen, b.seen, strict=True):
         assert torch.equal(x, y)
     # Another pattern: different raw image, identical noise on top of it.
-    for k, (name, img) in enumerate(images):
+    for k, (_, img) in enumerate(images):
         for j in range(2):
             i = 2 * k + j
             noise_d = a.seen[i] - SplitterSensor("D")(img[None].double()).float()
@@ -139,6 +139,14 @@ def test_evaluate_cli_with_images_and_zoom(tmp_path, capsys):
     assert "| bayer+bilinear | bayer |" in printed and "| lmmse-D | D |" in printed
     assert (out / "images/lmmse-D/photos/img0_sigma10.png").is_file()
     assert (out / "zoom/photos_img0_sigma0.png").is_file()
+    assert main(["evaluate", "--method", "bilinear", "--datasets", str(folder), "--sigmas", "0",
+                 "--out", str(tmp_path / "o2"), "--save-images", "--zoom", "img1:4,6,20",
+                 "--quiet"]) == 0
+    assert (tmp_path / "o2/zoom/photos_img1_sigma0.png").is_file()
+    assert not (tmp_path / "o2/zoom/photos_img0_sigma0.png").exists()
+    assert main(["evaluate", "--method", "bilinear", "--datasets", str(folder), "--sigmas", "0",
+                 "--out", str(tmp_path / "o3"), "--save-images", "--zoom", "img1:4,x"]) == 1
+    assert "expected a zoom as IMAGE or IMAGE:TOP,LEFT,SIZE" in capsys.readouterr().err
     assert main(["evaluate", "--method", "nonsense", "--datasets", str(folder)]) == 1
     assert "unknown method 'nonsense'" in capsys.readouterr().err
 

@@ -324,8 +324,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", default="results", help="output folder (default: results)")
     p.add_argument("--save-images", action="store_true",
                    help="write reconstructions and zoomed side-by-side crops")
-    p.add_argument("--zoom", action="append", metavar="IMAGE",
-                   help="image names for zoomed crops (default: first of each dataset)")
+    p.add_argument("--zoom", action="append", metavar="IMAGE[:TOP,LEFT,SIZE]",
+                   help="image (and region) for zoomed side-by-side crops (default: the most "
+                   "detailed region of the first image of each dataset)")
     p.add_argument("--tile", type=int, default=512, help="network tile size")
     p.add_argument("--fast", action="store_true",
                    help="bfloat16 + channels-last network inference (see README for its cost)")

@@ -130,8 +130,10 @@ def evaluate(
 
     Writes ``per_image.csv``, ``summary.json`` and ``table.md`` (see :func:`write_results`);
     with ``save_images``, the reconstructions under ``images/`` and, for each image in
-    ``zoom_images`` (default: the first image of each dataset), a side-by-side zoom of its most
-    detailed region for all methods (the paper's Figs. 4, 5, 7, 8). ``crop`` removes that many
+    ``zoom_images`` (default: the first image of each dataset), a side-by-side zoom of all
+    methods (the paper's Figs. 4, 5, 7, 8) on a chosen region: an entry ``"kodim05:200,300,96"``
+    zooms on the 96-pixel square at row 200, column 300; a bare name on the image's most
+    detailed region (:func:`detail_region`). ``crop`` removes that many
     border pixels before scoring (0, the paper's convention, by default).
     """
     if not methods:
@@ -148,8 +150,8 @@ def evaluate(
         from tqdm import tqdm
 
         bar = tqdm(total=total, unit="recon", desc="evaluate", dynamic_ncols=True)
-    zoom = set(zoom_images) if zoom_images is not None else {
-        images[0][0] for _, images in datasets if images}
+    zoom = (dict(parse_zoom(z) for z in zoom_images) if zoom_images is not None else
+            {images[0][0]: None for _, images in datasets if images})
     for dataset, images in datasets:
         for image_name, rgb in images:
             for sigma in sigmas:
@@ -167,7 +169,7 @@ def evaluate(
                                             f"{method.name} {scores['psnr']:.2f} dB", refresh=False)
                 if save_images and out_dir is not None:
                     _save_images(out_dir, dataset, image_name, sigma, rgb, outputs,
-                                 image_name in zoom)
+                                 image_name in zoom, zoom.get(image_name))
     if bar is not None:
         bar.close()
     if out_dir is not None:
@@ -182,7 +184,7 @@ def evaluate(
 
 
 def _save_images(out_dir: Path, dataset: str, image: str, sigma: float, rgb: torch.Tensor,
-                 outputs: dict, zoom: bool) -> None:
+                 outputs: dict, zoom: bool, region: tuple[int, int, int] | None) -> None:
     from .imageio import write_image
 
     safe = image.replace("/", "_")
@@ -192,18 +194,41 @@ def _save_images(out_dir: Path, dataset: str, image: str, sigma: float, rgb: tor
         write_image(path, pred)
     if zoom:
         zoom_figure(rgb, outputs, out_dir / "zoom" / f"{dataset}_{safe}_sigma{sigma:g}.png",
+                    region=region,
                     title=f"{dataset}/{image}, sigma {sigma:g}")
 
 
-def zoom_figure(rgb: torch.Tensor, outputs: dict, path: Path, title: str = "") -> Path:
-    """Ground truth and each method's output, zoomed on the most detailed region."""
+def parse_zoom(spec: str) -> tuple[str, tuple[int, int, int] | None]:
+    """``"name"`` or ``"name:top,left,size"`` → ``(name, region or None)``."""
+    name, _, region = spec.partition(":")
+    if not region:
+        return name, None
+    try:
+        top, left, size = (int(v) for v in region.split(","))
+    except ValueError:
+        raise ValueError(f"expected a zoom as IMAGE or IMAGE:TOP,LEFT,SIZE, got {spec!r}") from None
+    if top < 0 or left < 0 or size < 1:
+        raise ValueError(f"expected a zoom region with TOP, LEFT >= 0 and SIZE >= 1, got {spec!r}")
+    return name, (top, left, size)
+
+
+def zoom_figure(rgb: torch.Tensor, outputs: dict, path: Path, title: str = "",
+                region: tuple[int, int, int] | None = None) -> Path:
+    """Ground truth and each method's output, zoomed on ``region`` (top, left, size), by
+    default the most detailed region of the scene."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     from matplotlib.patches import Rectangle
 
-    top, left, h, w = detail_region(rgb)
+    if region is None:
+        top, left, h, w = detail_region(rgb)
+    else:
+        top, left, size = region
+        h, w = min(size, rgb.shape[1] - top), min(size, rgb.shape[2] - left)
+        if h < 1 or w < 1:
+            raise ValueError(f"zoom region {region} lies outside the {tuple(rgb.shape[1:])} image")
     panels = [("ground truth", rgb, None), *((n, p, s) for n, (p, s) in outputs.items())]
     fig, axes = plt.subplots(1, len(panels) + 1, figsize=(2.6 * (len(panels) + 1), 3.1))
     axes[0].imshow(rgb.permute(1, 2, 0).numpy())
