@@ -211,6 +211,10 @@ def train(config: TrainConfig, *, resume: bool = False, progress: bool = True) -
     ckpt_path = run_dir / ckpt_io.CHECKPOINT_NAME
     loaded = None
     if resume:
+        # A process killed while writing leaves a partial temporary file beside the intact
+        # checkpoint; it is rewritten by the next save, but clear it now so nothing stale lingers.
+        for stale in run_dir.glob("*.tmp"):
+            stale.unlink(missing_ok=True)
         loaded = ckpt_io.load(ckpt_path)
         saved = TrainConfig.from_dict(loaded.meta["config"], source=str(ckpt_path))
         _check_resume_compatible(saved, config)
