@@ -63,9 +63,11 @@ def make_system(arch: str, channels_last: bool) -> ImagingSystem:
 
 
 def train_step_time(arch: str, batch: torch.Tensor, steps: int, channels_last=False, bf16=False,
-                    foreach=None) -> tuple[float, float]:
+                    foreach=None, compile_=False) -> tuple[float, float]:
     torch.manual_seed(0)
     system = make_system(arch, channels_last)
+    if compile_:
+        system.network = torch.compile(system.network)
     opt = torch.optim.Adam(system.parameters(), lr=1e-4, foreach=foreach)
     noise = GaussianNoise((0, 30), seed=0)
 
@@ -79,6 +81,11 @@ def train_step_time(arch: str, batch: torch.Tensor, steps: int, channels_last=Fa
 
     from torch.utils.flop_counter import FlopCounterMode
 
+    if compile_:
+        t = time.perf_counter()
+        step()  # compilation happens here, outside the timed steps
+        print(f"  torch.compile warm-up: {time.perf_counter() - t:.0f} s")
+        return timeit(step, repeat=steps, warmup=0), 0.0
     with FlopCounterMode(display=False) as counter:
         step()
     return timeit(step, repeat=steps, warmup=0), counter.get_total_flops()
@@ -136,7 +143,7 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=3, help="timed training steps per setting")
     parser.add_argument("--batch-size", type=int, default=80)
     parser.add_argument("--skip-large", action="store_true", help="skip the 4000x3000 run")
-    parser.add_argument("--only", choices=["train", "inference", "large", "accuracy"],
+    parser.add_argument("--only", choices=["train", "inference", "large", "accuracy", "compile"],
                         help="run one part only")
     parser.add_argument("--accuracy-steps", type=int, default=0,
                         help="also train float32 vs optimised for N steps and compare PSNR")
@@ -165,6 +172,12 @@ def main() -> None:
               f" of peak), {flops / fast / 1e9:.0f} GFLOP/s optimised "
               f"({100 * flops / fast / 1e9 / bf16_peak:.0f}% of bf16 peak); data "
               f"{100 * data_s / fast:.2f}% of an optimised step")
+
+    if args.only == "compile":
+        base, _ = train_step_time("paper", batch, args.steps, **OPTIMISED)
+        comp, _ = train_step_time("paper", batch, args.steps, **OPTIMISED, compile_=True)
+        print(f"torch.compile (paper, optimised settings): {1 / base:.3f} -> {1 / comp:.3f} "
+              f"steps/s, ratio {base / comp:.2f}x")
 
     torch.manual_seed(0)
     for arch in ["paper", "packed"] if want("inference") else []:
