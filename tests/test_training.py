@@ -216,6 +216,8 @@ def test_cli_train_plot_reconstruct(image_folder, tmp_path, capsys):
     assert ckpt_io.load(out).meta["step"] == 6
     assert main(["plot", str(out)]) == 0
     assert (out / "curves.png").stat().st_size > 1000
+    assert main(["plot", str(out), str(out), "--out", str(tmp_path / "both.png")]) == 0
+    assert (tmp_path / "both.png").stat().st_size > 1000
     photo = image_folder / "im0.png"
     rec = tmp_path / "rec.png"
     assert main(["reconstruct", "--checkpoint", str(out), "--image", str(photo),

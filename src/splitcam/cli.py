@@ -146,9 +146,12 @@ def cmd_train(args: argparse.Namespace) -> int:
 
 
 def cmd_plot(args: argparse.Namespace) -> int:
-    from .training.plots import plot_run
+    from .training.plots import compare_runs, plot_run
 
-    out = plot_run(args.run, args.out)
+    if len(args.run) > 1:
+        out = compare_runs(args.run, args.out or "runs_compared.png")
+    else:
+        out = plot_run(args.run[0], args.out)
     print(f"wrote {out}")
     return 0
 
@@ -347,9 +350,13 @@ def build_parser() -> argparse.ArgumentParser:
 
     add_data_cli(sub)
 
-    p = sub.add_parser("plot", help="draw a run's loss and validation PSNR curves")
-    p.add_argument("run", help="run folder (with metrics.jsonl)")
-    p.add_argument("--out", help="PNG (default: RUN/curves.png)")
+    p = sub.add_parser(
+        "plot", help="draw a run's loss and validation PSNR curves (several runs: compare them)",
+        description="One run: loss and PSNR against step (RUN/curves.png). Several runs: their "
+        "validation PSNR against wall-clock time and against step, side by side.",
+    )
+    p.add_argument("run", nargs="+", help="run folder(s) (with metrics.jsonl)")
+    p.add_argument("--out", help="PNG (default: RUN/curves.png, or runs_compared.png)")
     p.set_defaults(handler=cmd_plot)
 
     p = sub.add_parser(

@@ -61,3 +61,42 @@ def plot_run(run: str | os.PathLike, out: str | os.PathLike | None = None) -> Pa
     fig.savefig(out, dpi=120)
     plt.close(fig)
     return out
+
+
+def compare_runs(runs: list[str | os.PathLike], out: str | os.PathLike) -> Path:
+    """Validation PSNR of several runs against wall-clock minutes and against steps: the
+    picture of an equal-time comparison."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(11, 4))
+    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    for i, run in enumerate(runs):
+        rows = [r for r in read_metrics(run) if "val_psnr" in r]
+        if not rows:
+            raise ValueError(f"run {str(run)!r} has no validation results")
+        t0 = rows[0]["time"]
+        keys = sorted((k for k in rows[0] if k.startswith("val_psnr_")),
+                      key=lambda k: float(k.rsplit("_", 1)[1]))
+        for j, key in enumerate(keys):
+            style = ["o-", "s--", "^:"][j % 3]
+            label = f"{Path(run).name}, sigma {key.rsplit('_', 1)[1]}"
+            minutes = [(r["time"] - t0) / 60 for r in rows]
+            ax1.plot(minutes, [r[key] for r in rows], style, color=colours[i], ms=3, label=label)
+            ax2.plot([r["step"] for r in rows], [r[key] for r in rows], style, color=colours[i],
+                     ms=3, label=label)
+    ax1.set_xlabel("wall-clock minutes since the first validation")
+    ax2.set_xlabel("step")
+    ax2.set_xscale("symlog", linthresh=100)
+    for ax in (ax1, ax2):
+        ax.set_ylabel("validation PSNR (dB)")
+        ax.grid(alpha=0.3)
+    ax1.legend(fontsize=8)
+    fig.tight_layout()
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=120)
+    plt.close(fig)
+    return out
