@@ -123,20 +123,23 @@ def sigma_chart(entries, path: Path) -> Path:
 
     fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(12, 4.6))
     colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
-    for i, (folder, method, entry, pattern) in enumerate(entries):
+    for i, (folder, method, entry, _) in enumerate(entries):
         colour = colours[i % len(colours)]
         sig = sorted(entry["all"], key=float)
         xs = [float(s) for s in sig]
         label = method if len({f for f, *_ in entries}) == 1 else f"{folder}: {method}"
         ax1.plot(xs, [entry["all"][s]["psnr"] for s in sig], "o-", color=colour, label=label)
         ax2.plot(xs, [entry["all"][s]["ciede2000"] for s in sig], "o-", color=colour, label=label)
-        ref = paper_row(pattern)
-        if ref:
-            ax1.plot([float(s) for s in PAPER_SIGMAS], [p for p, _ in PAPER[ref]], "--",
-                     color=colour, alpha=0.6, lw=1)
+    # The paper's network for each pattern in the report, once each, grey and labelled.
+    refs = dict.fromkeys(r for *_, pattern in entries if (r := paper_row(pattern)))
+    for ref in refs:
+        values = [p for p, _ in PAPER[ref]]
+        ax1.plot([float(s) for s in PAPER_SIGMAS], values, "--", color="grey", alpha=0.7, lw=1)
+        ax1.annotate(f"paper {ref}", (float(PAPER_SIGMAS[-1]), values[-1]), fontsize=7,
+                     color="dimgrey", xytext=(3, 0), textcoords="offset points", va="center")
     ax1.set_xlabel("noise σ (8-bit units)")
     ax1.set_ylabel("PSNR (dB)")
-    ax1.set_title("PSNR (dashed: the paper's network, same pattern)", fontsize=10)
+    ax1.set_title("PSNR (grey dashed: the paper's trained network)", fontsize=10)
     ax2.set_xlabel("noise σ (8-bit units)")
     ax2.set_ylabel("CIEDE2000 (lower is better)")
     ax2.set_title("colour error", fontsize=10)
