@@ -99,7 +99,7 @@ TRAIN_FLAGS: dict[str, tuple[str, type | None, str]] = {
     "val_sigmas": ("data.val_sigmas", float, "validation noise levels (default 0 15)"),
     "patch_size": ("data.patch_size", int, "patch size (default 64)"),
     "batch_size": ("data.batch_size", int, "batch size (default 80)"),
-    "arch": ("network.arch", str, "network: paper or packed"),
+    "arch": ("network.arch", str, "network: packed (default) or paper (the paper's)"),
     "features": ("network.features", int, "network width (default 64)"),
     "blocks": ("network.blocks", int, "residual blocks (default 10)"),
     "steps": ("optim.steps", int, "training steps (default 10^6)"),
