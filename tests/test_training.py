@@ -234,3 +234,15 @@ def test_cli_train_plot_reconstruct(image_folder, tmp_path, capsys):
     assert "no checkpoint" in capsys.readouterr().err
     assert main(["train", "--out", str(tmp_path / "new"), "--quiet"]) == 1
     assert "no training data" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_compiled_training_keeps_the_checkpoint_format(image_folder, tmp_path):
+    train(tiny(image_folder, tmp_path / "c", **{"run.compile": True, "optim.steps": 2}),
+          progress=False)
+    train(tiny(image_folder, tmp_path / "e", **{"optim.steps": 2}), progress=False)
+    compiled = ckpt_io.load(tmp_path / "c").section("model")
+    eager = ckpt_io.load(tmp_path / "e").section("model")
+    assert compiled.keys() == eager.keys()
+    for key in eager:
+        torch.testing.assert_close(compiled[key], eager[key], rtol=1e-4, atol=1e-5)

@@ -116,6 +116,7 @@ TRAIN_FLAGS: dict[str, tuple[str, type | None, str]] = {
     "tensorboard": ("run.tensorboard", None, "also log to TensorBoard (if installed)"),
     "channels_last": ("run.channels_last", None, "channels-last memory format"),
     "bf16": ("run.bf16", None, "bfloat16 autocast for the network"),
+    "compile": ("run.compile", None, "torch.compile the network (slow start, faster steps)"),
 }
 
 

@@ -37,6 +37,15 @@ class ImagingSystem(nn.Module):
         self.network = network
         #: Feed the network channels-last tensors (faster convolutions on some CPUs).
         self.channels_last = False
+        self._compiled: nn.Module | None = None
+
+    def compile_network(self) -> None:
+        """Run the network through ``torch.compile`` from now on.
+
+        The compiled wrapper is kept outside the module tree, so ``state_dict`` keys (and hence
+        checkpoints) are the same with and without compilation.
+        """
+        object.__setattr__(self, "_compiled", torch.compile(self.network))
 
     def forward(self, rgb: torch.Tensor, noise: NoiseFn | None = None) -> torch.Tensor:
         # The physics stays in full precision under a mixed-precision autocast: only the
@@ -47,4 +56,5 @@ class ImagingSystem(nn.Module):
             raw, _ = noise(raw)
         if self.channels_last:
             raw = raw.contiguous(memory_format=torch.channels_last)
-        return self.network(raw)
+        network = self._compiled if self._compiled is not None else self.network
+        return network(raw)

@@ -237,6 +237,8 @@ def train(config: TrainConfig, *, resume: bool = False, progress: bool = True) -
     if config.run.channels_last:
         system.channels_last = True
         system.network.to(memory_format=torch.channels_last)
+    if config.run.compile:
+        system.compile_network()
     net_params = list(system.network.parameters())
     groups = [{"params": net_params, "lr": config.optim.lr}]
     sensor_params = list(system.sensor.parameters())
