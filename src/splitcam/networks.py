@@ -241,8 +241,8 @@ class _Trunk(nn.Module):
         return _reach(self.head) + body + _reach(self.body_out) + _reach(self.tail)
 
 
-class ReconNet(nn.Module):
-    """The paper's reconstruction network (Fig. 2): periodic sampling, then a residual CNN.
+class _Reconstructor(nn.Module):
+    """What both reconstruction networks share: arguments, validation, ``config()``.
 
     Args:
         period: Splitter pattern period ``(Ph, Pw)``.
@@ -257,13 +257,32 @@ class ReconNet(nn.Module):
         - Output: ``(N, 3, H, W)`` RGB.
     """
 
-    arch = "paper"
+    arch = ""
 
     def __init__(self, period: tuple[int, int], features: int = 64, blocks: int = 10) -> None:
         super().__init__()
         self.period = _as_period(period)
         self.features = _as_count(features, "features", 1)
         self.num_blocks = _as_count(blocks, "blocks", 0)
+
+    def config(self) -> dict[str, Any]:
+        """JSON-serialisable description that :func:`build_network` turns back into this net."""
+        return {
+            "arch": self.arch,
+            "period": list(self.period),
+            "features": self.features,
+            "blocks": self.num_blocks,
+        }
+
+
+class ReconNet(_Reconstructor):
+    """The paper's reconstruction network (Fig. 2): periodic sampling, then a residual CNN
+    at full resolution. Arguments and shapes: see :class:`_Reconstructor`."""
+
+    arch = "paper"
+
+    def __init__(self, period: tuple[int, int], features: int = 64, blocks: int = 10) -> None:
+        super().__init__(period, features, blocks)
         ph, pw = self.period
         self.sampling = PeriodicSampling(self.period)
         self.trunk = _Trunk(ph * pw, 3, self.features, self.num_blocks)
@@ -277,43 +296,20 @@ class ReconNet(nn.Module):
         """Pixels of context on each side that can influence an output pixel."""
         return self.trunk.reach
 
-    def config(self) -> dict[str, Any]:
-        """JSON-serialisable description that :func:`build_network` turns back into this net."""
-        return {
-            "arch": self.arch,
-            "period": list(self.period),
-            "features": self.features,
-            "blocks": self.num_blocks,
-        }
 
-
-class PackedReconNet(nn.Module):
+class PackedReconNet(_Reconstructor):
     """Reconstruction at cell resolution: period cells packed into channels, then the trunk.
 
     The raw image is zero-padded at the bottom and right up to multiples of the period, each
     ``Ph x Pw`` cell becomes a ``Ph * Pw``-channel pixel, the trunk maps those to ``3 * Ph * Pw``
-    channels, which are unpacked to RGB cells and cropped back to ``H x W``.
-
-    Args:
-        period: Splitter pattern period ``(Ph, Pw)``.
-        features: Channels ``F`` of the hidden layers.
-        blocks: Number ``K`` of residual blocks.
-
-    Raises:
-        ValueError: A bad period, ``features < 1`` or ``blocks < 0``.
-
-    Shape:
-        - Input: ``(N, 1, H, W)`` raw image, floating point, any ``H, W >= 1``.
-        - Output: ``(N, 3, H, W)`` RGB.
+    channels, which are unpacked to RGB cells and cropped back to ``H x W``: the convolutions run
+    on ``1 / (Ph * Pw)`` of the positions. Arguments and shapes: see :class:`_Reconstructor`.
     """
 
     arch = "packed"
 
     def __init__(self, period: tuple[int, int], features: int = 64, blocks: int = 10) -> None:
-        super().__init__()
-        self.period = _as_period(period)
-        self.features = _as_count(features, "features", 1)
-        self.num_blocks = _as_count(blocks, "blocks", 0)
+        super().__init__(period, features, blocks)
         ph, pw = self.period
         self.trunk = _Trunk(ph * pw, 3 * ph * pw, self.features, self.num_blocks)
 
@@ -335,15 +331,6 @@ class PackedReconNet(nn.Module):
         period ``P``; the larger axis is reported.
         """
         return (self.trunk.reach + 1) * max(self.period) - 1
-
-    def config(self) -> dict[str, Any]:
-        """JSON-serialisable description that :func:`build_network` turns back into this net."""
-        return {
-            "arch": self.arch,
-            "period": list(self.period),
-            "features": self.features,
-            "blocks": self.num_blocks,
-        }
 
 
 #: Network classes by their ``config()["arch"]`` name.
