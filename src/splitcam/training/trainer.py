@@ -244,10 +244,7 @@ def train(config: TrainConfig, *, resume: bool = False, progress: bool = True) -
     sensor_params = list(system.sensor.parameters())
     if sensor_params:
         groups.append({"params": sensor_params, "lr": config.pattern.lr or config.optim.lr})
-    optimizer = torch.optim.Adam(
-        groups, lr=config.optim.lr, betas=tuple(config.optim.betas),
-        foreach=device.type != "cpu" or None,
-    )
+    optimizer = torch.optim.Adam(groups, lr=config.optim.lr, betas=tuple(config.optim.betas))
 
     cache = ImageCache(_train_source(config), min_size=config.data.patch_size,
                        max_images=config.data.max_images, progress=progress and dist_info.is_main)
