@@ -63,14 +63,35 @@ def load(path: str | os.PathLike) -> Pattern:
     return Pattern.from_dict(data, source=f"pattern file {str(path)!r}")
 
 
-def save(pattern: Pattern, path: str | os.PathLike) -> Path:
-    """Write ``pattern`` as JSON or TOML (by the file suffix), atomically."""
+def _toml(data: dict) -> str:
+    """TOML with one line per kernel row, so a pattern file reads like the SPEC's tables.
+
+    ``tomli_w`` would put every number on a line of its own; the format here is simple enough
+    to write directly (strings as JSON strings, which are valid TOML basic strings).
+    """
     import tomli_w
 
+    def row(values) -> str:
+        return "[" + ", ".join(repr(float(v)) for v in values) + "]"
+
+    lines = [f"{key} = {json.dumps(data[key])}" for key in
+             ("name", "provenance", "description", "reference")]
+    lines.append("layout = [" + ", ".join(
+        "[" + ", ".join(str(int(v)) for v in r) + "]" for r in data["layout"]) + "]")
+    if data.get("metadata"):
+        lines += ["", tomli_w.dumps({"metadata": data["metadata"]}).strip()]
+    for s, kernel in enumerate(data["kernels"]):
+        lines += ["", f"[[kernels]]  # splitter {s}"]
+        lines += [f"{c} = [" + ", ".join(row(r) for r in kernel[c]) + "]" for c in kernel]
+    return "\n".join(lines) + "\n"
+
+
+def save(pattern: Pattern, path: str | os.PathLike) -> Path:
+    """Write ``pattern`` as JSON or TOML (by the file suffix), atomically."""
     path = Path(path)
     suffix = _suffix(path)
     data = pattern.to_dict()
-    text = json.dumps(data, indent=2) + "\n" if suffix == ".json" else tomli_w.dumps(data)
+    text = json.dumps(data, indent=2) + "\n" if suffix == ".json" else _toml(data)
     tmp = path.with_name(path.name + ".tmp")
     tmp.write_text(text, encoding="utf-8")
     os.replace(tmp, path)
