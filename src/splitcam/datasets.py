@@ -58,7 +58,7 @@ from typing import TYPE_CHECKING, Any, BinaryIO, NoReturn
 import numpy as np
 
 from splitcam import __version__
-from splitcam.imageio import IMAGE_SUFFIXES, read_image
+from splitcam.imageio import read_image
 
 if TYPE_CHECKING:
     import torch
@@ -344,18 +344,11 @@ def data_root(root: str | os.PathLike[str] | None = None) -> Path:
 
 
 def _list_folder(folder: Path) -> list[tuple[str, Path]]:
-    """(stem, path) of the image files directly inside ``folder``, sorted by stem."""
-    if not folder.is_dir():
-        raise FileNotFoundError(f"'{folder}' is not a folder (expected a folder of images)")
-    items = sorted(
-        (p.stem, p)
-        for p in folder.iterdir()
-        if p.suffix.lower() in IMAGE_SUFFIXES and not p.name.startswith(".") and p.is_file()
-    )
-    if not items:
-        raise FileNotFoundError(
-            f"no image files ({' '.join(IMAGE_SUFFIXES)}) in folder '{folder}'"
-        )
+    """(stem, path) of the image files directly inside ``folder`` (see
+    :func:`splitcam.data.list_images`), sorted by stem, with unique stems."""
+    from .data import list_images
+
+    items = sorted((p.stem, p) for p in list_images(folder))
     # Image names key results and seed the evaluation noise, so two files must not share one.
     counts = Counter(stem for stem, _ in items)
     clashes = [p.name for stem, p in items if counts[stem] > 1]
@@ -424,8 +417,6 @@ def resolve(
                 f"'{spec}' is neither a folder nor a dataset in {where}; give a folder of "
                 f"images or one of the datasets {', '.join(DATASET_NAMES)}"
             )
-    if not folder.exists():
-        raise FileNotFoundError(f"image folder '{folder}' does not exist")
     return _list_folder(folder)
 
 
