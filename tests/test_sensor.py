@@ -265,3 +265,14 @@ def test_learning_a_filter_is_refused():
         LearnableSplitterSensor("bayer")
     with pytest.raises(ValueError, match="expected init to be one of support, exact, random"):
         LearnableSplitterSensor("A", init="zeros")
+
+
+def test_loading_a_state_dict_takes_its_layout():
+    """The sensor caches its layout as a tuple; a loaded layout buffer must replace it."""
+    a = patterns.get("A")
+    flipped = patterns.Pattern("A-flipped", a.layout[::-1, ::-1].copy(), a.kernels)
+    target = SplitterSensor(flipped)
+    target.load_state_dict(SplitterSensor(a).state_dict())
+    f = torch.rand(1, 3, 6, 8, generator=_gen(18), dtype=torch.float64)
+    torch.testing.assert_close(target(f), SplitterSensor(a)(f))
+    torch.testing.assert_close(target.gather(f), SplitterSensor(a)(f))

@@ -52,7 +52,13 @@ def _check(x: torch.Tensor, channels: int, what: str) -> None:
         raise ValueError(f"expected {what} with N, H, W >= 1, got {tuple(x.shape)}")
 
 
-def _layout_key(layout: torch.Tensor | np.ndarray) -> tuple[tuple[int, ...], ...]:
+Layout = torch.Tensor | np.ndarray | tuple[tuple[int, ...], ...]
+
+
+def _layout_key(layout: Layout) -> tuple[tuple[int, ...], ...]:
+    """The layout as a hashable tuple (the key of the index-table caches)."""
+    if isinstance(layout, tuple):
+        return layout
     arr = layout.detach().cpu().numpy() if isinstance(layout, torch.Tensor) else layout
     return tuple(tuple(int(v) for v in row) for row in np.asarray(arr))
 
@@ -90,7 +96,7 @@ def _strided_index(
     return torch.from_numpy(index)
 
 
-def _strided_kernel(weights: torch.Tensor, layout: torch.Tensor | np.ndarray) -> torch.Tensor:
+def _strided_kernel(weights: torch.Tensor, layout: Layout) -> torch.Tensor:
     s, _, kh, kw = weights.shape
     index = _strided_index(_layout_key(layout), s, kh, kw)
     flat = torch.cat([weights.reshape(-1), weights.new_zeros(1)])
@@ -116,12 +122,14 @@ def _from_blocks(x: torch.Tensor, period: tuple[int, int], size: tuple[int, int]
     return x.reshape(n, c, hb * ph, wb * pw)[:, :, : size[0], : size[1]]
 
 
-def _period(layout: torch.Tensor | np.ndarray) -> tuple[int, int]:
+def _period(layout: Layout) -> tuple[int, int]:
+    if isinstance(layout, tuple):
+        return (len(layout), len(layout[0]))
     return (int(layout.shape[0]), int(layout.shape[1]))
 
 
 def splitter_forward(
-    rgb: torch.Tensor, weights: torch.Tensor, layout: torch.Tensor | np.ndarray
+    rgb: torch.Tensor, weights: torch.Tensor, layout: Layout
 ) -> torch.Tensor:
     r"""Raw image of a splitter sensor, paper Eq. 1 (noise-free).
 
@@ -159,7 +167,7 @@ def splitter_forward(
 
 
 def splitter_adjoint(
-    raw: torch.Tensor, weights: torch.Tensor, layout: torch.Tensor | np.ndarray
+    raw: torch.Tensor, weights: torch.Tensor, layout: Layout
 ) -> torch.Tensor:
     r"""Exact adjoint of :func:`splitter_forward` in the image.
 
@@ -202,7 +210,7 @@ def _pixel_kernel_index(
     return torch.from_numpy(index)
 
 
-def pixel_kernels(weights: torch.Tensor, layout: torch.Tensor | np.ndarray) -> torch.Tensor:
+def pixel_kernels(weights: torch.Tensor, layout: Layout) -> torch.Tensor:
     """Per-pixel gather kernels ``k_p`` of paper Eq. 2, derived from the splitter kernels.
 
     ``k[i, j, c, a, b]`` is the fraction of colour ``c`` at scene pixel
@@ -219,7 +227,7 @@ def pixel_kernels(weights: torch.Tensor, layout: torch.Tensor | np.ndarray) -> t
 
 
 def pixel_gather(
-    rgb: torch.Tensor, weights: torch.Tensor, layout: torch.Tensor | np.ndarray
+    rgb: torch.Tensor, weights: torch.Tensor, layout: Layout
 ) -> torch.Tensor:
     r"""Raw image by paper Eq. 2: each pixel correlates the scene with its own kernel.
 
@@ -264,6 +272,12 @@ class SplitterSensor(nn.Module):
         pattern = get(pattern) if isinstance(pattern, str) else pattern
         self._meta = pattern
         self.register_buffer("layout", torch.tensor(pattern.layout, dtype=torch.long))
+        # The layout as a tuple, read once: converting the buffer on every call would copy it
+        # to the host (a device sync on GPUs). Refreshed if a state dict replaces the buffer.
+        self._layout = _layout_key(pattern.layout)
+        self.register_load_state_dict_post_hook(
+            lambda module, _keys: setattr(module, "_layout", _layout_key(module.layout))
+        )
         self._init_kernels(pattern)
 
     def _init_kernels(self, pattern: Pattern) -> None:
@@ -271,26 +285,26 @@ class SplitterSensor(nn.Module):
 
     @property
     def period(self) -> tuple[int, int]:
-        return _period(self.layout)
+        return _period(self._layout)
 
     def weights(self) -> torch.Tensor:
         """The splitter kernels ``(S, 3, kh, kw)`` currently in use."""
         return self.kernels
 
     def forward(self, rgb: torch.Tensor) -> torch.Tensor:
-        return splitter_forward(rgb, self.weights(), self.layout)
+        return splitter_forward(rgb, self.weights(), self._layout)
 
     def gather(self, rgb: torch.Tensor) -> torch.Tensor:
         """Same raw image by the pixel (gather) form, Eq. 2."""
-        return pixel_gather(rgb, self.weights(), self.layout)
+        return pixel_gather(rgb, self.weights(), self._layout)
 
     def adjoint(self, raw: torch.Tensor) -> torch.Tensor:
         """``A^T raw``, the exact adjoint of :meth:`forward`."""
-        return splitter_adjoint(raw, self.weights(), self.layout)
+        return splitter_adjoint(raw, self.weights(), self._layout)
 
     def pixel_kernels(self) -> torch.Tensor:
         """What each pixel phase sees, ``(Ph, Pw, 3, kh, kw)`` (see :func:`pixel_kernels`)."""
-        return pixel_kernels(self.weights(), self.layout)
+        return pixel_kernels(self.weights(), self._layout)
 
     def to_pattern(self, name: str | None = None) -> Pattern:
         """The pattern this sensor currently implements (learned kernels included)."""
