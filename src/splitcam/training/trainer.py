@@ -91,10 +91,6 @@ def build_system(config: TrainConfig, pattern: patterns.Pattern | None = None) -
     return ImagingSystem(sensor, net)
 
 
-def _sensor_pattern(system: ImagingSystem) -> dict[str, Any]:
-    return system.sensor.to_pattern().to_dict()
-
-
 def _val_images(config: TrainConfig) -> list[tuple[str, torch.Tensor]]:
     """Validation images: the held-out split or the --val folder, centre-cropped."""
     data = config.data
@@ -225,10 +221,9 @@ def train(config: TrainConfig, *, resume: bool = False, progress: bool = True) -
         )
     if config.run.threads:
         torch.set_num_threads(config.run.threads)
-    device_kind = "cuda" if config.run.device.startswith("cuda") or (
-        config.run.device == "auto" and torch.cuda.is_available()) else "cpu"
-    dist_info = init_distributed(device_kind)
-    device = resolve_device(config.run.device, dist_info.local_rank)
+    # torchrun sets LOCAL_RANK: the device comes first, it decides the backend (nccl or gloo).
+    device = resolve_device(config.run.device, int(os.environ.get("LOCAL_RANK", "0")))
+    dist_info = init_distributed(device.type)
     torch.manual_seed(config.run.seed)
 
     pattern = patterns.Pattern.from_dict(loaded.meta["start_pattern"]) if loaded else None
@@ -293,7 +288,7 @@ def train(config: TrainConfig, *, resume: bool = False, progress: bool = True) -
             "config": config.to_dict(),
             "step": step,
             "network": system.network.config(),
-            "pattern": _sensor_pattern(system),
+            "pattern": system.sensor.to_pattern().to_dict(),
             "start_pattern": start_pattern,
             "optimizer": opt_meta,
             "world_size": dist_info.world_size,
