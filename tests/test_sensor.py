@@ -192,6 +192,12 @@ def test_follows_the_input_device(device):
     assert sensor.gather(f).device.type == device
 
 
+def test_fixed_sensor_exports_its_pattern():
+    exported = SplitterSensor("D").to_pattern("mine")
+    assert exported.name == "mine" and exported.equals(patterns.get("D"))
+    assert SplitterSensor("D").to_pattern().name == "D"
+
+
 def test_state_dict_round_trip():
     a = LearnableSplitterSensor("A", init="random", generator=_gen(12))
     b = LearnableSplitterSensor("A", init="support")

@@ -19,6 +19,7 @@ so gradients reach the kernels through plain indexing.
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 
 import numpy as np
@@ -307,8 +308,8 @@ class SplitterSensor(nn.Module):
         return pixel_kernels(self.weights(), self._layout)
 
     def to_pattern(self, name: str | None = None) -> Pattern:
-        """The pattern this sensor currently implements (learned kernels included)."""
-        return self._meta
+        """The pattern this sensor currently implements (renamed to ``name`` if given)."""
+        return self._meta if name is None else dataclasses.replace(self._meta, name=name)
 
     def extra_repr(self) -> str:
         return f"pattern={self._meta.name!r}, period={self.period}"
