@@ -17,7 +17,7 @@ from pathlib import Path
 from bench_train import OPTIMISED, train_step_time
 from common import SHARED_DATA, machine, timeit
 
-from splitcam.data import ImageCache, PatchSampler
+from splitcam.data.patches import ImageCache, PatchSampler
 
 BATCH = 80
 PATCH = 64

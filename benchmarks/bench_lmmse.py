@@ -20,15 +20,11 @@ from typing import Any
 
 from common import SHARED_DATA, machine
 
-from splitcam.baselines import (
-    DEFAULT_PATCHES,
-    DEFAULT_RADIUS,
-    ClassicalDemosaic,
-    evaluate_method,
-    screen_patterns,
-    summarise,
-)
-from splitcam.data import ImageCache, load_validation
+from splitcam.data.patches import ImageCache, load_validation
+from splitcam.evaluation.metrics import mean_over_images
+from splitcam.evaluation.screening import evaluate_method, screen_patterns
+from splitcam.recon.demosaic import ClassicalDemosaic
+from splitcam.recon.lmmse import DEFAULT_PATCHES, DEFAULT_RADIUS
 
 PATTERNS = ["A", "B", "C", "D", "E", "bayer"]
 CLASSICAL = ClassicalDemosaic.METHODS
@@ -46,13 +42,17 @@ PAPER_NET = {
 }
 
 
+def _mean(rows: list[dict[str, Any]], keys: tuple[str, ...]) -> dict[str, float]:
+    return {k: mean_over_images(r[k] for r in rows).mean for k in keys}
+
+
 def _means(rows: list[dict[str, Any]], sets: dict[str, str], keys: tuple[str, ...]) -> dict:
     """Means over each test set and over all images."""
-    out = {"all": summarise(rows, keys)}
+    out = {"all": _mean(rows, keys)}
     for name in SETS:
         part = [r for r in rows if sets[r["image"]] == name]
         if part:
-            out[name] = summarise(part, keys)
+            out[name] = _mean(part, keys)
     return out
 
 

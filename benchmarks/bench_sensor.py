@@ -20,7 +20,7 @@ sys.path.insert(0, str(ROOT / "tests"))
 from naive_reference import naive_splitter_forward  # noqa: E402
 
 from splitcam import patterns  # noqa: E402
-from splitcam.sensor import splitter_forward  # noqa: E402
+from splitcam.physics.sensor import splitter_forward  # noqa: E402
 
 
 def main() -> None:

@@ -25,12 +25,12 @@ import torch
 import torch.nn.functional as F
 from common import SHARED_DATA, machine, timeit
 
-from splitcam.data import ImageCache, PatchSampler
-from splitcam.inference import reconstruct
-from splitcam.networks import build_network
-from splitcam.noise import GaussianNoise
-from splitcam.sensor import SplitterSensor
-from splitcam.system import ImagingSystem
+from splitcam.data.patches import ImageCache, PatchSampler
+from splitcam.physics.noise import GaussianNoise
+from splitcam.physics.sensor import SplitterSensor
+from splitcam.physics.system import ImagingSystem
+from splitcam.recon.networks import build_network
+from splitcam.recon.tiling import reconstruct
 
 OPTIMISED = {"channels_last": True, "bf16": True}
 
@@ -97,8 +97,8 @@ def large_image_memory(arch: str) -> dict:
     # ru_maxrss over exec() from the parent, so it would report the benchmark's own peak.
     code = f"""
 import json, time, torch
-from splitcam.inference import reconstruct
-from splitcam.networks import build_network
+from splitcam.recon.tiling import reconstruct
+from splitcam.recon.networks import build_network
 def hwm():
     for line in open("/proc/self/status"):
         if line.startswith("VmHWM"):

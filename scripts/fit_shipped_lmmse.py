@@ -8,8 +8,8 @@ import time
 from pathlib import Path
 
 from splitcam import patterns
-from splitcam.baselines import LMMSE
-from splitcam.data import ImageCache
+from splitcam.data.patches import ImageCache
+from splitcam.recon.lmmse import LMMSE
 from splitcam.weights import HERE
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -11,19 +11,13 @@ import pytest
 import torch
 
 from splitcam import patterns
-from splitcam.baselines import (
-    LMMSE,
-    ClassicalDemosaic,
-    LMMSEFileError,
-    LMMSEStatistics,
-    Method,
-    evaluate_method,
-    fit_lmmse,
-    screen_patterns,
-)
-from splitcam.data import ImageCache
-from splitcam.metrics import psnr
-from splitcam.sensor import SplitterSensor
+from splitcam.data.patches import ImageCache
+from splitcam.evaluation.metrics import psnr
+from splitcam.evaluation.screening import evaluate_method, screen_patterns
+from splitcam.physics.sensor import SplitterSensor
+from splitcam.recon.base import Reconstructor as Method
+from splitcam.recon.demosaic import ClassicalDemosaic
+from splitcam.recon.lmmse import LMMSE, LMMSEFileError, LMMSEStatistics, fit_lmmse
 
 
 def _smooth_images(n: int, h: int, w: int, seed: int) -> torch.Tensor:

@@ -9,9 +9,9 @@ from PIL import Image
 
 from splitcam import patterns
 from splitcam.cli import main
-from splitcam.imageio import read_raw
-from splitcam.noise import evaluation_noise
-from splitcam.sensor import SplitterSensor
+from splitcam.data.imageio import read_raw
+from splitcam.physics.noise import evaluation_noise
+from splitcam.physics.sensor import SplitterSensor
 
 
 @pytest.fixture

@@ -1,4 +1,4 @@
-"""Tests of splitcam.data: folder listing, the decode-once cache and the patch sampler."""
+"""Tests of splitcam.data.patches: folder listing, the decode-once cache and the patch sampler."""
 
 from __future__ import annotations
 
@@ -10,8 +10,8 @@ import pytest
 import torch
 from PIL import Image
 
-from splitcam.data import ImageCache, PatchSampler, list_images, load_validation
-from splitcam.imageio import read_image, write_image
+from splitcam.data.imageio import read_image, write_image
+from splitcam.data.patches import ImageCache, PatchSampler, list_images, load_validation
 
 TRAIN = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "train"
 

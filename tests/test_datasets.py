@@ -1,4 +1,4 @@
-"""Tests for splitcam.datasets: test-set lookup, the bundled default images, verified downloads.
+"""Tests for splitcam.data.testsets: test sets, the bundled images, verified downloads.
 
 Downloads are served by a local HTTP server on 127.0.0.1 from the shared data folder (or from
 temporary folders laid out like the public sources); nothing goes to the internet.
@@ -22,8 +22,8 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from splitcam import datasets
-from splitcam.datasets import ChecksumError, DownloadError
+from splitcam.data import testsets as datasets
+from splitcam.data.testsets import ChecksumError, DownloadError
 
 
 class _Handler(http.server.BaseHTTPRequestHandler):

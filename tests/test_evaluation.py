@@ -12,10 +12,12 @@ from PIL import Image
 
 from splitcam import patterns
 from splitcam.cli import main
-from splitcam.evaluation import NetworkMethod, detail_region, evaluate, summarise
-from splitcam.metrics import psnr
-from splitcam.sensor import SplitterSensor
+from splitcam.evaluation import evaluate, summarise
+from splitcam.evaluation.metrics import psnr
+from splitcam.methods import build_method
+from splitcam.physics.sensor import SplitterSensor
 from splitcam.training import TrainConfig, train
+from splitcam.viz.zoom import detail_region
 
 
 class Spy:
@@ -109,9 +111,9 @@ def test_tiny_checkpoint_evaluates_reproducibly(tmp_path):
     })
     train(cfg, progress=False)
     images = _images(2, size=(16, 18))
-    first = evaluate([NetworkMethod.from_checkpoint(tmp_path / "run")], [("s", images)], [0, 10],
+    first = evaluate([build_method(tmp_path / "run")], [("s", images)], [0, 10],
                      tmp_path / "e1", progress=False)
-    second = evaluate([NetworkMethod.from_checkpoint(tmp_path / "run")], [("s", images)],
+    second = evaluate([build_method(tmp_path / "run")], [("s", images)],
                       [0, 10], tmp_path / "e2", progress=False)
     assert first == second
     assert (tmp_path / "e1/summary.json").read_text() == (tmp_path / "e2/summary.json").read_text()
@@ -152,8 +154,8 @@ def test_evaluate_cli_with_images_and_zoom(tmp_path, capsys):
 
 
 def test_report_puts_results_beside_the_paper(tmp_path, capsys):
-    from splitcam.report import make_report
-    from splitcam.sensor import LearnableSplitterSensor
+    from splitcam.evaluation.report import make_report
+    from splitcam.physics.sensor import LearnableSplitterSensor
 
     learned = Spy("learned")
     learned.pattern = LearnableSplitterSensor("A", init="random").to_pattern("A-opt")

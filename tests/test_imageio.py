@@ -1,4 +1,4 @@
-"""Tests of splitcam.imageio: colour image round trips, refusals and raw sensor images."""
+"""Tests of splitcam.data.imageio: colour image round trips, refusals and raw sensor images."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ import pytest
 import torch
 from PIL import Image
 
-from splitcam.imageio import (
+from splitcam.data.imageio import (
     RAW_SCALE_KEY,
     ImageReadError,
     decode_image,

@@ -1,4 +1,4 @@
-"""Tests of splitcam.metrics against published data, scikit-image and hand computations."""
+"""Tests of splitcam.evaluation.metrics against published data, scikit-image, hand computation."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ import torch
 from scipy.signal import correlate2d
 from skimage.color import deltaE_ciede2000, rgb2lab
 
-from splitcam.metrics import (
+from splitcam.evaluation.metrics import (
     ImageMean,
     ciede2000,
     compute_all,

@@ -1,4 +1,4 @@
-"""Tests for splitcam.networks and splitcam.inference (small nets and images, CPU, fast)."""
+"""Tests for splitcam.recon.networks and splitcam.recon.tiling (small, CPU)."""
 
 from __future__ import annotations
 
@@ -8,15 +8,14 @@ import pytest
 import torch
 import torch.nn.functional as F
 
-from splitcam.inference import reconstruct, tile_spans
-from splitcam.networks import (
+from splitcam.physics.periodic import period_shuffle, period_unshuffle
+from splitcam.recon.networks import (
     PackedReconNet,
     PeriodicSampling,
     ReconNet,
     build_network,
-    period_shuffle,
-    period_unshuffle,
 )
+from splitcam.recon.tiling import reconstruct, tile_spans
 
 PERIODS = [(2, 2), (1, 3), (3, 2)]
 ARCHS = [ReconNet, PackedReconNet]
@@ -353,8 +352,17 @@ def test_period_unshuffle_matches_torch_for_square(factor):
     assert torch.equal(period_shuffle(y, (factor, factor)), F.pixel_shuffle(y, factor))
 
 
-def test_period_unshuffle_rejects_bad_sizes():
-    with pytest.raises(ValueError, match="multiples of the period"):
-        period_unshuffle(torch.rand(1, 1, 5, 6), (2, 2))
+@pytest.mark.parametrize("period", [(2, 2), (1, 3), (2, 3)])
+def test_period_unshuffle_pads_partial_cells_and_shuffle_crops_them(period):
+    x = torch.rand(2, 3, 5, 7)
+    packed = period_unshuffle(x, period)
+    ph, pw = period
+    assert packed.shape == (2, 3 * ph * pw, -(-5 // ph), -(-7 // pw))
+    padded = F.pad(x, (0, -7 % pw, 0, -5 % ph))
+    assert torch.equal(period_shuffle(packed, period), padded)  # zeros where the pad was
+    assert torch.equal(period_shuffle(packed, period, (5, 7)), x)
+
+
+def test_period_shuffle_rejects_bad_sizes():
     with pytest.raises(ValueError, match="for the period"):
         period_shuffle(torch.rand(1, 5, 3, 3), (2, 2))

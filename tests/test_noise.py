@@ -5,7 +5,12 @@ from __future__ import annotations
 import pytest
 import torch
 
-from splitcam.noise import GaussianNoise, add_evaluation_noise, evaluation_noise, evaluation_seed
+from splitcam.physics.noise import (
+    GaussianNoise,
+    add_evaluation_noise,
+    evaluation_noise,
+    evaluation_seed,
+)
 
 
 def test_fixed_sigma_has_the_right_statistics():
@@ -42,8 +47,11 @@ def test_bad_sigma():
     for bad in [(-1.0, 2.0), (3.0, 2.0), (0.0, float("nan")), (0.0, float("inf"))]:
         with pytest.raises(ValueError, match="expected 0 <= sigma_lo <= sigma_hi"):
             GaussianNoise(bad)
-    with pytest.raises(ValueError, match="expected sigma >= 0"):
-        evaluation_noise((1, 1, 2, 2), "x", -1)
+    for bad in (-1, float("nan"), float("inf")):
+        with pytest.raises(ValueError, match="expected a finite sigma >= 0"):
+            evaluation_noise((1, 1, 2, 2), "x", bad)
+    with pytest.raises(TypeError, match="sigma as a number"):
+        evaluation_noise((1, 1, 2, 2), "x", "5")
 
 
 def test_evaluation_noise_is_deterministic_and_per_image():

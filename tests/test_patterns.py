@@ -49,7 +49,7 @@ def test_pattern_b_two_green_pixels_of_a_cell_read_the_same():
     """SPEC: B pools each cell's green half/half into its two G sub-pixels."""
     import torch
 
-    from splitcam.sensor import SplitterSensor
+    from splitcam.physics.sensor import SplitterSensor
 
     f = torch.rand(1, 3, 8, 8, generator=torch.Generator().manual_seed(0), dtype=torch.float64)
     raw = SplitterSensor("B")(f)[0, 0]

@@ -9,7 +9,7 @@ from naive_reference import loop_splitter_forward, naive_splitter_forward
 
 from splitcam import patterns
 from splitcam.patterns import PatternError
-from splitcam.sensor import (
+from splitcam.physics.sensor import (
     LearnableSplitterSensor,
     SplitterSensor,
     pixel_gather,

@@ -3,11 +3,11 @@
 Layout of the package:
 
 - :mod:`splitcam.patterns` — the pattern type, the library A–E + bayer, pattern files, measures.
-- :mod:`splitcam.sensor` — the differentiable image-formation model (Eq. 1, Eq. 2, adjoint).
-- :mod:`splitcam.noise` — seeded training noise and deterministic evaluation noise.
-- :mod:`splitcam.imageio` / :mod:`splitcam.data` — reading images and training patches.
-- :mod:`splitcam.networks` — the reconstruction network.
-- :mod:`splitcam.metrics` — PSNR, SSIM, CIEDE2000.
+- :mod:`splitcam.physics.sensor` — the differentiable image-formation model (Eq. 1, Eq. 2, adjoint).
+- :mod:`splitcam.physics.noise` — seeded training noise and deterministic evaluation noise.
+- :mod:`splitcam.data.imageio` / :mod:`splitcam.data.patches` — reading images and training patches.
+- :mod:`splitcam.recon.networks` — the reconstruction network.
+- :mod:`splitcam.evaluation.metrics` — PSNR, SSIM, CIEDE2000.
 - :mod:`splitcam.cli` — the ``splitcam`` command (parses arguments, calls the library).
 """
 

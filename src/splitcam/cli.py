@@ -42,7 +42,7 @@ def cmd_patterns(args: argparse.Namespace) -> int:
         raise ValueError(f"'patterns {args.action}' takes one pattern name or file")
     pattern = patterns.get(args.names[0])
     if args.action == "show":
-        from .patterns.plot import draw_pattern
+        from .viz.patterns import draw_pattern
 
         out = Path(args.out or f"pattern_{pattern.name}.png")
         draw_pattern(pattern, out)
@@ -58,22 +58,20 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     import torch
 
     from . import patterns
-    from .imageio import read_image, write_image, write_raw
-    from .noise import add_evaluation_noise
-    from .sensor import SplitterSensor
-    from .visualize import false_colour
+    from .data.imageio import read_image, write_image, write_raw
+    from .physics.sensor import SplitterSensor
+    from .physics.system import simulate
+    from .viz.raw import false_colour
 
     image = Path(args.image)
     pattern = patterns.get(args.pattern)
     out = Path(args.out)
     if out.suffix.lower() not in (".png", ".npy"):
         raise ValueError(f"--out must end in .png or .npy, got {out.name!r}")
-    rgb = torch.from_numpy(read_image(image)).permute(2, 0, 1)[None].double()
-    with torch.no_grad():
-        raw = SplitterSensor(pattern).double()(rgb)
-    # Evaluation noise: seeded from the image name and sigma, so a simulation is reproducible
-    # and matches what `splitcam evaluate` feeds the methods.
-    raw = add_evaluation_noise(raw, image.stem, args.sigma)[0, 0].numpy()
+    rgb = torch.from_numpy(read_image(image)).permute(2, 0, 1)[None]
+    # The evaluation protocol's simulation: float64 sensor, noise seeded from the image name and
+    # sigma, so a simulation is reproducible and matches what `splitcam evaluate` feeds methods.
+    raw = simulate(SplitterSensor(pattern), rgb, image.stem, args.sigma)[0, 0].numpy()
     out.parent.mkdir(parents=True, exist_ok=True)
     scale = write_raw(out, raw)
     preview = Path(args.preview) if args.preview else out.with_name(out.stem + "_preview.png")
@@ -147,7 +145,7 @@ def cmd_train(args: argparse.Namespace) -> int:
 
 
 def cmd_plot(args: argparse.Namespace) -> int:
-    from .training.plots import compare_runs, plot_run
+    from .viz.curves import compare_runs, plot_run
 
     if len(args.run) > 1:
         out = compare_runs(args.run, args.out or "runs_compared.png")
@@ -160,58 +158,37 @@ def cmd_plot(args: argparse.Namespace) -> int:
 def cmd_reconstruct(args: argparse.Namespace) -> int:
     import torch
 
-    from .imageio import read_image, read_raw, write_image
-    from .inference import reconstruct
-    from .noise import add_evaluation_noise
-    from .training import load_system
+    from . import patterns
+    from .data.imageio import read_image, read_raw, write_image
+    from .methods import build_method
+    from .physics.sensor import SplitterSensor
+    from .physics.system import simulate
 
     if (args.image is None) == (args.raw is None):
         raise ValueError("give exactly one of --image (simulate, then reconstruct) or --raw")
-    system = load_system(args.checkpoint)
+    spec = args.method or args.checkpoint
+    if spec is None:
+        raise ValueError("give --method (lmmse, malvar2004, ..., or a run folder) or --checkpoint")
+    method = build_method(spec, pattern=args.pattern, lmmse_train=args.lmmse_train,
+                          tile=args.tile, fast=args.fast, progress=not args.quiet)
+    if args.pattern is not None and not patterns.get(args.pattern).equals(method.pattern):
+        raise ValueError(f"--pattern {args.pattern} differs from the pattern of {spec} "
+                         f"({method.pattern.name})")
     if args.image:
         rgb = torch.from_numpy(read_image(args.image)).permute(2, 0, 1)[None]
-        with torch.no_grad():
-            raw = add_evaluation_noise(system.sensor(rgb), Path(args.image).stem, args.sigma)
+        raw = simulate(SplitterSensor(method.pattern), rgb, Path(args.image).stem, args.sigma)
     else:
         raw = torch.from_numpy(read_raw(args.raw))[None, None]
-    out = reconstruct(system.network, raw, tile=args.tile, progress=not args.quiet)
+    with torch.no_grad():
+        out = method.reconstruct(raw, args.sigma)
     write_image(args.out, out[0].clamp(0, 1))
-    print(f"wrote {args.out} ({out.shape[-1]}x{out.shape[-2]})")
+    print(f"{method.name}: wrote {args.out} ({out.shape[-1]}x{out.shape[-2]})")
     return 0
-
-
-def build_methods(args: argparse.Namespace) -> list:
-    """Evaluation methods from --checkpoint / --method / --patterns (see `evaluate --help`)."""
-    from .baselines import LMMSE, ClassicalDemosaic
-    from .evaluation import NetworkMethod
-    from .weights import shipped_lmmse
-
-    methods: list = [NetworkMethod.from_checkpoint(c, tile=args.tile, fast=args.fast)
-                     for c in args.checkpoint]
-    requested = args.method or ([] if methods else ["lmmse", "malvar2004"])
-    for name in requested:
-        key = name.lower()
-        if key in ClassicalDemosaic.METHODS:
-            method = ClassicalDemosaic(key)
-            method.name = f"bayer+{key}"
-            methods.append(method)
-        elif key == "lmmse":
-            for pattern in args.patterns:
-                if args.lmmse_train:
-                    lmmse = LMMSE.fit(pattern, args.lmmse_train, progress=not args.quiet)
-                else:
-                    lmmse = shipped_lmmse(pattern)
-                lmmse.name = f"lmmse-{lmmse.pattern.name}"
-                methods.append(lmmse)
-        else:
-            valid = ", ".join([*ClassicalDemosaic.METHODS, "lmmse"])
-            raise ValueError(f"unknown method {name!r}; valid: {valid} (or give --checkpoint)")
-    return methods
 
 
 def load_datasets(spec: str | None, max_images: int | None) -> list:
     """``[(dataset name, [(image name, rgb)])]`` for a comma-separated list of names/folders."""
-    from .datasets import default_images, load_images
+    from .data.testsets import default_images, load_images
 
     if not spec or spec == "default":
         images = default_images()
@@ -224,19 +201,33 @@ def load_datasets(spec: str | None, max_images: int | None) -> list:
 
 
 def cmd_evaluate(args: argparse.Namespace) -> int:
-    from .evaluation import evaluate, markdown_tables, summarise
+    from .evaluation.protocol import evaluate, parse_zoom
+    from .evaluation.tables import markdown_tables, summarise
+    from .methods import build_methods
 
-    methods = build_methods(args)
+    zooms = [parse_zoom(z) for z in args.zoom or ()]  # bad syntax fails before any work
+    specs = [*args.checkpoint, *(args.method or ([] if args.checkpoint else
+                                                 ["lmmse", "malvar2004"]))]
+    methods = build_methods(specs, patterns_for_lmmse=args.patterns,
+                            lmmse_train=args.lmmse_train, tile=args.tile, fast=args.fast,
+                            progress=not args.quiet)
     datasets = load_datasets(args.datasets, args.max_images)
-    rows = evaluate(methods, datasets, args.sigmas, args.out, save_images=args.save_images,
-                    zoom_images=args.zoom or None, crop=args.crop, progress=not args.quiet)
+    try:
+        rows = evaluate(methods, datasets, args.sigmas, args.out, save_images=args.save_images,
+                        zoom_images=zooms if args.zoom else None, crop=args.crop,
+                        progress=not args.quiet, resume=not args.restart)
+    except KeyboardInterrupt:
+        print(f"splitcam evaluate: interrupted; the results so far are in "
+              f"{args.out}/per_image.csv: run the same command again to continue",
+              file=sys.stderr)
+        return 130
     print(markdown_tables(summarise(rows)))
     print(f"wrote {args.out}/per_image.csv, summary.json and table.md")
     return 0
 
 
 def cmd_report(args: argparse.Namespace) -> int:
-    from .report import make_report
+    from .evaluation.report import make_report
 
     path = make_report(args.results, args.out)
     print(path.read_text(encoding="utf-8"))
@@ -334,6 +325,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--tile", type=int, default=512, help="network tile size")
     p.add_argument("--fast", action="store_true",
                    help="bfloat16 + channels-last network inference (see README for its cost)")
+    p.add_argument("--restart", action="store_true",
+                   help="recompute everything instead of continuing the results in --out")
     p.add_argument("--quiet", action="store_true")
     p.set_defaults(handler=cmd_evaluate)
 
@@ -347,7 +340,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", default="report", help="output folder (default: report)")
     p.set_defaults(handler=cmd_report)
 
-    from .datasets import add_cli as add_data_cli
+    from .data.testsets import add_cli as add_data_cli
 
     add_data_cli(sub)
 
@@ -361,16 +354,23 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(handler=cmd_plot)
 
     p = sub.add_parser(
-        "reconstruct", help="reconstruct a colour image with a trained run",
+        "reconstruct", help="reconstruct a colour image with a trained run or a baseline",
         description="--image: simulate the sensor on a colour image (with --sigma noise), then "
         "reconstruct; --raw: reconstruct a raw image (.png written by `simulate`, or .npy). "
         "Large images are processed in overlapping tiles.",
     )
-    p.add_argument("--checkpoint", required=True, help="run folder or checkpoint file")
+    p.add_argument("--method", help="lmmse, bilinear, malvar2004, menon2007, or a run folder / "
+                   "checkpoint file")
+    p.add_argument("--checkpoint", help="run folder or checkpoint file (same as --method RUN)")
+    p.add_argument("--pattern", help="pattern name or file (for --method lmmse)")
+    p.add_argument("--lmmse-train", metavar="DIR",
+                   help="fit LMMSE on these training images (default: the shipped fits)")
     p.add_argument("--image", help="colour image to simulate and reconstruct")
     p.add_argument("--raw", help="raw image to reconstruct")
     p.add_argument("--sigma", type=float, default=0.0, help="noise sigma for --image")
     p.add_argument("--tile", type=int, default=512, help="tile size in pixels (default 512)")
+    p.add_argument("--fast", action="store_true",
+                   help="bfloat16 + channels-last network inference (see README for its cost)")
     p.add_argument("--out", required=True, help="output PNG")
     p.add_argument("--quiet", action="store_true")
     p.set_defaults(handler=cmd_reconstruct)

@@ -12,7 +12,7 @@ from pathlib import Path
 from .core import COLOURS, Pattern, PatternError, kernel_offsets
 from .files import load, save
 from .library import BUILTIN_FACTORIES
-from .measures import PatternMeasures, measure
+from .measures import PatternMeasures, measure, pixel_response
 
 __all__ = [
     "COLOURS",
@@ -24,6 +24,7 @@ __all__ = [
     "load",
     "measure",
     "names",
+    "pixel_response",
     "save",
 ]
 

@@ -110,3 +110,18 @@ def measure(pattern: Pattern) -> PatternMeasures:
         mean_travel=float((k * dist).sum() / total) if total > 0 else 0.0,
         pooling_unit=unit,
     )
+
+
+def pixel_response(pattern: Pattern) -> np.ndarray:
+    """``(Ph, Pw, 3)``: what each pixel of the unit cell records of a white scene, per colour."""
+    ph, pw = pattern.period
+    kh, kw = pattern.kernel_size
+    response = np.zeros((ph, pw, 3))
+    for i in range(ph):
+        for j in range(pw):
+            for a in range(kh):
+                for b in range(kw):
+                    # Light reaching (i, j) through tap (a, b) left from (i - dy, j - dx).
+                    s = pattern.layout[(i - a + kh // 2) % ph, (j - b + kw // 2) % pw]
+                    response[i, j] += pattern.kernels[s, :, a, b]
+    return response

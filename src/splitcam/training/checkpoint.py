@@ -19,6 +19,11 @@ from typing import Any
 
 import torch
 
+from ..patterns import Pattern
+from ..physics.sensor import SplitterSensor
+from ..physics.system import ImagingSystem
+from ..recon.networks import build_network
+
 FORMAT = "splitcam-checkpoint"
 VERSION = 1
 CHECKPOINT_NAME = "checkpoint.safetensors"
@@ -154,3 +159,14 @@ def load_module(
             "checkpoint belongs to another architecture: " + "; ".join(details)
         )
     module.load_state_dict(state)
+
+
+def load_system(path: str | os.PathLike, device: str | torch.device = "cpu") -> ImagingSystem:
+    """The trained system of a run folder or checkpoint, with the sensor fixed to the pattern
+    it had at that step (a learned pattern is loaded as a fixed one), in eval mode."""
+    loaded = load(path)
+    pattern = Pattern.from_dict(loaded.meta["pattern"])
+    network = build_network(loaded.meta["network"])
+    load_module(network, loaded, child="network")
+    system = ImagingSystem(SplitterSensor(pattern), network)
+    return system.to(device).eval()

@@ -18,12 +18,13 @@ import torch
 import torch.nn.functional as F
 
 from .. import patterns
-from ..data import ImageCache, PatchSampler, list_images
-from ..metrics import psnr
-from ..networks import build_network
-from ..noise import GaussianNoise, add_evaluation_noise
-from ..sensor import LearnableSplitterSensor, SplitterSensor
-from ..system import ImagingSystem
+from ..data.patches import ImageCache, PatchSampler, list_images
+from ..evaluation.protocol import mean_psnr
+from ..physics.noise import GaussianNoise
+from ..physics.sensor import LearnableSplitterSensor, SplitterSensor
+from ..physics.system import ImagingSystem
+from ..recon.base import NetworkReconstructor
+from ..recon.networks import build_network
 from . import checkpoint as ckpt_io
 from .config import ConfigError, TrainConfig
 
@@ -127,26 +128,20 @@ def _train_source(config: TrainConfig) -> Any:
     return config.data.train
 
 
-@torch.no_grad()
 def validate(
     system: ImagingSystem, images: list[tuple[str, torch.Tensor]], sigmas: list[float],
-    device: torch.device,
 ) -> dict[str, float]:
-    """Mean PSNR (8-bit, SPEC section 7) per sigma with the deterministic evaluation noise."""
+    """Mean PSNR per sigma on the validation images, by the evaluation protocol itself
+    (:func:`splitcam.evaluation.protocol.mean_psnr`): the pattern as a run's checkpoint records
+    it, the same simulation, noise, reconstruction, rounding and averaging as ``splitcam
+    evaluate``, so the logged value is what ``evaluate`` reports for this step."""
     was_training = system.training
     system.eval()
-    out: dict[str, float] = {}
-    for sigma in sigmas:
-        scores = []
-        for name, img in images:
-            rgb = img[None].to(device)
-            raw = add_evaluation_noise(system.sensor(rgb), name, sigma)
-            pred = system.network(raw)
-            scores.append(psnr(pred[0].float().cpu().clamp(0, 1), img))
-        finite = [s for s in scores if math.isfinite(s)]
-        out[f"val_psnr_{sigma:g}"] = sum(finite) / max(len(finite), 1)
-    out["val_psnr"] = sum(out.values()) / len(sigmas)
+    method = NetworkReconstructor(system.network, system.sensor.to_pattern(), "validation")
+    means = mean_psnr(method, images, sigmas)
     system.train(was_training)
+    out = {f"val_psnr_{sigma:g}": value for sigma, value in means.items()}
+    out["val_psnr"] = sum(means.values()) / len(means)
     return out
 
 
@@ -319,7 +314,7 @@ def train(config: TrainConfig, *, resume: bool = False, progress: bool = True) -
     timed_out = False
     with _StopFlag() as stop:
         if step == 0 and val_images and dist_info.is_main:
-            start = validate(system, val_images, config.data.val_sigmas, device)
+            start = validate(system, val_images, config.data.val_sigmas)
             with open(metrics_path, "a", encoding="utf-8") as fh:
                 fh.write(json.dumps({"step": 0, **start, "time": time.time()}) + "\n")
         while step < config.optim.steps:
@@ -358,7 +353,7 @@ def train(config: TrainConfig, *, resume: bool = False, progress: bool = True) -
                 }
             if val_now and dist_info.is_main:
                 t_val = time.perf_counter()
-                last.update(validate(system, val_images, config.data.val_sigmas, device))
+                last.update(validate(system, val_images, config.data.val_sigmas))
                 last["step"] = step
                 t_window += time.perf_counter() - t_val  # keep steps/s about training only
             if (log_now or val_now) and dist_info.is_main:
@@ -487,14 +482,3 @@ def _tensorboard(run_dir: Path):
                       stacklevel=2)
         return None
     return SummaryWriter(str(run_dir / "tensorboard"))
-
-
-def load_system(path: str | os.PathLike, device: str | torch.device = "cpu") -> ImagingSystem:
-    """The trained system of a run folder or checkpoint, with the sensor fixed to the pattern
-    it had at that step (a learned pattern is loaded as a fixed one), in eval mode."""
-    loaded = ckpt_io.load(path)
-    pattern = patterns.Pattern.from_dict(loaded.meta["pattern"])
-    network = build_network(loaded.meta["network"])
-    ckpt_io.load_module(network, loaded, child="network")
-    system = ImagingSystem(SplitterSensor(pattern), network)
-    return system.to(device).eval()

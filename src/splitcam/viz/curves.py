@@ -24,17 +24,15 @@ def read_metrics(run: str | os.PathLike) -> list[dict]:
 
 def plot_run(run: str | os.PathLike, out: str | os.PathLike | None = None) -> Path:
     """Loss (log scale) and training/validation PSNR against step, saved as a PNG."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from matplotlib.figure import Figure
 
     rows = read_metrics(run)
     folder = Path(run) if Path(run).is_dir() else Path(run).parent
     out = Path(out) if out else folder / "curves.png"
     train = [r for r in rows if "loss" in r]
     val = [r for r in rows if "val_psnr" in r]
-    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(11, 4))
+    fig = Figure(figsize=(11, 4))
+    ax1, ax2 = fig.subplots(1, 2)
     ax1.plot([r["step"] for r in train], [r["loss"] for r in train], lw=1)
     ax1.set_yscale("log")
     ax1.set_xlabel("step")
@@ -59,7 +57,6 @@ def plot_run(run: str | os.PathLike, out: str | os.PathLike | None = None) -> Pa
     fig.tight_layout()
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=120)
-    plt.close(fig)
     return out
 
 
@@ -67,12 +64,11 @@ def compare_runs(runs: list[str | os.PathLike], out: str | os.PathLike) -> Path:
     """Validation PSNR of several runs against wall-clock minutes and against steps: the
     picture of an equal-time comparison."""
     import matplotlib
+    from matplotlib.figure import Figure
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(11, 4))
-    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    fig = Figure(figsize=(11, 4))
+    ax1, ax2 = fig.subplots(1, 2)
+    colours = matplotlib.rcParams["axes.prop_cycle"].by_key()["color"]
     for i, run in enumerate(runs):
         rows = [r for r in read_metrics(run) if "val_psnr" in r]
         if not rows:
@@ -98,5 +94,4 @@ def compare_runs(runs: list[str | os.PathLike], out: str | os.PathLike) -> Path:
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=120)
-    plt.close(fig)
     return out

@@ -5,8 +5,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from .patterns import Pattern
-from .patterns.plot import pixel_response
+from ..patterns import Pattern, pixel_response
 
 
 def false_colour(raw: np.ndarray | torch.Tensor, pattern: Pattern, *, scale: float | None = None):

@@ -27,7 +27,8 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from .patterns import Pattern, PatternError, get
+from ..patterns import Pattern, PatternError, get
+from .periodic import period_shuffle, period_unshuffle, phase_conv
 
 __all__ = [
     "LearnableSplitterSensor",
@@ -104,25 +105,6 @@ def _strided_kernel(weights: torch.Tensor, layout: Layout) -> torch.Tensor:
     return flat[index.to(weights.device)]
 
 
-def _to_blocks(x: torch.Tensor, period: tuple[int, int]) -> torch.Tensor:
-    """``(N, C, H, W)`` → ``(N, C * Ph * Pw, ceil(H/Ph), ceil(W/Pw))``, zero-padding H and W."""
-    n, c, h, w = x.shape
-    ph, pw = period
-    hb, wb = -(-h // ph), -(-w // pw)
-    x = F.pad(x, (0, wb * pw - w, 0, hb * ph - h))
-    x = x.reshape(n, c, hb, ph, wb, pw).permute(0, 1, 3, 5, 2, 4)
-    return x.reshape(n, c * ph * pw, hb, wb)
-
-
-def _from_blocks(x: torch.Tensor, period: tuple[int, int], size: tuple[int, int]) -> torch.Tensor:
-    """Inverse of :func:`_to_blocks`, cropping back to ``size = (H, W)``."""
-    n, cp, hb, wb = x.shape
-    ph, pw = period
-    c = cp // (ph * pw)
-    x = x.reshape(n, c, ph, pw, hb, wb).permute(0, 1, 4, 2, 5, 3)
-    return x.reshape(n, c, hb * ph, wb * pw)[:, :, : size[0], : size[1]]
-
-
 def _period(layout: Layout) -> tuple[int, int]:
     if isinstance(layout, tuple):
         return (len(layout), len(layout[0]))
@@ -164,7 +146,7 @@ def splitter_forward(
         # is cropped away, exactly like light that leaves the sensor.
         pad = (kw // 2, kw // 2 + wp - w, kh // 2, kh // 2 + hp - h)
         raw = F.conv2d(F.pad(rgb, pad), kernel, stride=(ph, pw))
-    return _from_blocks(raw, (ph, pw), (h, w))
+    return period_shuffle(raw, (ph, pw), (h, w))
 
 
 def splitter_adjoint(
@@ -185,7 +167,7 @@ def splitter_adjoint(
     kh, kw = weights.shape[-2:]
     kernel = _strided_kernel(weights.to(raw.dtype), layout)
     rgb = F.conv_transpose2d(
-        _to_blocks(raw, (ph, pw)), kernel, stride=(ph, pw), padding=(kh // 2, kw // 2)
+        period_unshuffle(raw, (ph, pw)), kernel, stride=(ph, pw), padding=(kh // 2, kw // 2)
     )
     return rgb[:, :, : raw.shape[-2], : raw.shape[-1]]
 
@@ -241,15 +223,9 @@ def pixel_gather(
         - rgb: ``(N, 3, H, W)``; output ``(N, 1, H, W)``.
     """
     _check(rgb, 3, "an RGB image")
-    ph, pw = _period(layout)
     k = pixel_kernels(weights.to(rgb.dtype), layout)
-    kh, kw = k.shape[-2:]
-    response = F.conv2d(rgb, k.reshape(ph * pw, 3, kh, kw), padding=(kh // 2, kw // 2))
-    h, w = rgb.shape[-2:]
-    yy = torch.arange(h, device=rgb.device) % ph
-    xx = torch.arange(w, device=rgb.device) % pw
-    phase = (yy[:, None] * pw + xx[None, :]).expand(rgb.shape[0], 1, h, w)
-    return response.gather(1, phase)
+    ph, pw, c, kh, kw = k.shape
+    return phase_conv(rgb, k.reshape(ph * pw, 1, c, kh, kw), (ph, pw))
 
 
 class SplitterSensor(nn.Module):

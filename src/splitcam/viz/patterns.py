@@ -9,8 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .core import COLOURS, Pattern
-from .measures import measure
+from ..patterns import COLOURS, Pattern, measure, pixel_response
 
 _RGB = {"R": (0.84, 0.15, 0.16), "G": (0.17, 0.63, 0.17), "B": (0.12, 0.37, 0.84)}
 
@@ -18,21 +17,6 @@ _RGB = {"R": (0.84, 0.15, 0.16), "G": (0.17, 0.63, 0.17), "B": (0.12, 0.37, 0.84
 def _fmt(v: float) -> str:
     text = f"{v:.2f}".rstrip("0").rstrip(".")
     return text[1:] if text.startswith("0.") else text
-
-
-def pixel_response(pattern: Pattern) -> np.ndarray:
-    """``(Ph, Pw, 3)``: what each pixel of the unit cell records of a white scene, per colour."""
-    ph, pw = pattern.period
-    kh, kw = pattern.kernel_size
-    response = np.zeros((ph, pw, 3))
-    for i in range(ph):
-        for j in range(pw):
-            for a in range(kh):
-                for b in range(kw):
-                    # Light reaching (i, j) through tap (a, b) left from (i - dy, j - dx).
-                    s = pattern.layout[(i - a + kh // 2) % ph, (j - b + kw // 2) % pw]
-                    response[i, j] += pattern.kernels[s, :, a, b]
-    return response
 
 
 def draw_pattern(pattern: Pattern, out: str | os.PathLike | None = None, *, dpi: int = 130):
@@ -44,10 +28,7 @@ def draw_pattern(pattern: Pattern, out: str | os.PathLike | None = None, *, dpi:
     centre = the pixel the light arrives at), shaded by the fraction of that colour's light that
     lands on each pixel, with the fraction written in.
     """
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from matplotlib.figure import Figure
     from matplotlib.patches import Rectangle
 
     ph, pw = pattern.period
@@ -58,7 +39,7 @@ def draw_pattern(pattern: Pattern, out: str | os.PathLike | None = None, *, dpi:
     left_w = max(2.6, pw * 0.9)
     fig_w = left_w + 3 * (mini_w + 0.35) + 1.4
     fig_h = max(len(sites) * (mini_h + 0.45), ph * 0.9 + 1.2) + 1.6
-    fig = plt.figure(figsize=(fig_w, fig_h))
+    fig = Figure(figsize=(fig_w, fig_h))
 
     def box(x0: float, y0: float, w: float, h: float):
         return fig.add_axes((x0 / fig_w, y0 / fig_h, w / fig_w, h / fig_h))
@@ -125,5 +106,4 @@ def draw_pattern(pattern: Pattern, out: str | os.PathLike | None = None, *, dpi:
     if out is not None:
         Path(out).parent.mkdir(parents=True, exist_ok=True)
         fig.savefig(out, dpi=dpi)
-        plt.close(fig)
     return fig

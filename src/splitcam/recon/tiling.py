@@ -18,7 +18,7 @@ from typing import Any, NamedTuple
 import torch
 from torch import nn
 
-from splitcam.networks import check_raw
+from .base import check_raw
 
 __all__ = ["Span", "reconstruct", "tile_spans"]
 
@@ -122,7 +122,7 @@ def reconstruct(
 
     Args:
         net: A reconstruction network with ``period`` and ``receptive_radius`` attributes (see
-            :mod:`splitcam.networks`).
+            :mod:`splitcam.recon.networks`).
         raw: Raw image batch.
         tile: Maximum tile height and width in pixels; ``None`` runs the whole image at once, as
             does an image no larger than one tile.

@@ -57,8 +57,9 @@ from typing import TYPE_CHECKING, Any, BinaryIO, NoReturn
 
 import numpy as np
 
-from splitcam import __version__
-from splitcam.imageio import read_image
+from .. import __version__
+from .imageio import read_image
+from .patches import list_images
 
 if TYPE_CHECKING:
     import torch
@@ -345,8 +346,7 @@ def data_root(root: str | os.PathLike[str] | None = None) -> Path:
 
 def _list_folder(folder: Path) -> list[tuple[str, Path]]:
     """(stem, path) of the image files directly inside ``folder`` (see
-    :func:`splitcam.data.list_images`), sorted by stem, with unique stems."""
-    from .data import list_images
+    :func:`splitcam.data.patches.list_images`), sorted by stem, with unique stems."""
 
     items = sorted((p.stem, p) for p in list_images(folder))
     # Image names key results and seed the evaluation noise, so two files must not share one.
@@ -385,7 +385,7 @@ def resolve(
     Returns:
         ``(name, path)`` pairs sorted by name, where the name is the file name without its suffix.
         Only files directly inside the folder with one of the suffixes in
-        :data:`splitcam.imageio.IMAGE_SUFFIXES` count; hidden files are ignored.
+        :data:`splitcam.data.imageio.IMAGE_SUFFIXES` count; hidden files are ignored.
 
     Raises:
         FileNotFoundError: The dataset has not been downloaded, or the folder does not exist or
@@ -446,7 +446,7 @@ def load_images(
 
     Raises:
         FileNotFoundError: See :func:`resolve`.
-        splitcam.imageio.ImageReadError: A file is not a readable colour image.
+        splitcam.data.imageio.ImageReadError: A file is not a readable colour image.
     """
     if spec is None:
         return default_images()

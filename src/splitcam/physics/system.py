@@ -1,4 +1,5 @@
-"""The whole imaging system: splitter sensor, noise, reconstruction network (paper Fig. 6a)."""
+"""The whole imaging system: splitter sensor, noise, reconstruction network (paper Fig. 6a), and
+:func:`simulate`, the one way every command turns a test scene into the raw image a method sees."""
 
 from __future__ import annotations
 
@@ -7,7 +8,10 @@ from collections.abc import Callable
 import torch
 from torch import nn
 
+from .noise import add_evaluation_noise, check_sigma
 from .sensor import SplitterSensor
+
+__all__ = ["ImagingSystem", "simulate"]
 
 NoiseFn = Callable[[torch.Tensor], tuple[torch.Tensor, torch.Tensor]]
 
@@ -58,3 +62,38 @@ class ImagingSystem(nn.Module):
             raw = raw.contiguous(memory_format=torch.channels_last)
         network = self._compiled if self._compiled is not None else self.network
         return network(raw)
+
+
+#: Rows per strip in :func:`simulate`: bounds the float64 copy of a large scene.
+SIMULATE_STRIP = 256
+
+
+def simulate(
+    sensor: SplitterSensor, rgb: torch.Tensor, image_name: str, sigma: float, *,
+    strip: int = SIMULATE_STRIP,
+) -> torch.Tensor:
+    """The noisy raw image of a test scene: the protocol of ``evaluate``, validation,
+    ``simulate`` and ``reconstruct`` alike.
+
+    The sensor runs in float64 (the raw image is then float32), in strips of ``strip`` rows so
+    that a large scene never exists in float64 at once; the strips overlap by the kernel's reach
+    rounded up to whole periods, so the result equals the sensor on the whole image exactly.
+    Noise is the deterministic evaluation noise of ``image_name`` and ``sigma``
+    (:func:`~splitcam.physics.noise.add_evaluation_noise`), the same for every method.
+
+    Shape:
+        - rgb: ``(N, 3, H, W)``; output ``(N, 1, H, W)`` float32 on ``rgb``'s device.
+    """
+    sigma = check_sigma(sigma)
+    ph = sensor.period[0]
+    kh = sensor.kernels.shape[-2] if hasattr(sensor, "kernels") else sensor.weights().shape[-2]
+    halo = -(-(kh // 2) // ph) * ph
+    step = max(ph, strip // ph * ph)
+    h = rgb.shape[-2]
+    out = torch.empty((rgb.shape[0], 1, *rgb.shape[-2:]), dtype=torch.float32, device=rgb.device)
+    with torch.no_grad(), torch.autocast(rgb.device.type, enabled=False):
+        for top in range(0, h, step):
+            lo, hi = max(0, top - halo), min(h, top + step + halo)
+            raw = sensor(rgb[:, :, lo:hi].double())
+            out[:, :, top:min(h, top + step)] = raw[:, :, top - lo:top - lo + step].float()
+        return add_evaluation_noise(out, image_name, sigma)

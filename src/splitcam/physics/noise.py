@@ -9,10 +9,33 @@ method is scored on identical noise. Nothing here touches Python's ``random`` or
 from __future__ import annotations
 
 import hashlib
+import math
+from numbers import Real
+from typing import Any
 
 import torch
 
-__all__ = ["GaussianNoise", "add_evaluation_noise", "evaluation_noise", "evaluation_seed"]
+__all__ = [
+    "GaussianNoise",
+    "add_evaluation_noise",
+    "check_sigma",
+    "evaluation_noise",
+    "evaluation_seed",
+]
+
+
+def check_sigma(sigma: Any) -> float:
+    """A noise level in 8-bit units: a finite number ``>= 0``.
+
+    Raises:
+        TypeError: Not a number.
+        ValueError: Negative, infinite or NaN.
+    """
+    if isinstance(sigma, bool) or not isinstance(sigma, Real):
+        raise TypeError(f"expected sigma as a number (8-bit units), got {type(sigma).__name__}")
+    if not (math.isfinite(sigma) and sigma >= 0):
+        raise ValueError(f"expected a finite sigma >= 0 (8-bit units), got {sigma}")
+    return float(sigma)
 
 
 class GaussianNoise:
@@ -71,8 +94,7 @@ def evaluation_noise(
     The same for every pattern and method (it depends only on the name, sigma and shape), so
     differences in scores come from the methods, not from the draw.
     """
-    if sigma < 0:
-        raise ValueError(f"expected sigma >= 0, got {sigma}")
+    sigma = check_sigma(sigma)
     gen = torch.Generator().manual_seed(evaluation_seed(image_name, sigma))
     noise = torch.randn(shape, generator=gen, dtype=torch.float64) * (float(sigma) / 255.0)
     return noise.to(device=device, dtype=dtype)
@@ -80,7 +102,7 @@ def evaluation_noise(
 
 def add_evaluation_noise(raw: torch.Tensor, image_name: str, sigma: float) -> torch.Tensor:
     """``raw`` plus :func:`evaluation_noise` (returned unchanged for ``sigma == 0``)."""
-    if sigma == 0:
+    if check_sigma(sigma) == 0:
         return raw
     return raw + evaluation_noise(
         tuple(raw.shape), image_name, sigma, dtype=raw.dtype, device=raw.device

@@ -10,7 +10,7 @@ conv, a long skip from the head, tail conv; all 3x3, zero padding, biases, no ou
   (:func:`period_unshuffle`), runs the trunk at ``1 / (Ph * Pw)`` of the pixels and rearranges the
   ``3 * Ph * Pw`` output channels back (:func:`period_shuffle`).
 
-Both store ``period``, report ``receptive_radius`` (what :func:`splitcam.inference.reconstruct`
+Both store ``period``, report ``receptive_radius`` (what :func:`splitcam.recon.tiling.reconstruct`
 needs to tile exactly) and round-trip through ``config()`` / :func:`build_network`.
 """
 
@@ -24,15 +24,16 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from ..physics.periodic import as_period as _as_period
+from ..physics.periodic import period_shuffle, period_unshuffle, phase_map
+from .base import check_raw
+
 __all__ = [
     "ARCHITECTURES",
     "PackedReconNet",
     "PeriodicSampling",
     "ReconNet",
     "build_network",
-    "check_raw",
-    "period_shuffle",
-    "period_unshuffle",
 ]
 
 
@@ -40,44 +41,10 @@ def _is_int(value: Any) -> bool:
     return isinstance(value, Integral) and not isinstance(value, bool)
 
 
-def _as_period(period: Any) -> tuple[int, int]:
-    if (
-        not isinstance(period, (tuple, list))
-        or len(period) != 2
-        or not all(_is_int(p) and p >= 1 for p in period)
-    ):
-        raise ValueError(f"period must be two positive integers (Ph, Pw), got {period!r}")
-    return int(period[0]), int(period[1])
-
-
 def _as_count(value: Any, name: str, minimum: int) -> int:
     if not _is_int(value) or value < minimum:
         raise ValueError(f"{name} must be an integer >= {minimum}, got {value!r}")
     return int(value)
-
-
-def check_raw(raw: Any) -> None:
-    """Raise if ``raw`` is not a floating-point raw image batch.
-
-    Args:
-        raw: The candidate input.
-
-    Raises:
-        TypeError: ``raw`` is not a tensor, or its dtype is not floating point.
-        ValueError: ``raw`` is not of shape ``(N, 1, H, W)`` with ``H, W >= 1``.
-
-    Shape:
-        - raw: ``(N, 1, H, W)``.
-    """
-    if not isinstance(raw, torch.Tensor):
-        raise TypeError(f"expected a torch.Tensor of shape (N, 1, H, W), got {type(raw).__name__}")
-    shape = tuple(raw.shape)
-    if raw.ndim != 4 or shape[1] != 1:
-        raise ValueError(f"expected (N, 1, H, W), got {shape}")
-    if shape[2] < 1 or shape[3] < 1:
-        raise ValueError(f"expected (N, 1, H, W) with H, W >= 1, got {shape}")
-    if not raw.is_floating_point():
-        raise TypeError(f"expected a floating-point raw image, got dtype {raw.dtype}")
 
 
 class PeriodicSampling(nn.Module):
@@ -104,87 +71,12 @@ class PeriodicSampling(nn.Module):
         h, w = raw.shape[-2:]
         # A mask costs as much as the multiply it feeds, far less than one conv layer, so it is
         # rebuilt per call rather than cached for every tile size a tiled run produces.
-        rows = torch.arange(h, device=raw.device) % ph
-        cols = torch.arange(w, device=raw.device) % pw
-        position_class = rows[:, None] * pw + cols[None, :]
         classes = torch.arange(ph * pw, device=raw.device)[:, None, None]
-        mask = (position_class[None] == classes).to(raw.dtype)
+        mask = (phase_map(h, w, self.period, raw.device)[None] == classes).to(raw.dtype)
         return raw * mask
 
     def extra_repr(self) -> str:
         return f"period={self.period}"
-
-
-def _rearrange(x: torch.Tensor, period: tuple[int, int], inverse: bool) -> torch.Tensor:
-    """Move period cells into channels (``inverse=False``) or back (``inverse=True``).
-
-    Uses the channel order of :func:`torch.nn.functional.pixel_unshuffle`: channel
-    ``c * Ph * Pw + i * Pw + j`` of cell ``(u, v)`` is pixel ``(u * Ph + i, v * Pw + j)`` of
-    channel ``c``.
-    """
-    ph, pw = period
-    n, c, h, w = x.shape
-    if ph == pw:
-        return F.pixel_shuffle(x, ph) if inverse else F.pixel_unshuffle(x, ph)
-    if inverse:
-        x = x.reshape(n, c // (ph * pw), ph, pw, h, w).permute(0, 1, 4, 2, 5, 3)
-        return x.reshape(n, c // (ph * pw), h * ph, w * pw)
-    x = x.reshape(n, c, h // ph, ph, w // pw, pw).permute(0, 1, 3, 5, 2, 4)
-    return x.reshape(n, c * ph * pw, h // ph, w // pw)
-
-
-def period_unshuffle(x: torch.Tensor, period: tuple[int, int]) -> torch.Tensor:
-    """Pixel-unshuffle with possibly rectangular factors ``(Ph, Pw)``.
-
-    Equals ``F.pixel_unshuffle(x, P)`` when ``Ph == Pw == P``.
-
-    Args:
-        x: Tensor whose height and width are multiples of ``Ph`` and ``Pw``.
-        period: ``(Ph, Pw)``.
-
-    Returns:
-        The rearranged tensor.
-
-    Raises:
-        ValueError: The spatial size is not a multiple of the period.
-
-    Shape:
-        - x: ``(N, C, H, W)``.
-        - Output: ``(N, C * Ph * Pw, H / Ph, W / Pw)``.
-    """
-    period = _as_period(period)
-    if x.ndim != 4 or x.shape[2] % period[0] or x.shape[3] % period[1]:
-        raise ValueError(
-            f"expected (N, C, H, W) with H, W multiples of the period {period}, "
-            f"got {tuple(x.shape)}"
-        )
-    return _rearrange(x, period, inverse=False)
-
-
-def period_shuffle(x: torch.Tensor, period: tuple[int, int]) -> torch.Tensor:
-    """Inverse of :func:`period_unshuffle`.
-
-    Args:
-        x: Tensor whose channel count is a multiple of ``Ph * Pw``.
-        period: ``(Ph, Pw)``.
-
-    Returns:
-        The rearranged tensor.
-
-    Raises:
-        ValueError: The channel count is not a multiple of ``Ph * Pw``.
-
-    Shape:
-        - x: ``(N, C * Ph * Pw, h, w)``.
-        - Output: ``(N, C, h * Ph, w * Pw)``.
-    """
-    period = _as_period(period)
-    if x.ndim != 4 or x.shape[1] % (period[0] * period[1]):
-        raise ValueError(
-            f"expected (N, C * {period[0] * period[1]}, h, w) for the period {period}, "
-            f"got {tuple(x.shape)}"
-        )
-    return _rearrange(x, period, inverse=True)
 
 
 def _conv3x3(in_channels: int, out_channels: int) -> nn.Conv2d:
@@ -315,12 +207,9 @@ class PackedReconNet(_Reconstructor):
 
     def forward(self, raw: torch.Tensor) -> torch.Tensor:
         check_raw(raw)
-        ph, pw = self.period
-        h, w = raw.shape[-2:]
-        padded = F.pad(raw, (0, -w % pw, 0, -h % ph))
-        cells = _rearrange(padded, self.period, inverse=False)
-        rgb = _rearrange(self.trunk(cells), self.period, inverse=True)
-        return rgb[..., :h, :w]
+        cells = period_unshuffle(raw, self.period)
+        rgb = period_shuffle(self.trunk(cells), self.period, raw.shape[-2:])
+        return rgb
 
     @property
     def receptive_radius(self) -> int:

@@ -1,59 +1,41 @@
-"""Reconstruction methods that need no network training, behind one interface (:class:`Method`).
+"""LMMSE: the linear minimum-mean-square-error reconstructor of any pattern.
 
-- :class:`ClassicalDemosaic`: bilinear, Malvar 2004 and Menon 2007 demosaicking of the ``bayer``
-  pattern with the ``colour-demosaicing`` package. Our bayer raw image is exactly the standard
-  RGGB mosaic, so the published algorithms apply unchanged. They do not denoise.
-- :class:`LMMSE`: the linear minimum-mean-square-error reconstructor of any pattern. Each phase
-  ``(i, j)`` of the period gets its own linear filter (plus bias) over the ``(2r+1) x (2r+1)``
-  neighbourhood of the raw image, predicting the RGB of the centre pixel. The filters are solved
-  in closed form from second moments gathered once from training patches (:func:`fit_lmmse`).
-  The noise is white, Gaussian and independent of the signal, so the noisy-raw second moment is
-  the clean one plus ``(sigma/255)^2 I``: one pass over the data gives the exact LMMSE filters
-  for every sigma.
-- :func:`screen_patterns`: fit and score many patterns in minutes, to rank them before spending
-  hours training networks.
-
-A :class:`Method` maps a raw image ``(N, 1, H, W)`` and the noise level to an RGB estimate
-``(N, 3, H, W)`` (not clamped), like a trained network, so one evaluation loop scores both.
+Each phase ``(i, j)`` of the period gets its own linear filter (plus bias) over the
+``(2r+1) x (2r+1)`` neighbourhood of the raw image, predicting the RGB of the centre pixel. The
+filters are solved in closed form from second moments gathered once from training patches
+(:func:`fit_lmmse`). The noise is white, Gaussian and independent of the signal, so the
+noisy-raw second moment is the clean one plus ``(sigma/255)^2 I``: one pass over the data gives
+the exact LMMSE filters for every sigma. Fits of the built-in patterns ship with splitcam
+(:func:`shipped_lmmse`).
 """
 
 from __future__ import annotations
 
 import hashlib
 import json
-import math
 import os
-import time
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Iterable
 from dataclasses import dataclass, field
-from numbers import Real
 from pathlib import Path
-from typing import Any, Protocol, runtime_checkable
+from typing import Any
 
-import numpy as np
 import torch
-import torch.nn.functional as F
 
-from .data import ImageCache, PatchSampler, load_validation
-from .metrics import compute_all, mean_over_images, psnr
-from .networks import check_raw
-from .patterns import Pattern, PatternError, get
-from .sensor import SplitterSensor
+from ..data.patches import ImageCache, PatchSampler
+from ..patterns import Pattern, PatternError, get
+from ..physics.periodic import phase_conv, phase_map
+from ..physics.sensor import SplitterSensor
+from .base import check_raw, check_sigma
 
 __all__ = [
     "DEFAULT_PATCHES",
     "DEFAULT_PATCH_SIZE",
     "DEFAULT_RADIUS",
     "LMMSE",
-    "ClassicalDemosaic",
     "LMMSEFileError",
     "LMMSEStatistics",
-    "Method",
-    "ScreenResult",
-    "evaluate_method",
     "fit_lmmse",
-    "screen_patterns",
-    "summarise",
+    "shipped_lmmse",
 ]
 
 #: Default number of training patches for :func:`fit_lmmse`. Measured on data/train (shared 2-core
@@ -70,108 +52,6 @@ _RIDGE = 1e-8
 _BATCH = 64
 _FORMAT = "splitcam-lmmse-statistics"
 _VERSION = 1
-
-
-def _check_sigma(sigma: float) -> float:
-    if isinstance(sigma, bool) or not isinstance(sigma, Real):
-        raise TypeError(f"expected sigma as a number (8-bit units), got {type(sigma).__name__}")
-    if not (math.isfinite(sigma) and sigma >= 0):
-        raise ValueError(f"expected a finite sigma >= 0 (8-bit units), got {sigma}")
-    return float(sigma)
-
-
-@runtime_checkable
-class Method(Protocol):
-    """A reconstruction method: raw image of ``pattern`` plus noise level in, RGB estimate out.
-
-    Attributes:
-        name: Short label for tables, e.g. ``"lmmse"`` or ``"malvar2004"``.
-        pattern: The sensor pattern whose raw images the method reconstructs.
-    """
-
-    name: str
-    pattern: Pattern
-
-    def reconstruct(self, raw: torch.Tensor, sigma: float) -> torch.Tensor:
-        """Estimate the scene.
-
-        Args:
-            raw: Raw sensor image (noise included).
-            sigma: The noise level in 8-bit units (methods may ignore it).
-
-        Returns:
-            RGB estimate, float, not clamped, same dtype as ``raw``.
-
-        Shape:
-            - raw: ``(N, 1, H, W)``.
-            - output: ``(N, 3, H, W)``.
-        """
-        ...
-
-
-# --------------------------------------------------------------------------------------------
-# Classical demosaicking of the Bayer pattern
-
-
-def _demosaic_functions() -> dict[str, Callable[..., np.ndarray]]:
-    import colour_demosaicing as cd
-
-    return {
-        "bilinear": cd.demosaicing_CFA_Bayer_bilinear,
-        "malvar2004": cd.demosaicing_CFA_Bayer_Malvar2004,
-        "menon2007": cd.demosaicing_CFA_Bayer_Menon2007,
-    }
-
-
-class ClassicalDemosaic:
-    """Classical demosaicking of the ``bayer`` pattern (RGGB) with ``colour-demosaicing``.
-
-    ``bilinear`` is ``demosaicing_CFA_Bayer_bilinear``, ``malvar2004`` is
-    ``demosaicing_CFA_Bayer_Malvar2004`` (Malvar, He & Cutler 2004) and ``menon2007`` is
-    ``demosaicing_CFA_Bayer_Menon2007`` (Menon, Andriani & Calvagno 2007, with its refining
-    step). These algorithms interpolate and do not denoise: ``sigma`` is ignored, so at
-    ``sigma > 0`` they pass the noise (and its demosaicking artefacts) straight through.
-
-    Args:
-        method: One of ``bilinear``, ``malvar2004``, ``menon2007`` (case-insensitive).
-
-    Raises:
-        ValueError: Unknown method; the message lists the valid names.
-    """
-
-    METHODS = ("bilinear", "malvar2004", "menon2007")
-
-    def __init__(self, method: str) -> None:
-        key = str(method).strip().lower()
-        if key not in self.METHODS:
-            raise ValueError(
-                f"expected a demosaicking method among {', '.join(self.METHODS)}, got {method!r}"
-            )
-        self.name = key
-        self.pattern = get("bayer")
-        self._function = _demosaic_functions()[key]
-
-    def reconstruct(self, raw: torch.Tensor, sigma: float = 0.0) -> torch.Tensor:
-        """Demosaic each image of the batch (``sigma`` is checked, then ignored).
-
-        Shape:
-            - raw: ``(N, 1, H, W)``, the RGGB mosaic (R at (0, 0)).
-            - output: ``(N, 3, H, W)``, same dtype and device as ``raw``.
-        """
-        check_raw(raw)
-        _check_sigma(sigma)
-        cfa = raw.detach().cpu().double().numpy()
-        # The package works in float64 on (H, W) arrays and returns (H, W, 3).
-        out = np.stack([self._function(cfa[n, 0], "RGGB") for n in range(cfa.shape[0])])
-        rgb = torch.from_numpy(np.ascontiguousarray(out.transpose(0, 3, 1, 2)))
-        return rgb.to(device=raw.device, dtype=raw.dtype)
-
-    def __repr__(self) -> str:
-        return f"ClassicalDemosaic({self.name!r})"
-
-
-# --------------------------------------------------------------------------------------------
-# LMMSE: statistics, filters, reconstruction
 
 
 class LMMSEFileError(ValueError):
@@ -286,7 +166,7 @@ class LMMSEStatistics:
             - weights: ``(Ph * Pw, 3, 2r + 1, 2r + 1)``.
             - bias: ``(Ph * Pw, 3)``.
         """
-        sigma = _check_sigma(sigma)
+        sigma = check_sigma(sigma)
         if sigma not in self._cache:
             w = self._solve(sigma)
             k = self.kernel_size
@@ -301,7 +181,7 @@ class LMMSEStatistics:
         colours and over all neighbourhoods, in [0, 1] units. A score that needs no test
         images; being in-sample it is slightly optimistic, and it ignores image borders.
         """
-        sigma = _check_sigma(sigma)
+        sigma = check_sigma(sigma)
         n = self.counts.to(torch.float64)
         w = self._solve(sigma)
         resid = torch.diagonal(self.yy, dim1=-2, dim2=-1).sum(-1) - (self.xy * w).sum((-2, -1))
@@ -579,18 +459,11 @@ class LMMSE:
         check_raw(raw)
         weights, bias = self.statistics.filters(sigma)
         ph, pw = self.pattern.period
-        r = self.statistics.radius
-        n, _, h, w = raw.shape
         weights = weights.to(device=raw.device, dtype=raw.dtype)
         bias = bias.to(device=raw.device, dtype=raw.dtype)
-        out = F.conv2d(raw, weights.reshape(-1, 1, 2 * r + 1, 2 * r + 1), padding=r)
-        out = out.view(n, ph * pw, 3, h, w)
-        rows = torch.arange(h, device=raw.device) % ph
-        cols = torch.arange(w, device=raw.device) % pw
-        phase = rows[:, None] * pw + cols[None, :]
-        index = phase.view(1, 1, 1, h, w).expand(n, 1, 3, h, w)
-        picked = out.gather(1, index).squeeze(1)
-        return picked + bias[phase].permute(2, 0, 1).unsqueeze(0)
+        out = phase_conv(raw, weights.unsqueeze(2), (ph, pw))
+        phase = phase_map(*raw.shape[-2:], (ph, pw), raw.device)
+        return out + bias[phase].permute(2, 0, 1).unsqueeze(0)
 
     def __repr__(self) -> str:
         return (
@@ -599,183 +472,31 @@ class LMMSE:
         )
 
 
-# --------------------------------------------------------------------------------------------
-# Evaluation and screening
 
 
-TestImages = Sequence[tuple[str, torch.Tensor]] | str | os.PathLike[str]
+#: Folder of the shipped LMMSE fits (see ``scripts/fit_shipped_lmmse.py``).
+SHIPPED_DIR = Path(__file__).resolve().parent.parent / "weights" / "lmmse"
 
 
-def _test_images(images: TestImages) -> list[tuple[str, torch.Tensor]]:
-    if isinstance(images, (str, os.PathLike)):
-        return load_validation(images)
-    out = list(images)
-    if not out:
-        raise ValueError("expected at least one test image, got none")
-    for name, img in out:
-        if not isinstance(img, torch.Tensor) or img.ndim != 3 or img.shape[0] != 3:
-            raise ValueError(f"expected test image {name!r} as a (3, H, W) tensor")
-    return out
+def shipped_lmmse(pattern: Pattern | str) -> LMMSE:
+    """The shipped LMMSE fit of a built-in pattern (fitted on CBSD432).
 
+    A pattern file whose kernels differ from the built-in pattern of the same name gets no
+    shipped fit: its raw images are not the built-in's.
 
-def evaluate_method(
-    method: Method,
-    images: TestImages,
-    sigmas: Iterable[float],
-    *,
-    psnr_crops: Sequence[int] = (),
-) -> list[dict[str, Any]]:
-    """Score a method on whole test images (SPEC section 7), one row per image and sigma.
-
-    Each image goes through the method's sensor (float32), gets the evaluation noise of its
-    name and sigma (:func:`~splitcam.noise.add_evaluation_noise`, the same for every method),
-    is reconstructed (:func:`splitcam.evaluation.simulate_and_reconstruct`, the step
-    ``splitcam evaluate`` uses), and is compared with PSNR, SSIM and CIEDE2000 without border
-    crop.
-
-    Args:
-        method: The method to score.
-        images: ``(name, image)`` pairs, images ``(3, H, W)`` in [0, 1], or a folder.
-        sigmas: Noise levels in 8-bit units.
-        psnr_crops: Extra PSNRs with these border crops, as ``psnr_crop<c>`` (published
-            demosaicking figures often crop the border).
-
-    Returns:
-        Rows ``{"image", "sigma", "psnr", "ssim", "ciede2000", "psnr_crop<c>"..., "seconds"}``;
-        ``seconds`` is the time of sensor, noise and reconstruction (not the metrics).
+    Raises:
+        FileNotFoundError: No shipped fit for this pattern; the message says how to fit one.
     """
-    from .evaluation import simulate_and_reconstruct
-
-    sensor = SplitterSensor(method.pattern)
-    rows = []
-    data = _test_images(images)
-    for sigma in sigmas:
-        sigma = _check_sigma(sigma)
-        for name, img in data:
-            start = time.perf_counter()
-            out = simulate_and_reconstruct(method, sensor, name, img.float(), sigma)
-            seconds = time.perf_counter() - start
-            row: dict[str, Any] = {"image": name, "sigma": sigma, **compute_all(out, img)}
-            for crop in psnr_crops:
-                row[f"psnr_crop{crop}"] = psnr(out, img, crop=crop)
-            row["seconds"] = seconds
-            rows.append(row)
-    return rows
-
-
-def summarise(rows: Iterable[dict[str, Any]], keys: Sequence[str]) -> dict[str, float]:
-    """Mean of each metric in ``keys`` over ``rows`` (infinite PSNRs left out, see
-    :func:`~splitcam.metrics.mean_over_images`)."""
-    rows = list(rows)
-    return {k: mean_over_images(r[k] for r in rows).mean for k in keys}
-
-
-@dataclass
-class ScreenResult:
-    """What :func:`screen_patterns` found.
-
-    Attributes:
-        rows: One dict per pattern and sigma: ``pattern``, ``sigma``, mean ``psnr``, ``ssim``,
-            ``ciede2000`` over the test images, ``rank`` (1 = best PSNR at that sigma),
-            ``expected_psnr`` (in-sample on the training patches, from the statistics alone),
-            ``fit_seconds`` and ``eval_seconds``.
-        ranking: Per sigma, the pattern names from best to worst mean PSNR.
-        per_image: The per-image rows of :func:`evaluate_method`, with a ``pattern`` key.
-        statistics: The fitted statistics per pattern name (save them to reuse the fits).
-        decode_seconds: Time to decode the training images (shared by all patterns).
-        total_seconds: Wall time of the whole screen.
-    """
-
-    rows: list[dict[str, Any]]
-    ranking: dict[float, list[str]]
-    per_image: list[dict[str, Any]]
-    statistics: dict[str, LMMSEStatistics]
-    decode_seconds: float
-    total_seconds: float
-
-
-def screen_patterns(
-    pattern_names: Sequence[str | Pattern],
-    train_dir: str | os.PathLike[str] | ImageCache,
-    test_images: TestImages,
-    sigmas: Sequence[float] = (0.0, 10.0),
-    *,
-    radius: int = DEFAULT_RADIUS,
-    patches: int = DEFAULT_PATCHES,
-    patch_size: int = DEFAULT_PATCH_SIZE,
-    seed: int = 0,
-    psnr_crops: Sequence[int] = (),
-    progress: bool = False,
-) -> ScreenResult:
-    """Fit LMMSE for each pattern and rank the patterns by mean PSNR on the test images.
-
-    Every pattern is fitted on the same training patches (one decoded cache, the same sampler
-    seed) and scored on the same noisy test images, so the ranking compares the patterns, not
-    the draws. Minutes for the whole library, against days of network training.
-
-    Args:
-        pattern_names: Built-in names, pattern file paths or :class:`Pattern` objects; names
-            must be distinct.
-        train_dir: Folder of training images (or an already decoded :class:`ImageCache`).
-        test_images: ``(name, image)`` pairs or a folder (see :func:`evaluate_method`).
-        sigmas: Noise levels in 8-bit units.
-        radius, patches, patch_size, seed: See :func:`fit_lmmse`.
-        psnr_crops: Extra border-cropped PSNRs (see :func:`evaluate_method`), averaged into the
-            rows as ``psnr_crop<c>``.
-        progress: Show progress bars.
-
-    Returns:
-        A :class:`ScreenResult`.
-    """
-    start = time.perf_counter()
-    resolved = [get(p) for p in pattern_names]
-    names = [p.name for p in resolved]
-    if len(set(names)) != len(names):
-        raise ValueError(f"expected distinct pattern names, got {names}")
-    cache = train_dir if isinstance(train_dir, ImageCache) else ImageCache(
-        train_dir, min_size=patch_size, progress=progress
-    )
-    decode_seconds = time.perf_counter() - start
-    data = _test_images(test_images)
-    crop_keys = [f"psnr_crop{c}" for c in psnr_crops]
-    rows: list[dict[str, Any]] = []
-    per_image: list[dict[str, Any]] = []
-    statistics: dict[str, LMMSEStatistics] = {}
-    for pattern in resolved:
-        t0 = time.perf_counter()
-        stats = fit_lmmse(
-            pattern, cache, radius=radius, patches=patches, patch_size=patch_size, seed=seed,
-            progress=progress,
+    pattern = get(pattern)
+    path = SHIPPED_DIR / f"{pattern.name}.json"
+    if path.is_file():
+        lmmse = LMMSE.load(path)
+        if lmmse.pattern.equals(pattern):
+            return lmmse
+        raise FileNotFoundError(
+            f"pattern {pattern.name!r} has other kernels than the built-in {pattern.name!r}, "
+            f"so the shipped LMMSE fit does not apply; fit one with --lmmse-train DIR"
         )
-        method = LMMSE(stats)
-        for sigma in sigmas:
-            method.statistics.filters(sigma)
-        fit_seconds = time.perf_counter() - t0
-        statistics[pattern.name] = stats
-        for sigma in sigmas:
-            t1 = time.perf_counter()
-            image_rows = evaluate_method(method, data, [sigma], psnr_crops=psnr_crops)
-            eval_seconds = time.perf_counter() - t1
-            per_image += [{"pattern": pattern.name, **r} for r in image_rows]
-            mse = stats.expected_mse(sigma)
-            rows.append({
-                "pattern": pattern.name, "sigma": float(sigma),
-                **summarise(image_rows, ("psnr", "ssim", "ciede2000", *crop_keys)),
-                "expected_psnr": -10.0 * math.log10(mse) if mse > 0 else math.inf,
-                "fit_seconds": fit_seconds, "eval_seconds": eval_seconds,
-            })
-    ranking = _rank(rows)
-    return ScreenResult(
-        rows, ranking, per_image, statistics, decode_seconds, time.perf_counter() - start
+    raise FileNotFoundError(
+        f"no shipped LMMSE fit for pattern {pattern.name!r}; fit one with --lmmse-train DIR"
     )
-
-
-def _rank(rows: list[dict[str, Any]]) -> dict[float, list[str]]:
-    """Order the patterns per sigma by mean PSNR and write each row's ``rank``."""
-    ranking: dict[float, list[str]] = {}
-    for sigma in dict.fromkeys(r["sigma"] for r in rows):
-        group = sorted((r for r in rows if r["sigma"] == sigma), key=lambda r: -r["psnr"])
-        for place, row in enumerate(group, start=1):
-            row["rank"] = place
-        ranking[sigma] = [r["pattern"] for r in group]
-    return ranking

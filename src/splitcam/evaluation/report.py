@@ -7,8 +7,9 @@ import json
 import os
 from pathlib import Path
 
-from . import patterns
-from .patterns.plot import draw_pattern
+from .. import patterns
+from ..viz.charts import sigma_chart
+from ..viz.patterns import draw_pattern
 
 #: SPEC section 8: mean over Kodak24 and McMaster (42 images), PSNR dB / SSIM, from 10^6 GPU
 #: training steps on DIV2K (Liu & Lam, Tables 1-3).
@@ -107,46 +108,14 @@ def make_report(results: list[str | os.PathLike], out: str | os.PathLike) -> Pat
         path = out / "patterns" / f"{pattern.name}.png"
         draw_pattern(pattern, path)
         lines.append(f"![pattern {pattern.name}](patterns/{path.name})")
-    chart = sigma_chart(entries, out / "sigma_curves.png")
+    several = len({f for f, *_ in entries}) > 1
+    curves = [(f"{folder}: {method}" if several else method, entry["all"])
+              for folder, method, entry, _ in entries]
+    refs = dict.fromkeys(r for *_, pattern in entries if (r := paper_row(pattern)))
+    references = {ref: [(float(s), p) for s, (p, _) in zip(PAPER_SIGMAS, PAPER[ref], strict=True)]
+                  for ref in refs}
+    chart = sigma_chart(curves, out / "sigma_curves.png", references)
     lines += ["", "## PSNR and CIEDE2000 against noise", "", f"![curves]({chart.name})", ""]
     report = out / "report.md"
     report.write_text("\n".join(lines) + "\n", encoding="utf-8")
     return report
-
-
-def sigma_chart(entries, path: Path) -> Path:
-    """PSNR and CIEDE2000 against sigma for every method, the paper's PSNR dashed (Fig. 9)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(12, 4.6))
-    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
-    for i, (folder, method, entry, _) in enumerate(entries):
-        colour = colours[i % len(colours)]
-        sig = sorted(entry["all"], key=float)
-        xs = [float(s) for s in sig]
-        label = method if len({f for f, *_ in entries}) == 1 else f"{folder}: {method}"
-        ax1.plot(xs, [entry["all"][s]["psnr"] for s in sig], "o-", color=colour, label=label)
-        ax2.plot(xs, [entry["all"][s]["ciede2000"] for s in sig], "o-", color=colour, label=label)
-    # The paper's network for each pattern in the report, once each, grey and labelled.
-    refs = dict.fromkeys(r for *_, pattern in entries if (r := paper_row(pattern)))
-    for ref in refs:
-        values = [p for p, _ in PAPER[ref]]
-        ax1.plot([float(s) for s in PAPER_SIGMAS], values, "--", color="grey", alpha=0.7, lw=1)
-        ax1.annotate(f"paper {ref}", (float(PAPER_SIGMAS[-1]), values[-1]), fontsize=7,
-                     color="dimgrey", xytext=(3, 0), textcoords="offset points", va="center")
-    ax1.set_xlabel("noise σ (8-bit units)")
-    ax1.set_ylabel("PSNR (dB)")
-    ax1.set_title("PSNR (grey dashed: the paper's trained network)", fontsize=10)
-    ax2.set_xlabel("noise σ (8-bit units)")
-    ax2.set_ylabel("CIEDE2000 (lower is better)")
-    ax2.set_title("colour error", fontsize=10)
-    for ax in (ax1, ax2):
-        ax.grid(alpha=0.3)
-    ax2.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1))
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path

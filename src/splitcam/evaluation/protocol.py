@@ -1,0 +1,266 @@
+"""The paper's evaluation protocol (SPEC section 7), the one path every score goes through.
+
+Every method sees the same scenes and the same noise: the raw image of each scene is simulated
+with the method's pattern (:func:`splitcam.physics.simulate`: float64 sensor, evaluation noise
+seeded by the image name and sigma), reconstructed through the
+:class:`~splitcam.recon.Reconstructor` interface, clamped and scored on 8-bit images
+(:func:`score`). Training validation, ``splitcam evaluate`` and the LMMSE screening all call :func:`simulate_and_reconstruct` and :func:`score`,
+so a run's logged validation PSNR is what ``evaluate`` reports for the same images and sigmas.
+
+:func:`evaluate` checks every argument before any work, appends each result to
+``per_image.csv`` as soon as it is computed, and continues an interrupted evaluation of the same
+settings where it stopped.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import torch
+
+from ..data.imageio import write_image
+from ..patterns import Pattern, save
+from ..physics.noise import check_sigma
+from ..physics.sensor import SplitterSensor
+from ..physics.system import simulate
+from ..recon.base import Reconstructor
+from ..viz.zoom import check_region, zoom_figure
+from .metrics import compute_all, mean_over_images
+from .tables import CSV_NAME, EvalRow, append_rows, read_rows, write_summary
+
+__all__ = [
+    "Zoom",
+    "evaluate",
+    "mean_psnr",
+    "parse_zoom",
+    "score",
+    "score_images",
+    "simulate_and_reconstruct",
+]
+
+Images = Sequence[tuple[str, torch.Tensor]]
+SETTINGS_NAME = "evaluation.json"
+
+
+def simulate_and_reconstruct(method: Reconstructor, sensor: SplitterSensor, image_name: str,
+                             rgb: torch.Tensor, sigma: float) -> torch.Tensor:
+    """One step of the protocol: the noisy raw image of ``rgb`` (:func:`splitcam.physics.simulate`)
+    and the method's reconstruction, clamped to [0, 1].
+
+    Shape:
+        - rgb: ``(3, H, W)``; output ``(3, H, W)`` float32 in [0, 1], on the CPU.
+    """
+    raw = simulate(sensor, rgb[None], image_name, sigma)
+    with torch.no_grad():
+        return method.reconstruct(raw, sigma)[0].float().clamp(0, 1).cpu()
+
+
+def score(pred: torch.Tensor, rgb: torch.Tensor, *, crop: int = 0) -> dict[str, float]:
+    """PSNR, SSIM and CIEDE2000 of a reconstruction on 8-bit images (SPEC section 7)."""
+    return compute_all(pred, rgb.cpu(), crop=crop)
+
+
+def score_images(method: Reconstructor, images: Images, sigmas: Sequence[float], *,
+                 crop: int = 0, sensor: SplitterSensor | None = None
+                 ) -> Iterator[tuple[str, float, torch.Tensor, dict[str, float]]]:
+    """``(image name, sigma, reconstruction, scores)`` for every image at every sigma."""
+    sensor = sensor if sensor is not None else SplitterSensor(method.pattern)
+    for sigma in sigmas:
+        for name, rgb in images:
+            pred = simulate_and_reconstruct(method, sensor, name, rgb, sigma)
+            yield name, float(sigma), pred, score(pred, rgb, crop=crop)
+
+
+def mean_psnr(method: Reconstructor, images: Images, sigmas: Sequence[float], *,
+              sensor: SplitterSensor | None = None) -> dict[float, float]:
+    """Mean PSNR per sigma over ``images`` (infinite PSNRs left out, as in the tables)."""
+    scores: dict[float, list[float]] = {float(s): [] for s in sigmas}
+    for _, sigma, _, values in score_images(method, images, sigmas, sensor=sensor):
+        scores[sigma].append(values["psnr"])
+    return {s: mean_over_images(v).mean for s, v in scores.items()}
+
+
+@dataclass(frozen=True)
+class Zoom:
+    """An image to draw side-by-side zoomed crops of, and the region (``None``: the most
+    detailed one)."""
+
+    image: str
+    region: tuple[int, int, int] | None = None
+
+
+def parse_zoom(spec: str) -> Zoom:
+    """``"name"`` or ``"name:top,left,size"``."""
+    name, _, region = spec.partition(":")
+    if not name:
+        raise ValueError(f"expected a zoom as IMAGE or IMAGE:TOP,LEFT,SIZE, got {spec!r}")
+    if not region:
+        return Zoom(name)
+    try:
+        top, left, size = (int(v) for v in region.split(","))
+    except ValueError:
+        raise ValueError(f"expected a zoom as IMAGE or IMAGE:TOP,LEFT,SIZE, got {spec!r}") from None
+    if top < 0 or left < 0 or size < 1:
+        raise ValueError(f"expected a zoom region with TOP, LEFT >= 0 and SIZE >= 1, got {spec!r}")
+    return Zoom(name, (top, left, size))
+
+
+def _check_zooms(zooms: Sequence[Zoom], datasets: Sequence[tuple[str, Images]]) -> dict[str, Zoom]:
+    """Every zoom names an image of the datasets and its region lies inside it."""
+    shapes = {name: tuple(rgb.shape[1:]) for _, images in datasets for name, rgb in images}
+    out = {}
+    for zoom in zooms:
+        if zoom.image not in shapes:
+            known = ", ".join(list(shapes)[:8]) + (", ..." if len(shapes) > 8 else "")
+            raise ValueError(f"--zoom names image {zoom.image!r}, which is not among the "
+                             f"images evaluated ({known})")
+        if zoom.region is not None:
+            check_region(zoom.region, shapes[zoom.image])
+        out[zoom.image] = zoom
+    return out
+
+
+def _fingerprint(method: Reconstructor, crop: int) -> str:
+    """What a stored result depends on besides its key: the method's kind, its pattern's kernels
+    and the border crop. A result is reused on resume only if this is unchanged."""
+    pattern: Pattern = method.pattern
+    text = json.dumps([type(method).__name__, pattern.to_dict(), crop,
+                       getattr(method, "fingerprint", None)], sort_keys=True, default=str)
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def evaluate(
+    methods: Sequence[Reconstructor],
+    datasets: Sequence[tuple[str, Images]],
+    sigmas: Sequence[float],
+    out: str | os.PathLike | None = None,
+    *,
+    save_images: bool = False,
+    zoom_images: Sequence[str | Zoom] | None = None,
+    crop: int = 0,
+    progress: bool = True,
+    resume: bool = True,
+) -> list[EvalRow]:
+    """Score every method on every image at every sigma, writing results to ``out`` as it goes.
+
+    Writes ``per_image.csv`` (a row as soon as it is computed), then ``summary.json``,
+    ``table.md``, each method's pattern under ``patterns/`` and ``evaluation.json`` (what the
+    results depend on). With ``save_images``, the reconstructions go under ``images/`` and, for
+    each image in ``zoom_images`` (default: the first image of each dataset), a side-by-side
+    zoom of all methods (the paper's Figs. 4, 5, 7, 8) under ``zoom/``: ``"kodim05:200,300,96"``
+    zooms on the 96-pixel square at row 200, column 300; a bare name on the image's most
+    detailed region. ``crop`` removes that many border pixels before scoring (0, the paper's
+    convention, by default).
+
+    With ``resume`` (default), results already in ``out/per_image.csv`` for the same method (same
+    pattern kernels), image, sigma and crop are kept and not recomputed: an interrupted
+    evaluation continues where it stopped.
+
+    Raises:
+        ValueError: No method, duplicate method names, a bad sigma or crop, or a zoom that names
+            an unknown image or a region outside it; all checked before any work.
+    """
+    if not methods:
+        raise ValueError("expected at least one method to evaluate")
+    names = [m.name for m in methods]
+    if len(set(names)) != len(names):
+        raise ValueError(f"expected distinct method names, got {names}")
+    sigmas = [check_sigma(s) for s in sigmas]
+    if not sigmas:
+        raise ValueError("expected at least one sigma")
+    if isinstance(crop, bool) or not isinstance(crop, int) or crop < 0:
+        raise ValueError(f"expected crop as an integer >= 0, got {crop!r}")
+    zooms = [z if isinstance(z, Zoom) else parse_zoom(z) for z in zoom_images or ()]
+    if zoom_images is None:
+        zooms = [Zoom(images[0][0]) for _, images in datasets if images]
+    zoom = _check_zooms(zooms, datasets)
+    fingerprints = {m.name: _fingerprint(m, crop) for m in methods}
+
+    out_dir = Path(out) if out is not None else None
+    done: dict[tuple, EvalRow] = {}
+    if out_dir is not None:
+        out_dir.mkdir(parents=True, exist_ok=True)
+        done = _previous_rows(out_dir, fingerprints) if resume else {}
+        # Rewrite the CSV with the rows kept, then append: the file always holds exactly the
+        # results of this evaluation so far.
+        write_summary(list(done.values()), out_dir)
+        (out_dir / SETTINGS_NAME).write_text(
+            json.dumps({"crop": crop, "fingerprints": fingerprints}, indent=2) + "\n",
+            encoding="utf-8")
+        (out_dir / "patterns").mkdir(exist_ok=True)
+        for method in methods:
+            save(method.pattern, out_dir / "patterns" / f"{method.name}.json")
+
+    sensors = {m.name: SplitterSensor(m.pattern) for m in methods}
+    jobs = [(dataset, name, rgb, sigma)
+            for dataset, images in datasets for name, rgb in images for sigma in sigmas]
+    total = len(jobs) * len(methods)
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=total, initial=len(done), unit="recon", desc="evaluate",
+                   dynamic_ncols=True)
+    rows: list[EvalRow] = []
+    try:
+        for dataset, image_name, rgb, sigma in jobs:
+            zoomed = save_images and image_name in zoom
+            outputs = {}
+            for method in methods:
+                key = (method.name, dataset, image_name, sigma)
+                if key in done and not zoomed:
+                    rows.append(done[key])
+                    continue
+                pred = simulate_and_reconstruct(method, sensors[method.name], image_name, rgb,
+                                                sigma)
+                scores = score(pred, rgb, crop=crop)
+                row = EvalRow(method.name, method.pattern.name, dataset, image_name, sigma,
+                              **scores)
+                rows.append(row)
+                outputs[method.name] = (pred, scores)
+                if out_dir is not None and key not in done:
+                    append_rows(out_dir / CSV_NAME, [row])
+                if bar is not None:
+                    if key not in done:
+                        bar.update(1)
+                    bar.set_postfix_str(f"{dataset}/{image_name} s{sigma:g} "
+                                        f"{method.name} {scores['psnr']:.2f} dB", refresh=False)
+            if save_images and out_dir is not None and outputs:
+                _save_images(out_dir, dataset, image_name, sigma, rgb, outputs,
+                             zoom.get(image_name))
+    finally:
+        if bar is not None:
+            bar.close()
+    if out_dir is not None:
+        write_summary(rows, out_dir)
+    return rows
+
+
+def _previous_rows(out_dir: Path, fingerprints: dict[str, str]) -> dict[tuple, EvalRow]:
+    """Rows of an earlier (possibly interrupted) evaluation in ``out_dir`` that still apply."""
+    csv_path, settings_path = out_dir / CSV_NAME, out_dir / SETTINGS_NAME
+    if not (csv_path.is_file() and settings_path.is_file()):
+        return {}
+    try:
+        before = json.loads(settings_path.read_text(encoding="utf-8"))["fingerprints"]
+    except (OSError, ValueError, KeyError, TypeError):
+        return {}
+    return {row.key: row for row in read_rows(csv_path)
+            if row.method in fingerprints and before.get(row.method) == fingerprints[row.method]}
+
+
+def _save_images(out_dir: Path, dataset: str, image: str, sigma: float, rgb: torch.Tensor,
+                 outputs: dict, zoom: Zoom | None) -> None:
+    safe = image.replace("/", "_")
+    for name, (pred, _) in outputs.items():
+        path = out_dir / "images" / name / dataset / f"{safe}_sigma{sigma:g}.png"
+        path.parent.mkdir(parents=True, exist_ok=True)
+        write_image(path, pred)
+    if zoom is not None:
+        zoom_figure(rgb, outputs, out_dir / "zoom" / f"{dataset}_{safe}_sigma{sigma:g}.png",
+                    region=zoom.region, title=f"{dataset}/{image}, sigma {sigma:g}")

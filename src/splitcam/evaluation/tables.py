@@ -1,0 +1,169 @@
+"""Evaluation results as rows, files and tables: one row per method, image and sigma
+(:class:`EvalRow`), ``per_image.csv`` written row by row (so an interrupted evaluation keeps what
+it did), and the means per image set in the layout of the paper's Table 1."""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import os
+from collections.abc import Iterable, Sequence
+from dataclasses import astuple, dataclass, fields
+from pathlib import Path
+
+from .metrics import mean_over_images
+
+__all__ = [
+    "CSV_NAME",
+    "METRICS",
+    "EvalRow",
+    "append_rows",
+    "markdown_tables",
+    "read_rows",
+    "summarise",
+    "write_summary",
+]
+
+METRICS = ("psnr", "ssim", "ciede2000")
+CSV_NAME = "per_image.csv"
+_FORMATS = {"sigma": "{:g}", "psnr": "{:.4f}", "ssim": "{:.6f}", "ciede2000": "{:.4f}"}
+
+
+@dataclass(frozen=True)
+class EvalRow:
+    """The scores of one method on one image at one noise level."""
+
+    method: str
+    pattern: str
+    dataset: str
+    image: str
+    sigma: float
+    psnr: float
+    ssim: float
+    ciede2000: float
+
+    @property
+    def key(self) -> tuple[str, str, str, float]:
+        """What identifies the row in an evaluation: method, dataset, image, sigma."""
+        return (self.method, self.dataset, self.image, self.sigma)
+
+    def cells(self) -> list[str]:
+        return [_FORMATS.get(f.name, "{}").format(v)
+                for f, v in zip(fields(self), astuple(self), strict=True)]
+
+
+def append_rows(path: str | os.PathLike, rows: Iterable[EvalRow]) -> None:
+    """Append rows to a CSV file (header first if the file is new), flushed to disk."""
+    path = Path(path)
+    new = not path.is_file() or path.stat().st_size == 0
+    with open(path, "a", newline="", encoding="utf-8") as fh:
+        writer = csv.writer(fh)
+        if new:
+            writer.writerow([f.name for f in fields(EvalRow)])
+        for row in rows:
+            writer.writerow(row.cells())
+        fh.flush()
+        os.fsync(fh.fileno())
+
+
+def read_rows(path: str | os.PathLike) -> list[EvalRow]:
+    """Rows of a ``per_image.csv``; a last line cut short by a kill is dropped.
+
+    Raises:
+        ValueError: The file is not a per-image results file (the message names it).
+    """
+    path = Path(path)
+    names = [f.name for f in fields(EvalRow)]
+    with open(path, newline="", encoding="utf-8") as fh:
+        lines = list(csv.reader(fh))
+    if not lines:
+        return []
+    if lines[0] != names:
+        raise ValueError(f"{str(path)!r} is not a splitcam per-image results file")
+    rows = []
+    for cells in lines[1:]:
+        try:
+            rows.append(EvalRow(*cells[:4], *(float(v) for v in cells[4:])))
+        except (TypeError, ValueError):
+            continue  # a line cut short by a kill
+    return rows
+
+
+def write_summary(rows: Sequence[EvalRow], out_dir: str | os.PathLike) -> dict:
+    """``per_image.csv`` (rewritten from ``rows``), ``summary.json`` and ``table.md`` in
+    ``out_dir``; returns the summary."""
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    tmp = out_dir / (CSV_NAME + ".tmp")
+    tmp.unlink(missing_ok=True)
+    append_rows(tmp, rows)
+    os.replace(tmp, out_dir / CSV_NAME)
+    summary = summarise(rows)
+    (out_dir / "summary.json").write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
+    (out_dir / "table.md").write_text(markdown_tables(summary), encoding="utf-8")
+    return summary
+
+
+def summarise(rows: Sequence[EvalRow]) -> dict:
+    """``{method: {dataset|"all": {sigma: {metric: mean, "n_images": n, "n_infinite": k}}}}``."""
+    summary: dict = {}
+    methods = list(dict.fromkeys(r.method for r in rows))
+    for method in methods:
+        mine = [r for r in rows if r.method == method]
+        groups = list(dict.fromkeys(r.dataset for r in mine))
+        entry: dict = {"pattern": mine[0].pattern}
+        for group in [*groups, "all"]:
+            chosen = mine if group == "all" else [r for r in mine if r.dataset == group]
+            per_sigma = {}
+            for sigma in sorted({r.sigma for r in chosen}):
+                at = [r for r in chosen if r.sigma == sigma]
+                stats = {}
+                for metric in METRICS:
+                    m = mean_over_images(getattr(r, metric) for r in at)
+                    stats[metric] = m.mean
+                    if metric == "psnr":
+                        stats["n_infinite"] = m.n_infinite
+                stats["n_images"] = len(at)
+                per_sigma[f"{sigma:g}"] = stats
+            entry[group] = per_sigma
+        summary[method] = entry
+    return summary
+
+
+def markdown_tables(summary: dict) -> str:
+    """PSNR/SSIM per sigma in the layout of the paper's Table 1 (one table per image set), and
+    CIEDE2000 likewise."""
+    methods = list(summary)
+    groups = list(dict.fromkeys(g for m in methods for g in summary[m] if g != "pattern"))
+    if len(groups) == 2:  # one image set: "all" would repeat it
+        groups = groups[:1]
+    sigmas = list(dict.fromkeys(s for m in methods for g in groups for s in summary[m].get(g, {})))
+    lines: list[str] = []
+    for group in groups:
+        n = max((summary[m][group][s]["n_images"] for m in methods if group in summary[m]
+                 for s in summary[m][group]), default=0)
+        lines += [f"### {group} ({n} images): PSNR (dB) / SSIM", ""]
+        lines.append("| method | pattern | " + " | ".join(f"σ={s}" for s in sigmas) + " |")
+        lines.append("|---|---|" + "---|" * len(sigmas))
+        for m in methods:
+            cells = []
+            for s in sigmas:
+                st = summary[m].get(group, {}).get(s)
+                cells.append("–" if st is None else f"{_db(st['psnr'])} / {st['ssim']:.4f}")
+            lines.append(f"| {m} | {summary[m]['pattern']} | " + " | ".join(cells) + " |")
+        lines += ["", f"### {group}: CIEDE2000 (lower is better)", ""]
+        lines.append("| method | " + " | ".join(f"σ={s}" for s in sigmas) + " |")
+        lines.append("|---|" + "---|" * len(sigmas))
+        for m in methods:
+            cells = [
+                "–" if (st := summary[m].get(group, {}).get(s)) is None
+                else f"{st['ciede2000']:.3f}" for s in sigmas
+            ]
+            lines.append(f"| {m} | " + " | ".join(cells) + " |")
+        lines.append("")
+    return "\n".join(lines)
+
+
+def _db(v: float) -> str:
+    return "inf" if math.isinf(v) else f"{v:.2f}"

@@ -1,0 +1,131 @@
+"""The registry of reconstruction methods: from what a user types to a
+:class:`~splitcam.recon.Reconstructor`.
+
+``splitcam evaluate``, ``splitcam reconstruct`` and Python code all build their methods here, so a
+name means the same thing everywhere:
+
+- ``lmmse``: the LMMSE filters of a pattern (shipped fits for the built-in patterns, or fitted on
+  a folder of training images with ``lmmse_train``);
+- ``bilinear``, ``malvar2004``, ``menon2007``: classical demosaicking of the ``bayer`` pattern;
+- a run folder or checkpoint file: a trained network with the pattern it was trained for.
+
+>>> build_method("malvar2004").name
+'bayer+malvar2004'
+
+This module sits above :mod:`splitcam.training` (it reads checkpoints) and below the CLI.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+from pathlib import Path
+
+from . import patterns
+from .recon.base import NetworkReconstructor, Reconstructor
+from .recon.demosaic import ClassicalDemosaic
+from .recon.lmmse import LMMSE, shipped_lmmse
+from .training.checkpoint import CHECKPOINT_NAME, load_system, resolve
+
+__all__ = ["DEMOSAICKING", "build_method", "build_methods", "method_names"]
+
+#: Classical demosaicking methods of the bayer pattern, by name.
+DEMOSAICKING = ClassicalDemosaic.METHODS
+
+
+def method_names() -> list[str]:
+    """The method names :func:`build_method` knows (besides run folders and checkpoints)."""
+    return ["lmmse", *DEMOSAICKING]
+
+
+def _is_path(spec: str | os.PathLike) -> bool:
+    """A run folder or checkpoint file, as opposed to a method name."""
+    text = str(spec)
+    return (isinstance(spec, os.PathLike) or "/" in text or os.sep in text
+            or text.endswith(".safetensors") or Path(text).exists())
+
+
+def _lmmse_label(pattern_spec: str | os.PathLike | patterns.Pattern,
+                 pattern: patterns.Pattern) -> str:
+    """``lmmse-D`` for a built-in pattern, ``lmmse-<file name>`` for a pattern file (even if the
+    file's pattern is named like a built-in, so a table never passes one off as the other)."""
+    if isinstance(pattern_spec, (str, os.PathLike)) and str(pattern_spec).lower() not in (
+        n.lower() for n in patterns.names()
+    ):
+        return f"lmmse-{Path(pattern_spec).name}"
+    return f"lmmse-{pattern.name}"
+
+
+def build_method(
+    spec: str | os.PathLike,
+    *,
+    pattern: str | os.PathLike | patterns.Pattern | None = None,
+    lmmse_train: str | os.PathLike | None = None,
+    tile: int | None = 512,
+    fast: bool = False,
+    progress: bool = False,
+) -> Reconstructor:
+    """One reconstruction method from its name or a run folder / checkpoint file.
+
+    Args:
+        spec: ``lmmse``, ``bilinear``, ``malvar2004``, ``menon2007``, or the path of a run folder
+            or checkpoint.
+        pattern: The pattern (name, file or :class:`~splitcam.patterns.Pattern`) for ``lmmse``.
+        lmmse_train: Fit the LMMSE on this folder of training images instead of using the
+            shipped fit (needed for patterns other than the built-in ones).
+        tile: Tile size of network reconstruction.
+        fast: bfloat16 + channels-last network inference.
+        progress: Progress bars while fitting.
+
+    Raises:
+        ValueError: Unknown name (the message lists the valid ones), or ``lmmse`` without a
+            pattern.
+        FileNotFoundError: No shipped LMMSE fit for the pattern and no ``lmmse_train``.
+    """
+    key = str(spec).strip().lower()
+    if key in DEMOSAICKING:
+        method = ClassicalDemosaic(key)
+        method.name = f"bayer+{key}"
+        return method
+    if key == "lmmse":
+        if pattern is None:
+            raise ValueError("method 'lmmse' needs a pattern (a name such as D, or a file)")
+        resolved = patterns.get(pattern)
+        if lmmse_train is not None:
+            lmmse = LMMSE.fit(resolved, lmmse_train, progress=progress)
+        else:
+            lmmse = shipped_lmmse(resolved)
+        lmmse.pattern = resolved
+        lmmse.name = _lmmse_label(pattern, resolved)
+        return lmmse
+    if _is_path(spec):
+        path = resolve(spec)
+        system = load_system(path)
+        label = path.parent.name if path.name == CHECKPOINT_NAME else path.stem
+        method = NetworkReconstructor(system.network, system.sensor.to_pattern(), label,
+                                      tile=tile, fast=fast)
+        stat = path.stat()
+        method.fingerprint = f"{path.resolve()}:{stat.st_size}:{stat.st_mtime_ns}"
+        return method
+    raise ValueError(
+        f"unknown method {str(spec)!r}; valid: {', '.join(method_names())}, or a run folder / "
+        f"checkpoint file"
+    )
+
+
+def build_methods(
+    specs: Sequence[str | os.PathLike],
+    *,
+    patterns_for_lmmse: Sequence[str | os.PathLike | patterns.Pattern] = (),
+    **options,
+) -> list[Reconstructor]:
+    """:func:`build_method` for each spec; ``lmmse`` expands to one method per pattern."""
+    methods: list[Reconstructor] = []
+    for spec in specs:
+        if str(spec).strip().lower() == "lmmse":
+            if not patterns_for_lmmse:
+                raise ValueError("method 'lmmse' needs at least one pattern")
+            methods += [build_method(spec, pattern=p, **options) for p in patterns_for_lmmse]
+        else:
+            methods.append(build_method(spec, **options))
+    return methods

@@ -1,0 +1,33 @@
+"""The physics of a splitter sensor: image formation (Eq. 1, Eq. 2, adjoint), noise, the
+imaging system, and the tensor helpers for anything laid out on a pattern's period."""
+
+from .noise import GaussianNoise, add_evaluation_noise, check_sigma, evaluation_noise
+from .periodic import period_shuffle, period_unshuffle, phase_conv, phase_map
+from .sensor import (
+    LearnableSplitterSensor,
+    SplitterSensor,
+    pixel_gather,
+    pixel_kernels,
+    splitter_adjoint,
+    splitter_forward,
+)
+from .system import ImagingSystem, simulate
+
+__all__ = [
+    "GaussianNoise",
+    "ImagingSystem",
+    "LearnableSplitterSensor",
+    "SplitterSensor",
+    "add_evaluation_noise",
+    "check_sigma",
+    "evaluation_noise",
+    "period_shuffle",
+    "period_unshuffle",
+    "phase_conv",
+    "phase_map",
+    "pixel_gather",
+    "pixel_kernels",
+    "simulate",
+    "splitter_adjoint",
+    "splitter_forward",
+]

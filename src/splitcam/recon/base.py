@@ -1,0 +1,104 @@
+"""The one reconstruction interface, and its implementation for a trained network.
+
+A *reconstruction method* is anything with a ``name``, the ``pattern`` whose raw images it
+reconstructs, and ``reconstruct(raw, sigma) -> rgb`` (:class:`Reconstructor`): classical
+demosaicking (:mod:`splitcam.recon.demosaic`), the LMMSE filters (:mod:`splitcam.recon.lmmse`)
+and trained networks (:class:`NetworkReconstructor`) alike. The evaluation protocol, the CLI and
+the Python API only ever talk to this interface; :mod:`splitcam.methods` builds one from a name.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Protocol, runtime_checkable
+
+import torch
+from torch import nn
+
+from ..patterns import Pattern
+from ..physics.noise import check_sigma
+
+__all__ = ["NetworkReconstructor", "Reconstructor", "check_raw", "check_sigma"]
+
+
+def check_raw(raw: Any) -> None:
+    """Raise if ``raw`` is not a floating-point raw image batch.
+
+    Raises:
+        TypeError: ``raw`` is not a tensor, or its dtype is not floating point.
+        ValueError: ``raw`` is not of shape ``(N, 1, H, W)`` with ``H, W >= 1``.
+
+    Shape:
+        - raw: ``(N, 1, H, W)``.
+    """
+    if not isinstance(raw, torch.Tensor):
+        raise TypeError(f"expected a torch.Tensor of shape (N, 1, H, W), got {type(raw).__name__}")
+    shape = tuple(raw.shape)
+    if raw.ndim != 4 or shape[1] != 1:
+        raise ValueError(f"expected (N, 1, H, W), got {shape}")
+    if shape[2] < 1 or shape[3] < 1:
+        raise ValueError(f"expected (N, 1, H, W) with H, W >= 1, got {shape}")
+    if not raw.is_floating_point():
+        raise TypeError(f"expected a floating-point raw image, got dtype {raw.dtype}")
+
+
+@runtime_checkable
+class Reconstructor(Protocol):
+    """A reconstruction method: raw image of ``pattern`` plus noise level in, RGB estimate out.
+
+    Attributes:
+        name: Short label for tables, e.g. ``"lmmse"`` or ``"malvar2004"``.
+        pattern: The sensor pattern whose raw images the method reconstructs.
+    """
+
+    name: str
+    pattern: Pattern
+
+    def reconstruct(self, raw: torch.Tensor, sigma: float) -> torch.Tensor:
+        """Estimate the scene.
+
+        Args:
+            raw: Raw sensor image (noise included).
+            sigma: The noise level in 8-bit units (methods may ignore it).
+
+        Returns:
+            RGB estimate, float, not clamped, same dtype as ``raw``.
+
+        Shape:
+            - raw: ``(N, 1, H, W)``.
+            - output: ``(N, 3, H, W)``.
+        """
+        ...
+
+
+
+class NetworkReconstructor:
+    """A trained network (with the pattern it was trained for) as a :class:`Reconstructor`.
+
+    Reconstruction is tiled (:func:`splitcam.recon.tiling.reconstruct`), so memory stays bounded
+    on large images; the result equals the untiled network's up to float error.
+
+    Args:
+        network: A reconstruction network (``period`` and ``receptive_radius`` attributes).
+        pattern: The pattern whose raw images it reconstructs (learned kernels included).
+        name: Label in tables.
+        tile: Tile size in pixels (``None``: whole images).
+        fast: bfloat16 autocast and channels-last inference.
+    """
+
+    def __init__(self, network: nn.Module, pattern: Pattern, name: str, *,
+                 tile: int | None = 512, fast: bool = False) -> None:
+        self.network = network
+        self.pattern = pattern
+        self.name = name
+        self.tile = tile
+        self.fast = fast
+
+    def reconstruct(self, raw: torch.Tensor, sigma: float) -> torch.Tensor:
+        from .tiling import reconstruct
+
+        check_sigma(sigma)
+        return reconstruct(self.network, raw, tile=self.tile, bf16=self.fast,
+                           channels_last=self.fast)
+
+    def __repr__(self) -> str:
+        return f"NetworkReconstructor({self.name!r}, pattern={self.pattern.name!r})"
