@@ -171,3 +171,117 @@ def test_report_puts_results_beside_the_paper(tmp_path, capsys):
     assert (tmp_path / "rep/sigma_curves.png").stat().st_size > 10_000
     assert main(["report", str(tmp_path / "nothing"), "--out", str(tmp_path / "r2")]) == 1
     assert "no summary.json" in capsys.readouterr().err
+
+
+def _interrupting(name: str, stop_at: int) -> Spy:
+    """A Spy that is interrupted (Ctrl-C) on its ``stop_at``-th reconstruction."""
+    spy = Spy(name)
+    plain = spy.reconstruct
+
+    def reconstruct(raw, sigma):
+        if len(spy.seen) + 1 == stop_at:
+            raise KeyboardInterrupt
+        return plain(raw, sigma)
+
+    spy.reconstruct = reconstruct
+    return spy
+
+
+def test_interrupted_evaluation_keeps_its_rows_and_resumes(tmp_path):
+    images = _images(3)
+    whole = evaluate([Spy("a"), Spy("b")], [("set", images)], [0, 10], tmp_path / "whole",
+                     progress=False)
+    out = tmp_path / "part"
+    a, b = Spy("a"), _interrupting("b", stop_at=4)
+    with pytest.raises(KeyboardInterrupt):
+        evaluate([a, b], [("set", images)], [0, 10], out, progress=False)
+    with open(out / "per_image.csv") as fh:
+        kept = list(csv.DictReader(fh))
+    assert len(kept) == len(a.seen) + len(b.seen) == 7  # every finished result is on disk
+    a2, b2 = Spy("a"), Spy("b")
+    rows = evaluate([a2, b2], [("set", images)], [0, 10], out, progress=False)
+    assert len(a2.seen) + len(b2.seen) == 12 - 7  # only the missing ones are computed
+    assert sorted(rows, key=lambda r: r.key) == sorted(whole, key=lambda r: r.key)
+    assert (out / "summary.json").read_text() == (tmp_path / "whole/summary.json").read_text()
+    # Another pattern under the same method name is a different method: recomputed.
+    c = Spy("a", pattern="A")
+    evaluate([c], [("set", images)], [0], out, progress=False)
+    assert len(c.seen) == 3
+    # --restart recomputes everything.
+    d = Spy("a", pattern="A")
+    evaluate([d], [("set", images)], [0], out, progress=False, resume=False)
+    assert len(d.seen) == 3
+
+
+def test_zoom_arguments_are_checked_before_any_work(tmp_path):
+    images = _images(2)
+    spy = Spy("a")
+    with pytest.raises(ValueError, match="not among the images evaluated"):
+        evaluate([spy], [("set", images)], [0], tmp_path, save_images=True,
+                 zoom_images=["kodim05"], progress=False)
+    with pytest.raises(ValueError, match="lies outside"):
+        evaluate([spy], [("set", images)], [0], tmp_path, save_images=True,
+                 zoom_images=["img1:30,2,8"], progress=False)
+    with pytest.raises(ValueError, match="finite sigma"):
+        evaluate([spy], [("set", images)], [0, float("nan")], tmp_path, progress=False)
+    assert spy.seen == []
+
+
+def _write_photos(folder, n=2, size=(40, 44)):
+    folder.mkdir()
+    for name, img in _images(n, size=size):
+        Image.fromarray((img.permute(1, 2, 0).numpy() * 255).astype(np.uint8)).save(
+            folder / f"{name}.png")
+
+
+def test_pattern_file_named_like_a_builtin_is_not_the_builtin(tmp_path, capsys):
+    """`patterns export D` writes a file whose pattern is called D; edited, it is another
+    pattern: the LMMSE must use its kernels and the label must say it is the file."""
+    photos = tmp_path / "photos"
+    _write_photos(photos, size=(60, 64))
+    mine = tmp_path / "mine.toml"
+    assert main(["patterns", "export", "D", "--out", str(mine)]) == 0
+    same = build_method("lmmse", pattern=mine)
+    assert same.name == "lmmse-mine.toml" and same.pattern.equals(patterns.get("D"))
+    edited = patterns.get("D")
+    kernels = edited.kernels.copy()
+    kernels[1, 0] = kernels[0, 0]  # the red deflector no longer deflects
+    import dataclasses
+
+    patterns.save(dataclasses.replace(edited, kernels=kernels), mine)
+    capsys.readouterr()
+    assert main(["evaluate", "--method", "lmmse", "--patterns", str(mine), "--datasets",
+                 str(photos), "--sigmas", "0", "--out", str(tmp_path / "o"), "--quiet"]) == 1
+    assert "other kernels than the built-in 'D'" in capsys.readouterr().err
+    fitted = build_method("lmmse", pattern=mine, lmmse_train=photos)
+    assert fitted.name == "lmmse-mine.toml"
+    assert np.array_equal(fitted.pattern.kernels, kernels)
+    assert np.array_equal(fitted.statistics.pattern.kernels, kernels)
+    builtin = build_method("lmmse", pattern="D", lmmse_train=photos)
+    assert builtin.name == "lmmse-D"
+    rows = evaluate([fitted, builtin], [("p", _images(1, (40, 44)))], [0], progress=False)
+    assert rows[0].psnr != pytest.approx(rows[1].psnr)
+
+
+def test_validation_psnr_equals_what_evaluate_reports(tmp_path):
+    """Training validation and `splitcam evaluate` are one protocol: the PSNR a run logs for its
+    checkpoint is the PSNR evaluate reports for that checkpoint on the same images and sigmas."""
+    train_dir, val_dir = tmp_path / "train", tmp_path / "val"
+    _write_photos(train_dir, n=3, size=(32, 32))
+    _write_photos(val_dir, n=2, size=(36, 40))
+    cfg = TrainConfig().override({
+        "data.train": str(train_dir), "data.val": str(val_dir), "data.val_crop": None,
+        "data.val_sigmas": [0.0, 15.0], "data.patch_size": 16, "data.batch_size": 2,
+        "network.features": 4, "network.blocks": 1, "optim.steps": 3, "run.val_every": 3,
+        "run.out": str(tmp_path / "run"), "run.threads": 1,
+    })
+    train(cfg, progress=False)
+    logged = [json.loads(line) for line in (tmp_path / "run/metrics.jsonl").read_text()
+              .splitlines()]
+    last = [r for r in logged if "val_psnr_0" in r][-1]
+    assert last["step"] == 3
+    assert main(["evaluate", "--checkpoint", str(tmp_path / "run"), "--datasets", str(val_dir),
+                 "--sigmas", "0", "15", "--out", str(tmp_path / "ev"), "--quiet"]) == 0
+    summary = json.loads((tmp_path / "ev/summary.json").read_text())["run"]["all"]
+    assert summary["0"]["psnr"] == pytest.approx(last["val_psnr_0"], abs=1e-9)
+    assert summary["15"]["psnr"] == pytest.approx(last["val_psnr_15"], abs=1e-9)

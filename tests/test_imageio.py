@@ -12,6 +12,7 @@ import torch
 from PIL import Image
 
 from splitcam.data.imageio import (
+    RAW_OFFSET_KEY,
     RAW_SCALE_KEY,
     ImageReadError,
     decode_image,
@@ -307,8 +308,23 @@ def test_raw_png_scale_choices_and_clipping(tmp_path: Path) -> None:
     assert write_raw(tmp_path / "f.png", np.full((3, 3), 4.01)) == 8.0
     noisy = torch.tensor([[[-0.1, 0.5], [2.5, 7.0]]])  # (1, H, W) tensors are accepted
     assert write_raw(tmp_path / "n.png", noisy, scale=2.0) == 2.0
+    got = read_raw(tmp_path / "n.png")  # a given scale clips above offset + scale
+    assert np.allclose(got, [[-0.1, 0.5], [1.9, 1.9]], atol=2.0 / 65535)
+
+
+def test_raw_png_keeps_negative_noise(tmp_path: Path) -> None:
+    """Noise pushes raw values below 0; the PNG stores them above an offset instead of
+    clipping them (a silent loss before)."""
+    rng = np.random.default_rng(3)
+    raw = rng.random((20, 24)) * 4 + rng.normal(0, 15 / 255, (20, 24))
+    raw[0, 0] = -0.2
+    scale = write_raw(tmp_path / "n.png", raw)
+    assert scale == 8.0  # max - min > 4
+    with Image.open(tmp_path / "n.png") as im:
+        assert float(im.info[RAW_OFFSET_KEY]) == pytest.approx(raw.min())
     got = read_raw(tmp_path / "n.png")
-    assert np.allclose(got, [[0.0, 0.5], [2.0, 2.0]], atol=2.0 / 65535)
+    assert got.min() < 0
+    assert np.abs(got - raw).max() <= scale / 65535 / 2 * (1 + 1e-5) + 1e-7
 
 
 def test_raw_png_without_chunk_is_normalised(tmp_path: Path) -> None:

@@ -37,6 +37,7 @@ if TYPE_CHECKING:
 
 __all__ = [
     "IMAGE_SUFFIXES",
+    "RAW_OFFSET_KEY",
     "RAW_SCALE_KEY",
     "ImageReadError",
     "decode_image",
@@ -51,6 +52,7 @@ IMAGE_SUFFIXES: tuple[str, ...] = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".b
 """File suffixes (lower case) that are read as colour images."""
 
 RAW_SCALE_KEY = "splitcam:scale"
+RAW_OFFSET_KEY = "splitcam:offset"
 """PNG text-chunk key under which :func:`write_raw` records the scale of a raw PNG."""
 
 # Pillow modes that carry a single intensity channel (with or without alpha).
@@ -421,17 +423,19 @@ def write_raw(
 
     ``.npy`` stores the values exactly as float32, negative values (noise) included.
 
-    ``.png`` stores a 16-bit greyscale PNG of ``round(clip(raw, 0, scale) / scale * 65535)`` and
-    records ``scale`` in the text chunk ``splitcam:scale``, so :func:`read_raw` returns the values
-    to within ``scale / 65535 / 2``. Negative values are clipped to 0 and values above ``scale``
-    to ``scale``: use ``.npy`` for noisy raws that must survive exactly.
+    ``.png`` stores a 16-bit greyscale PNG of ``round((raw - offset) / scale * 65535)`` and
+    records ``scale`` and ``offset`` in the text chunks ``splitcam:scale`` and
+    ``splitcam:offset``, so :func:`read_raw` returns the values to within ``scale / 65535 / 2``.
+    ``offset`` is the most negative value (noise makes some raw values negative; 0 if there are
+    none), so nothing is clipped by default; with a given ``scale``, values above
+    ``offset + scale`` are clipped to it. ``.npy`` keeps the values exactly.
 
     Args:
         path: Output file, ``.npy`` or ``.png``.
-        raw: Non-negative float image (values may exceed 1).
-        scale: Full-scale value of the PNG. Default: the smallest power of two that is at least
-            the maximum of ``raw`` (and at least 1), so that a lossless splitter's values up to
-            4 are kept. Ignored for ``.npy``.
+        raw: Float image (values may exceed 1, and noise may make some negative).
+        scale: Full-scale range of the PNG above ``offset``. Default: the smallest power of two
+            that is at least ``max(raw) - offset`` (and at least 1), so that a lossless
+            splitter's values up to 4 are kept. Ignored for ``.npy``.
 
     Returns:
         The scale the stored values were divided by: the PNG scale, or 1.0 for ``.npy``.
@@ -453,14 +457,18 @@ def write_raw(
     from PIL import Image
     from PIL.PngImagePlugin import PngInfo
 
+    values = arr.astype(np.float64)
+    offset = min(0.0, float(values.min())) if values.size else 0.0
     if scale is None:
-        scale = _default_raw_scale(float(arr.max()) if arr.size else 0.0)
+        scale = _default_raw_scale(float(values.max()) - offset if values.size else 0.0)
     scale = float(scale)
     if not (math.isfinite(scale) and scale > 0):
         raise ValueError(f"scale must be a positive finite number, got {scale!r}")
-    levels = np.rint(np.clip(arr.astype(np.float64), 0.0, scale) / scale * 65535.0)
+    levels = np.rint(np.clip(values - offset, 0.0, scale) / scale * 65535.0)
     info = PngInfo()
     info.add_text(RAW_SCALE_KEY, repr(scale))
+    if offset:
+        info.add_text(RAW_OFFSET_KEY, repr(offset))
     Image.fromarray(levels.astype(np.uint16)).save(path, pnginfo=info)
     return scale
 
@@ -478,7 +486,7 @@ def read_raw(path: str | os.PathLike[str]) -> np.ndarray:
     """Read a raw (single-channel) sensor image written by :func:`write_raw`.
 
     A PNG without the ``splitcam:scale`` text chunk is read with scale 1, i.e. normalised by its
-    bit depth (255 for 8-bit, 65535 for 16-bit).
+    bit depth (255 for 8-bit, 65535 for 16-bit); without ``splitcam:offset``, with offset 0.
 
     Args:
         path: A ``.npy`` or greyscale ``.png`` file.
@@ -522,6 +530,13 @@ def read_raw(path: str | os.PathLike[str]) -> np.ndarray:
             im.load()
             arr = np.asarray(im)
             text = im.info.get(RAW_SCALE_KEY)
+            offset_text = im.info.get(RAW_OFFSET_KEY, "0.0")
+    try:
+        offset = float(offset_text)
+    except ValueError:
+        offset = math.nan
+    if not math.isfinite(offset):
+        raise ImageReadError(path, f"invalid {RAW_OFFSET_KEY} value {offset_text!r}")
     scale = 1.0
     if text is not None:
         try:
@@ -531,4 +546,4 @@ def read_raw(path: str | os.PathLike[str]) -> np.ndarray:
         if not (math.isfinite(scale) and scale > 0):
             raise ImageReadError(path, f"invalid {RAW_SCALE_KEY} value {text!r}")
     full = float((1 << depth) - 1)
-    return (arr.astype(np.float64) * (scale / full)).astype(np.float32)
+    return (arr.astype(np.float64) * (scale / full) + offset).astype(np.float32)

@@ -27,7 +27,9 @@ __all__ = [
 
 METRICS = ("psnr", "ssim", "ciede2000")
 CSV_NAME = "per_image.csv"
-_FORMATS = {"sigma": "{:g}", "psnr": "{:.4f}", "ssim": "{:.6f}", "ciede2000": "{:.4f}"}
+# Scores at full precision: a resumed evaluation reads them back and must summarise exactly like
+# an uninterrupted one.
+_FORMATS = {"sigma": "{:g}", "psnr": "{!r}", "ssim": "{!r}", "ciede2000": "{!r}"}
 
 
 @dataclass(frozen=True)
