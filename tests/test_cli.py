@@ -75,3 +75,57 @@ def test_errors_are_one_line(photo, tmp_path, capsys, argv, message):
     assert main(argv) == 1
     err = capsys.readouterr().err
     assert message in err and "Traceback" not in err and err.count("\n") == 1
+
+
+def test_reconstruct_goes_through_the_registry_and_the_protocol(tmp_path, capsys):
+    """`reconstruct --method lmmse` builds the method `evaluate` builds and simulates like it:
+    its output scores exactly what `evaluate` reports for that image."""
+    import json
+
+    from splitcam.data.imageio import read_image
+    from splitcam.evaluation.metrics import psnr
+
+    rng = np.random.default_rng(1)
+    folder = tmp_path / "photos"
+    folder.mkdir()
+    Image.fromarray((rng.random((40, 48, 3)) * 255).astype(np.uint8)).save(folder / "im.png")
+    out = tmp_path / "rec.png"
+    assert main(["reconstruct", "--method", "lmmse", "--pattern", "D", "--image",
+                 str(folder / "im.png"), "--sigma", "10", "--out", str(out)]) == 0
+    assert "lmmse-D: wrote" in capsys.readouterr().out
+    ours = psnr(torch.from_numpy(read_image(out)).permute(2, 0, 1),
+                torch.from_numpy(read_image(folder / "im.png")).permute(2, 0, 1))
+    assert main(["evaluate", "--method", "lmmse", "--patterns", "D", "--datasets", str(folder),
+                 "--sigmas", "10", "--out", str(tmp_path / "ev"), "--quiet"]) == 0
+    summary = json.loads((tmp_path / "ev/summary.json").read_text())
+    assert summary["lmmse-D"]["all"]["10"]["psnr"] == pytest.approx(ours, abs=1e-9)
+    assert main(["reconstruct", "--method", "lmmse", "--image", str(folder / "im.png"),
+                 "--out", str(out)]) == 1
+    assert "needs a pattern" in capsys.readouterr().err
+    assert main(["reconstruct", "--method", "malvar2004", "--pattern", "D", "--image",
+                 str(folder / "im.png"), "--out", str(out)]) == 1
+    assert "differs from the pattern" in capsys.readouterr().err
+
+
+def test_reconstruct_fast_matches_float32(tmp_path):
+    from splitcam.data.imageio import read_image
+    from splitcam.training import TrainConfig, train
+
+    rng = np.random.default_rng(2)
+    folder = tmp_path / "photos"
+    folder.mkdir()
+    for i in range(3):
+        Image.fromarray((rng.random((32, 32, 3)) * 255).astype(np.uint8)).save(
+            folder / f"p{i}.png")
+    train(TrainConfig().override({
+        "data.train": str(folder), "data.val_split": 0, "data.patch_size": 16,
+        "data.batch_size": 2, "network.features": 8, "network.blocks": 1, "optim.steps": 2,
+        "run.out": str(tmp_path / "run"), "run.threads": 1}), progress=False)
+    outs = {}
+    for flag in ([], ["--fast"]):
+        path = tmp_path / f"rec{len(flag)}.png"
+        assert main(["reconstruct", "--checkpoint", str(tmp_path / "run"), "--image",
+                     str(folder / "p0.png"), "--out", str(path), "--quiet", *flag]) == 0
+        outs[len(flag)] = read_image(path)
+    difference = np.abs(outs[0] - outs[1])
+    assert difference.max() <= 4 / 255  # bfloat16 moves 8-bit values by a few levels at most

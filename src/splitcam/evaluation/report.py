@@ -47,7 +47,13 @@ def _load(results: list[str | os.PathLike]) -> list[tuple[str, str, dict, patter
             raise FileNotFoundError(
                 f"{str(folder)!r} has no summary.json; give folders written by `splitcam evaluate`"
             )
-        summary = json.loads(summary_path.read_text(encoding="utf-8"))
+        try:
+            summary = json.loads(summary_path.read_text(encoding="utf-8"))
+            if not isinstance(summary, dict):
+                raise ValueError("not a JSON object")
+        except (ValueError, UnicodeDecodeError) as exc:
+            raise ValueError(f"{str(summary_path)!r} is damaged ({exc}); run `splitcam evaluate` "
+                             f"again to rewrite it") from None
         for method, entry in summary.items():
             pattern_file = folder / "patterns" / f"{method}.json"
             pattern = (patterns.load(pattern_file) if pattern_file.is_file()

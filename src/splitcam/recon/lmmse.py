@@ -142,6 +142,13 @@ class LMMSEStatistics:
         mxy = self.xy / n
         d = mxx.shape[-1] - 1
         trace = torch.diagonal(mxx[:, :d, :d], dim1=-2, dim2=-1).sum(-1)
+        if sigma == 0 and bool((trace == 0).any()):
+            dark = int((trace == 0).nonzero()[0, 0])
+            raise ValueError(
+                f"pattern {self.pattern.name!r}: the pixels of phase {dark} receive no light in "
+                f"the training data, so no noise-free LMMSE exists (does the pattern collect "
+                f"any light?)"
+            )
         diag = (sigma / 255.0) ** 2 + _RIDGE * trace / d
         eye = torch.zeros(d + 1, dtype=torch.float64)
         eye[:d] = 1.0

@@ -3,20 +3,47 @@
 from __future__ import annotations
 
 import json
+import math
 import os
+import warnings
+from numbers import Real
 from pathlib import Path
 
 
+def _valid(row: object) -> bool:
+    """A logged step: a JSON object with an integer step and numbers for every other value."""
+    return (isinstance(row, dict) and isinstance(row.get("step"), int)
+            and all(isinstance(v, Real) and not isinstance(v, bool) and not math.isnan(v)
+                    for k, v in row.items() if k != "step"))
+
+
 def read_metrics(run: str | os.PathLike) -> list[dict]:
+    """The logged steps of a run's ``metrics.jsonl``.
+
+    Damaged lines (cut short by a killed process, or edited by hand) are skipped with one
+    warning that names the file and the line numbers.
+
+    Raises:
+        FileNotFoundError: No metrics file.
+        ValueError: No valid logged step.
+    """
     path = Path(run) / "metrics.jsonl" if Path(run).is_dir() else Path(run)
     if not path.is_file():
         raise FileNotFoundError(f"no metrics.jsonl in {str(run)!r}")
-    rows = []
-    for line in path.read_text(encoding="utf-8").splitlines():
+    rows, damaged = [], []
+    for number, line in enumerate(path.read_text(encoding="utf-8").splitlines(), start=1):
         try:
-            rows.append(json.loads(line))
+            row = json.loads(line)
         except json.JSONDecodeError:
-            continue  # a line cut short by a killed process
+            row = None
+        if _valid(row):
+            rows.append(row)
+        elif line.strip():
+            damaged.append(number)
+    if damaged:
+        shown = ", ".join(map(str, damaged[:10])) + (", ..." if len(damaged) > 10 else "")
+        warnings.warn(f"{str(path)!r}: skipped {len(damaged)} damaged line(s): {shown}",
+                      UserWarning, stacklevel=2)
     if not rows:
         raise ValueError(f"{str(path)!r} holds no logged steps yet")
     return rows
