@@ -1,7 +1,8 @@
 """Tests for splitcam.data.testsets: test sets, the bundled images, verified downloads.
 
 Downloads are served by a local HTTP server on 127.0.0.1 from the shared data folder (or from
-temporary folders laid out like the public sources); nothing goes to the internet.
+temporary folders laid out like the public sources), or copied from local folders; nothing goes
+to the internet.
 """
 
 from __future__ import annotations
@@ -11,9 +12,12 @@ import csv
 import dataclasses
 import hashlib
 import http.server
+import importlib.resources
+import logging
 import re
 import socket
 import threading
+import urllib.parse
 import urllib.request
 from collections.abc import Iterator
 from pathlib import Path
@@ -27,48 +31,33 @@ from splitcam.data.testsets import ChecksumError, DownloadError
 
 
 class _Handler(http.server.BaseHTTPRequestHandler):
-    """Serves files below ``root``; optionally honours ``Range: bytes=N-`` and cuts files short.
+    """Serves the files below ``root``, logs the paths asked for, and can cut a file short.
 
-    Python's SimpleHTTPRequestHandler ignores Range headers, so this one is written out. Settings
-    live on a per-server subclass (see :class:`_Server`).
+    Settings live on a per-server subclass (see :class:`_Server`).
     """
 
     root: Path
-    supports_range: bool
     cut_once: set[str]
-    log: list[tuple[str, str | None]]
+    log: list[str]
 
     def do_GET(self) -> None:
-        path = self.path.split("?", 1)[0]
-        self.log.append((path, self.headers.get("Range")))
-        target = (self.root / path.lstrip("/")).resolve()
+        path = urllib.parse.unquote(self.path.split("?", 1)[0])
+        self.log.append(path)
+        target = self.root / path.lstrip("/")
         if not target.is_file():
             self.send_error(404)
             return
         data = target.read_bytes()
-        start, status = 0, 200
-        match = re.fullmatch(r"bytes=(\d+)-", self.headers.get("Range") or "")
-        if match and self.supports_range:
-            start, status = int(match.group(1)), 206
-            if start >= len(data):
-                self.send_response(416)
-                self.send_header("Content-Range", f"bytes */{len(data)}")
-                self.send_header("Content-Length", "0")
-                self.end_headers()
-                return
-        body = data[start:]
-        self.send_response(status)
-        self.send_header("Content-Length", str(len(body)))
-        if status == 206:
-            self.send_header("Content-Range", f"bytes {start}-{len(data) - 1}/{len(data)}")
+        self.send_response(200)
+        self.send_header("Content-Length", str(len(data)))
         self.end_headers()
         if path in self.cut_once:
             # Announce the full length, send half, hang up: a connection lost mid-download.
             self.cut_once.discard(path)
-            self.wfile.write(body[: len(body) // 2])
+            self.wfile.write(data[: len(data) // 2])
             self.close_connection = True
             return
-        self.wfile.write(body)
+        self.wfile.write(data)
 
     def log_message(self, fmt: str, *args: object) -> None:
         pass
@@ -77,22 +66,17 @@ class _Handler(http.server.BaseHTTPRequestHandler):
 class _Server:
     """A threaded HTTP server on 127.0.0.1 serving one folder."""
 
-    def __init__(self, root: Path, *, supports_range: bool = True) -> None:
-        self.log: list[tuple[str, str | None]] = []
+    def __init__(self, root: Path) -> None:
+        self.log: list[str] = []
         self.cut_once: set[str] = set()
         handler = type(
             "Handler", (_Handler,),
-            {"root": root.resolve(), "supports_range": supports_range, "cut_once": self.cut_once,
-             "log": self.log},
+            {"root": root.resolve(), "cut_once": self.cut_once, "log": self.log},
         )
         self.httpd = http.server.ThreadingHTTPServer(("127.0.0.1", 0), handler)
         self.url = f"http://127.0.0.1:{self.httpd.server_address[1]}"
         self.thread = threading.Thread(target=self.httpd.serve_forever, args=(0.05,), daemon=True)
         self.thread.start()
-
-    def requests_for(self, suffix: str) -> list[str | None]:
-        """Range headers of the requests whose path ends with ``suffix``."""
-        return [rng for path, rng in self.log if path.endswith(suffix)]
 
     def close(self) -> None:
         self.httpd.shutdown()
@@ -104,8 +88,8 @@ class _Server:
 def serve() -> Iterator:
     servers: list[_Server] = []
 
-    def start(root: Path, *, supports_range: bool = True) -> _Server:
-        servers.append(_Server(root, supports_range=supports_range))
+    def start(root: Path) -> _Server:
+        servers.append(_Server(root))
         return servers[-1]
 
     yield start
@@ -120,9 +104,9 @@ def _no_env(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.delenv(datasets.MIRROR_ENV, raising=False)
 
 
-def _leftovers(folder: Path) -> list[str]:
-    """Partial and temporary files in a dataset folder."""
-    return sorted(p.name for p in folder.iterdir() if p.name.endswith((".part", ".tmp")))
+def _contents(folder: Path) -> list[str]:
+    """Every name in a folder, hidden ones included: left-over downloads show up here."""
+    return sorted(p.name for p in folder.iterdir())
 
 
 def _write_png(path: Path, seed: int, size: tuple[int, int] = (5, 4)) -> np.ndarray:
@@ -131,15 +115,61 @@ def _write_png(path: Path, seed: int, size: tuple[int, int] = (5, 4)) -> np.ndar
     return pixels
 
 
-def _tiff_blob(data: bytes) -> str:
+def _git_blob(data: bytes) -> str:
     return hashlib.sha1(b"blob %d\0" % len(data) + data).hexdigest()
 
 
+def _entry(dataset: str, name: str) -> datasets._File:
+    return next(f for f in datasets._DATASETS[dataset].files if f.name == name)
+
+
+def _registry_rows() -> list[dict[str, str]]:
+    """The rows of the shipped registry file, read without the module's parser."""
+    text = importlib.resources.files("splitcam.data").joinpath("registry.tsv").read_text()
+    lines = [line for line in text.splitlines() if line and not line.startswith("#")]
+    return list(csv.DictReader(lines, delimiter="\t"))
+
+
 # ---------------------------------------------------------------------------------------------
-# The embedded table
+# The registry
 
 
-def test_table_matches_shared_manifests(shared_data: Path) -> None:
+def test_registry_lists_every_file_with_well_formed_hashes() -> None:
+    rows = _registry_rows()
+    assert list(rows[0]) == ["dataset", "file", "source_path", "sha256", "git_blob",
+                             "pixels_sha256"]
+    kodak = [row for row in rows if row["dataset"] == "kodak24"]
+    mcmaster = [row for row in rows if row["dataset"] == "mcmaster"]
+    assert len(kodak) + len(mcmaster) == len(rows)
+    assert [row["file"] for row in kodak] == [f"kodim{i:02d}.png" for i in range(1, 25)]
+    assert [row["source_path"] for row in kodak] == [
+        f"testsets/Set24/kodim{i:02d}.png" for i in range(1, 25)
+    ]
+    assert [row["file"] for row in mcmaster] == [f"{i:02d}.png" for i in range(1, 19)]
+    assert [row["source_path"] for row in mcmaster] == [
+        f"testsets/McMaster/{i}.tif" for i in range(1, 19)
+    ]
+    for row in rows:
+        assert re.fullmatch(r"[0-9a-f]{64}", row["sha256"]), row
+        assert re.fullmatch(r"[0-9a-f]{40}", row["git_blob"]), row
+    assert all(row["pixels_sha256"] == "-" for row in kodak)
+    assert all(re.fullmatch(r"[0-9a-f]{64}", row["pixels_sha256"]) for row in mcmaster)
+    for column in ("sha256", "git_blob"):
+        assert len({row[column] for row in rows}) == len(rows), column
+
+    # The module serves exactly these rows, and keeps no hashes of its own.
+    assert datasets.DATASET_NAMES == ("kodak24", "mcmaster")
+    loaded = [(d.name, f) for d in datasets._DATASETS.values() for f in d.files]
+    assert [(name, f.name, f.source_path, f.sha256, f.git_blob, f.pixels_sha256 or "-")
+            for name, f in loaded] == [tuple(row.values()) for row in rows]
+    assert all(f.converted for f in datasets._DATASETS["mcmaster"].files)
+    assert not any(f.converted for f in datasets._DATASETS["kodak24"].files)
+    source = Path(datasets.__file__).read_text()
+    assert not re.search(r"[0-9a-f]{64}", source)
+    assert not any(row["git_blob"] in source for row in rows)
+
+
+def test_registry_matches_shared_data(shared_data: Path) -> None:
     for name in datasets.DATASET_NAMES:
         folder = shared_data / name
         lines = (folder / "MANIFEST.sha256").read_text().splitlines()
@@ -148,47 +178,77 @@ def test_table_matches_shared_manifests(shared_data: Path) -> None:
             sources = {row["file"]: row for row in csv.DictReader(fh, delimiter="\t")}
         dataset = datasets._DATASETS[name]
         assert {f.name for f in dataset.files} == set(sources)
-        commits = {row["source_commit"] for row in sources.values()}
-        repos = {row["source_repo"] for row in sources.values()}
-        assert dataset.base_url == f"https://raw.githubusercontent.com/{repos.pop()}/{commits.pop()}/"
+        assert {f.name for f in dataset.files} == set(manifest) - {"SOURCES.tsv"}
+        ((repo, commit),) = {(row["source_repo"], row["source_commit"])
+                             for row in sources.values()}
+        assert dataset.base_url == f"https://raw.githubusercontent.com/{repo}/{commit}/"
         for entry in dataset.files:
             row = sources[entry.name]
             assert entry.sha256 == manifest[entry.name]
             assert entry.source_path == row["source_path"]
-            blob = row.get("git_blob_sha1") or row["git_blob_sha1_of_source_tif"]
-            assert entry.git_blob == blob
-            if entry.pixels_sha256 is not None:
+            assert entry.git_blob == (row.get("git_blob_sha1") or
+                                      row["git_blob_sha1_of_source_tif"])
+            data = (folder / entry.name).read_bytes()
+            assert hashlib.sha256(data).hexdigest() == entry.sha256
+            if entry.converted:
                 assert datasets._pixels_sha256(folder / entry.name) == entry.pixels_sha256
-    assert all(f.pixels_sha256 and f.converted for f in datasets._MCMASTER.files)
-    assert not any(f.converted for f in datasets._KODAK24.files)
+            else:
+                # The SHA-256 pooch checks pins the same bytes as the published git blob id.
+                assert _git_blob(data) == entry.git_blob
+
+
+def test_registry_parser_rejects_malformed_tables() -> None:
+    text = importlib.resources.files("splitcam.data").joinpath("registry.tsv").read_text()
+    assert datasets._parse_registry(text) == datasets._DATASETS
+    kodim01 = _entry("kodak24", "kodim01.png")
+    with pytest.raises(RuntimeError, match="malformed hash in row kodak24/kodim01.png"):
+        datasets._parse_registry(text.replace(kodim01.sha256, kodim01.sha256[:-1]))
+    mcm03 = _entry("mcmaster", "03.png")
+    with pytest.raises(RuntimeError, match="mcmaster/03.png is converted but has no pixel"):
+        datasets._parse_registry(text.replace(mcm03.pixels_sha256 or "?", "-"))
+    with pytest.raises(RuntimeError, match="expected the columns"):
+        datasets._parse_registry(text.replace("pixels_sha256\n", "pixels\n"))
+    kodak_only = "\n".join(line for line in text.splitlines() if not line.startswith("mcmaster"))
+    with pytest.raises(RuntimeError, match="no files listed for mcmaster"):
+        datasets._parse_registry(kodak_only)
 
 
 # ---------------------------------------------------------------------------------------------
 # Downloads
 
 
-def test_download_from_mirror_equals_source(shared_data: Path, serve, tmp_path: Path) -> None:
+def test_download_from_http_mirror(shared_data: Path, serve, tmp_path: Path) -> None:
     server = serve(shared_data)
-    wanted = ["kodim01.png", "kodim19.png"]
+    wanted = ["kodim01.png", "kodim19.png", "07.png"]
     paths = datasets.download(
-        ["kodak24"], tmp_path, mirror=server.url + "/", progress=False, files=wanted
+        ["kodak24", "mcmaster"], tmp_path, mirror=server.url + "/", progress=False, files=wanted
     )
-    assert paths == [tmp_path / "kodak24" / name for name in wanted]
+    assert paths == [tmp_path / "kodak24" / "kodim01.png", tmp_path / "kodak24" / "kodim19.png",
+                     tmp_path / "mcmaster" / "07.png"]
     for path in paths:
-        assert path.read_bytes() == (shared_data / "kodak24" / path.name).read_bytes()
-    assert _leftovers(tmp_path / "kodak24") == []
+        assert path.read_bytes() == (shared_data / path.parent.name / path.name).read_bytes()
+    assert sorted(server.log) == ["/kodak24/kodim01.png", "/kodak24/kodim19.png",
+                                  "/mcmaster/07.png"]
+    assert _contents(tmp_path / "kodak24") == ["kodim01.png", "kodim19.png"]
+    assert _contents(tmp_path / "mcmaster") == ["07.png"]
     names = [name for name, _ in datasets.resolve("kodak24", root=tmp_path)]
     assert names == ["kodim01", "kodim19"]
 
 
-def test_download_mirror_from_env_and_local_folder(
-    shared_data: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+@pytest.mark.parametrize("how", ["env-folder", "file-url"])
+def test_download_from_local_mirror(
+    how: str, shared_data: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    monkeypatch.setenv(datasets.MIRROR_ENV, str(shared_data))
     monkeypatch.setenv(datasets.DATA_ENV, str(tmp_path))
-    (path,) = datasets.download("mcmaster", progress=False, files=["07.png"])
+    if how == "env-folder":
+        monkeypatch.setenv(datasets.MIRROR_ENV, str(shared_data))
+        mirror = None
+    else:
+        mirror = shared_data.resolve().as_uri()
+    (path,) = datasets.download("mcmaster", mirror=mirror, progress=False, files=["07.png"])
     assert path == tmp_path / "mcmaster" / "07.png"
     assert path.read_bytes() == (shared_data / "mcmaster" / "07.png").read_bytes()
+    assert _contents(tmp_path / "mcmaster") == ["07.png"]
 
 
 def _public_layout(tmp_path: Path, shared_data: Path) -> Path:
@@ -205,12 +265,27 @@ def test_download_from_public_source_layout(
     server = serve(_public_layout(tmp_path, shared_data))
     monkeypatch.setitem(
         datasets._DATASETS, "kodak24",
-        dataclasses.replace(datasets._KODAK24, base_url=server.url + "/"),
+        dataclasses.replace(datasets._DATASETS["kodak24"], base_url=server.url + "/"),
     )
     (path,) = datasets.download("kodak24", tmp_path / "data", progress=False,
                                 files=["kodim03.png"])
     assert path.read_bytes() == (shared_data / "kodak24" / "kodim03.png").read_bytes()
-    assert server.requests_for("/testsets/Set24/kodim03.png") == [None]
+    assert server.log == ["/testsets/Set24/kodim03.png"]
+    assert _contents(tmp_path / "data" / "kodak24") == ["kodim03.png"]
+
+
+def _serve_mcmaster_tiff(
+    tiff: Path, name: str, blob: str, serve, monkeypatch: pytest.MonkeyPatch
+) -> _Server:
+    """Serve the folder above ``testsets/McMaster/`` as McMaster's source, with ``name``'s git
+    blob id registered as ``blob``."""
+    dataset = datasets._DATASETS["mcmaster"]
+    files = tuple(dataclasses.replace(f, git_blob=blob) if f.name == name else f
+                  for f in dataset.files)
+    server = serve(tiff.parents[2])
+    monkeypatch.setitem(datasets._DATASETS, "mcmaster",
+                        dataclasses.replace(dataset, base_url=server.url + "/", files=files))
+    return server
 
 
 def test_mcmaster_tiff_is_verified_and_converted(
@@ -218,26 +293,19 @@ def test_mcmaster_tiff_is_verified_and_converted(
 ) -> None:
     # The published TIFF is not on this machine; a PackBits TIFF with the same pixels stands in,
     # so the real pixel hash is checked while the blob id is the stand-in's.
-    source = tmp_path / "site" / "testsets" / "McMaster"
-    source.mkdir(parents=True)
+    tiff = tmp_path / "site" / "testsets" / "McMaster" / "2.tif"
+    tiff.parent.mkdir(parents=True)
     reference = np.asarray(Image.open(shared_data / "mcmaster" / "02.png").convert("RGB"))
-    Image.fromarray(reference).save(source / "2.tif", compression="packbits")
-    tiff = (source / "2.tif").read_bytes()
-    entry = next(f for f in datasets._MCMASTER.files if f.name == "02.png")
-    files = tuple(
-        dataclasses.replace(f, git_blob=_tiff_blob(tiff)) if f is entry else f
-        for f in datasets._MCMASTER.files
-    )
-    server = serve(tmp_path / "site")
-    monkeypatch.setitem(
-        datasets._DATASETS, "mcmaster",
-        dataclasses.replace(datasets._MCMASTER, base_url=server.url + "/", files=files),
-    )
+    Image.fromarray(reference).save(tiff, compression="packbits")
+    server = _serve_mcmaster_tiff(tiff, "02.png", _git_blob(tiff.read_bytes()), serve,
+                                  monkeypatch)
     out = tmp_path / "data"
     (path,) = datasets.download("mcmaster", out, progress=False, files=["02.png"])
     assert path == out / "mcmaster" / "02.png"
+    assert server.log == ["/testsets/McMaster/2.tif"]
     assert np.array_equal(np.asarray(Image.open(path)), reference)
-    assert _leftovers(out / "mcmaster") == []
+    assert _contents(out / "mcmaster") == ["02.png"]  # no TIFF, scratch folder or temporary
+
     # A PNG encoded differently still counts as present, by its pixels.
     Image.fromarray(reference).save(path, compress_level=1)
     server.log.clear()
@@ -245,76 +313,49 @@ def test_mcmaster_tiff_is_verified_and_converted(
     assert server.log == []
 
     # Different bytes (a changed TIFF) are refused by the blob id before decoding.
-    Image.fromarray(reference).save(source / "2.tif", compression="tiff_lzw")
+    Image.fromarray(reference).save(tiff, compression="tiff_lzw")
     path.unlink()
-    with pytest.raises(ChecksumError, match="git blob id"):
+    with pytest.raises(ChecksumError, match="mcmaster/02.png.*git blob id") as info:
         datasets.download("mcmaster", out, progress=False, files=["02.png"])
-    assert list((out / "mcmaster").iterdir()) == []
+    assert _git_blob(tiff.read_bytes()) in str(info.value)
+    assert _contents(out / "mcmaster") == []
 
 
-def test_checksum_mismatch_leaves_nothing(shared_data: Path, serve, tmp_path: Path) -> None:
+def test_mcmaster_tiff_with_other_pixels_is_refused(
+    serve, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # Right bytes (the blob id is registered) that decode to other pixels than registered: the
+    # pixel check is what stops them.
+    tiff = tmp_path / "site" / "testsets" / "McMaster" / "5.tif"
+    tiff.parent.mkdir(parents=True)
+    _write_png(tmp_path / "other.png", 5, size=(8, 8))
+    Image.open(tmp_path / "other.png").save(tiff, compression="packbits")
+    _serve_mcmaster_tiff(tiff, "05.png", _git_blob(tiff.read_bytes()), serve, monkeypatch)
+    out = tmp_path / "data"
+    with pytest.raises(DownloadError, match="mcmaster/05.png.*pixel SHA-256") as info:
+        datasets.download("mcmaster", out, progress=False, files=["05.png"])
+    assert not isinstance(info.value, ChecksumError)
+    assert _contents(out / "mcmaster") == []
+
+
+@pytest.mark.parametrize("how", ["http", "folder"])
+def test_tampered_file_is_refused_and_deleted(
+    how: str, shared_data: Path, serve, tmp_path: Path
+) -> None:
     site = tmp_path / "site" / "kodak24"
     site.mkdir(parents=True)
     data = bytearray((shared_data / "kodak24" / "kodim05.png").read_bytes())
     data[1000] ^= 0xFF
     (site / "kodim05.png").write_bytes(bytes(data))
-    server = serve(tmp_path / "site")
+    mirror = serve(tmp_path / "site").url if how == "http" else str(tmp_path / "site")
     out = tmp_path / "data"
     with pytest.raises(ChecksumError) as info:
-        datasets.download("kodak24", out, mirror=server.url, progress=False,
-                          files=["kodim05.png"])
+        datasets.download("kodak24", out, mirror=mirror, progress=False, files=["kodim05.png"])
     message = str(info.value)
-    entry = next(f for f in datasets._KODAK24.files if f.name == "kodim05.png")
     assert "kodak24/kodim05.png" in message
-    assert entry.sha256 in message
+    assert _entry("kodak24", "kodim05.png").sha256 in message
     assert hashlib.sha256(bytes(data)).hexdigest() in message
-    assert list((out / "kodak24").iterdir()) == []
-
-
-def test_interrupted_download_resumes_with_range(shared_data: Path, serve, tmp_path: Path) -> None:
-    server = serve(shared_data, supports_range=True)
-    server.cut_once.add("/kodak24/kodim02.png")
-    out = tmp_path / "data"
-    original = (shared_data / "kodak24" / "kodim02.png").read_bytes()
-    with pytest.raises(DownloadError, match="run the command again to resume"):
-        datasets.download("kodak24", out, mirror=server.url, progress=False,
-                          files=["kodim02.png"])
-    part = out / "kodak24" / "kodim02.png.part"
-    assert not (out / "kodak24" / "kodim02.png").exists()
-    assert part.stat().st_size == len(original) // 2
-
-    (path,) = datasets.download("kodak24", out, mirror=server.url, progress=False,
-                                files=["kodim02.png"])
-    assert path.read_bytes() == original
-    assert server.requests_for("kodim02.png") == [None, f"bytes={len(original) // 2}-"]
-    assert _leftovers(out / "kodak24") == []
-
-
-def test_truncated_part_restarts_without_range_support(
-    shared_data: Path, serve, tmp_path: Path
-) -> None:
-    server = serve(shared_data, supports_range=False)
-    folder = tmp_path / "kodak24"
-    folder.mkdir()
-    original = (shared_data / "kodak24" / "kodim04.png").read_bytes()
-    # A wrong prefix proves the restart: appending to it would fail the checksum.
-    (folder / "kodim04.png.part").write_bytes(b"x" * 1000)
-    (path,) = datasets.download("kodak24", tmp_path, mirror=server.url, progress=False,
-                                files=["kodim04.png"])
-    assert path.read_bytes() == original
-    assert server.requests_for("kodim04.png") == ["bytes=1000-"]
-
-
-def test_overlong_part_restarts_after_416(shared_data: Path, serve, tmp_path: Path) -> None:
-    server = serve(shared_data, supports_range=True)
-    folder = tmp_path / "kodak24"
-    folder.mkdir()
-    original = (shared_data / "kodak24" / "kodim06.png").read_bytes()
-    (folder / "kodim06.png.part").write_bytes(original + b"junk")
-    (path,) = datasets.download("kodak24", tmp_path, mirror=server.url, progress=False,
-                                files=["kodim06.png"])
-    assert path.read_bytes() == original
-    assert server.requests_for("kodim06.png") == [f"bytes={len(original) + 4}-", None]
+    assert _contents(out / "kodak24") == []
 
 
 def test_present_files_are_skipped_and_bad_ones_replaced(
@@ -331,8 +372,44 @@ def test_present_files_are_skipped_and_bad_ones_replaced(
     (tmp_path / "kodak24" / "kodim08.png").write_bytes(b"not the image")
     paths = datasets.download("kodak24", tmp_path, mirror=server.url, progress=False,
                               files=wanted)
-    assert [path for path, _ in server.log] == ["/kodak24/kodim08.png"]
+    assert server.log == ["/kodak24/kodim08.png"]
     assert paths[1].read_bytes() == (shared_data / "kodak24" / "kodim08.png").read_bytes()
+    assert _contents(tmp_path / "kodak24") == wanted
+
+
+def test_broken_connection_leaves_nothing_and_retry_starts_over(
+    shared_data: Path, serve, tmp_path: Path
+) -> None:
+    server = serve(shared_data)
+    server.cut_once.add("/kodak24/kodim02.png")
+    out = tmp_path / "data"
+    with pytest.raises(DownloadError, match="kodak24/kodim02.png"):
+        datasets.download("kodak24", out, mirror=server.url, progress=False,
+                          files=["kodim02.png"])
+    assert _contents(out / "kodak24") == []
+
+    (path,) = datasets.download("kodak24", out, mirror=server.url, progress=False,
+                                files=["kodim02.png"])
+    assert path.read_bytes() == (shared_data / "kodak24" / "kodim02.png").read_bytes()
+    assert server.log == ["/kodak24/kodim02.png"] * 2
+
+
+def test_progress_bars_without_pooch_log(
+    shared_data: Path, serve, tmp_path: Path, capfd: pytest.CaptureFixture[str]
+) -> None:
+    import pooch
+
+    server = serve(shared_data)
+    logger = pooch.get_logger()
+    # As after an earlier pooch download: the logger has cached that INFO messages go out.
+    assert logger.isEnabledFor(logging.INFO)
+    (path,) = datasets.download("kodak24", tmp_path, mirror=server.url, progress=True,
+                                files=["kodim09.png"])
+    assert path.read_bytes() == (shared_data / "kodak24" / "kodim09.png").read_bytes()
+    err = capfd.readouterr().err
+    assert "download" in err and "kodak24/kodim09.png" in err
+    assert "Downloading data from" not in err
+    assert logger.filters == []
 
 
 def test_network_error_leaves_no_final_file(tmp_path: Path) -> None:
@@ -340,18 +417,27 @@ def test_network_error_leaves_no_final_file(tmp_path: Path) -> None:
         sock.bind(("127.0.0.1", 0))
         port = sock.getsockname()[1]
     # Nothing listens on the port any more: the connection is refused.
-    with pytest.raises(DownloadError, match="kodak24/kodim01.png"):
+    with pytest.raises(DownloadError, match="kodak24/kodim01.png") as info:
         datasets.download("kodak24", tmp_path, mirror=f"http://127.0.0.1:{port}",
                           progress=False, timeout=5, files=["kodim01.png"])
-    assert not (tmp_path / "kodak24" / "kodim01.png").exists()
+    assert not isinstance(info.value, ChecksumError)
+    assert _contents(tmp_path / "kodak24") == []
 
 
 def test_http_error_is_reported(serve, tmp_path: Path) -> None:
     (tmp_path / "empty").mkdir()
     server = serve(tmp_path / "empty")
-    with pytest.raises(DownloadError, match="HTTP 404"):
+    with pytest.raises(DownloadError, match="kodak24/kodim01.png .*HTTP 404"):
         datasets.download("kodak24", tmp_path, mirror=server.url, progress=False,
                           files=["kodim01.png"])
+
+
+def test_missing_file_in_local_mirror_is_reported(tmp_path: Path) -> None:
+    (tmp_path / "mirror").mkdir()
+    with pytest.raises(DownloadError, match="kodak24/kodim01.png"):
+        datasets.download("kodak24", tmp_path / "data", mirror=str(tmp_path / "mirror"),
+                          progress=False, files=["kodim01.png"])
+    assert _contents(tmp_path / "data" / "kodak24") == []
 
 
 def test_download_rejects_unknown_names(tmp_path: Path) -> None:
@@ -361,6 +447,8 @@ def test_download_rejects_unknown_names(tmp_path: Path) -> None:
         datasets.download("kodak24", tmp_path, files=["01.png"])
     with pytest.raises(ValueError, match="neither a URL"):
         datasets.download("kodak24", tmp_path, mirror=str(tmp_path / "missing"))
+    with pytest.raises(ValueError, match="unsupported scheme 'ftp://'"):
+        datasets.download("kodak24", tmp_path, mirror="ftp://127.0.0.1/data")
 
 
 def test_cli_download_and_list(
@@ -372,13 +460,13 @@ def test_cli_download_and_list(
     # Pre-populate all but one file so the command downloads one and verifies the rest.
     folder = tmp_path / "mcmaster"
     folder.mkdir()
-    for entry in datasets._MCMASTER.files[1:]:
+    for entry in datasets._DATASETS["mcmaster"].files[1:]:
         (folder / entry.name).symlink_to(shared_data / "mcmaster" / entry.name)
     args = parser.parse_args(
         ["data", "download", "mcmaster", "--to", str(tmp_path), "--mirror", server.url, "--quiet"]
     )
     assert args.handler(args) == 0
-    assert server.requests_for(".png") == [None]
+    assert server.log == ["/mcmaster/01.png"]
     assert (folder / "01.png").read_bytes() == (shared_data / "mcmaster" / "01.png").read_bytes()
     assert f"mcmaster: 18 images in {folder}" in capsys.readouterr().out
 

@@ -11,49 +11,60 @@ Three kinds of test set are understood:
 
 Downloads and their checks
 --------------------------
-Every file is fetched from the public address the dataset is published at, pinned to a commit,
-and checked against hashes embedded in this module (:data:`_DATASETS`):
+Every file is fetched from the public address the dataset is published at, pinned to a commit
+(:data:`_SOURCES`), and checked against the hashes in the registry file ``registry.tsv`` that
+ships beside this module. The transfers go through `pooch <https://www.fatiando.org/pooch>`_
+(:func:`pooch.retrieve`), which downloads to a temporary file in the dataset folder, checks its
+SHA-256 and only then moves it to its final name.
 
 - **Kodak24** (``kodim01.png`` ... ``kodim24.png``): GitHub ``cszn/IRCNN``,
-  ``testsets/Set24/kodimNN.png``. The files are used as published, so the downloaded bytes must
-  have the embedded SHA-256 and git blob id.
+  ``testsets/Set24/kodimNN.png``. The files are used as published, so pooch checks the downloaded
+  bytes against the registered SHA-256. The registered git blob id describes the same bytes (the
+  tests check that), so it needs no second check.
 - **McMaster** (``01.png`` ... ``18.png``): GitHub ``cszn/FFDNet``, ``testsets/McMaster/N.tif``.
-  The published files are TIFFs; ``N.tif`` becomes ``NN.png``. The TIFF bytes must have the
-  embedded git blob id (``sha1(b"blob <size>\\0" + bytes)``, as ``git hash-object`` prints), and
-  the decoded pixels must have the embedded pixel hash,
-  ``sha256(np.asarray(Image.open(f).convert("RGB"), np.uint8).tobytes())``. The pixels are then
-  saved as PNG. The pixel hash is what makes the PNG trustworthy: a PNG encoder other than the one
-  that made the reference files may write different bytes for the same pixels, so an existing
-  McMaster PNG counts as verified if either its file SHA-256 or its pixel hash matches.
+  The published files are TIFFs; ``N.tif`` becomes ``NN.png``. pooch cannot verify these: their
+  registered hashes are a git blob id (``sha1(b"blob <size>\\0" + bytes)``, as
+  ``git hash-object`` prints), which is no plain digest of the file, and a hash of the decoded
+  pixels, ``sha256(np.asarray(Image.open(f).convert("RGB"), np.uint8).tobytes())``. So pooch
+  downloads the TIFF into a scratch folder without a hash, and a pooch processor of ours checks
+  both hashes and writes the pixels as PNG. The pixel hash is what makes the PNG trustworthy: a
+  PNG encoder other than the one that made the reference files may write different bytes for the
+  same pixels, so an existing McMaster PNG counts as verified if either its file SHA-256 or its
+  pixel hash matches.
 
 A mirror (``mirror=`` or the ``SPLITCAM_MIRROR`` environment variable) replaces the public
 addresses by ``<mirror>/<dataset>/<file name>``, i.e. a server holding copies of the dataset
-folders (PNG for both sets). Files from a mirror must have the embedded file SHA-256. A mirror
-may also be a local folder or a ``file://`` URL.
+folders (PNG for both sets). Files from a mirror must have the registered file SHA-256, which
+pooch checks. A mirror may also be a local folder or a ``file://`` URL; pooch has no downloader
+for those, so a small one of ours copies the file and pooch verifies and places it as usual.
 
-Each file is written to ``<file>.part`` in the dataset folder, verified, and only then renamed to
-its final name, so a file under its final name is always complete and verified. A ``.part`` left
-by an interrupted download is continued with an HTTP ``Range`` request where the server supports
-it. Files already present and verified are not downloaded again.
+A file under its final name is always complete and verified: a failed check deletes the download
+and raises :class:`ChecksumError`. Files already present and verified are not downloaded again.
+Unlike earlier versions, an interrupted download is not resumed with an HTTP ``Range`` request
+(pooch has no support for it): running the command again downloads that file from the start,
+which costs little as no file is larger than about 1 MB.
 """
 
 from __future__ import annotations
 
 import argparse
+import csv
 import hashlib
-import http.client
+import importlib.resources
+import logging
 import os
 import re
+import shutil
 import sys
 import tempfile
-import urllib.error
 import urllib.parse
 import urllib.request
 from collections import Counter
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Iterator, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, BinaryIO, NoReturn
+from typing import TYPE_CHECKING, Any, BinaryIO
 
 import numpy as np
 
@@ -88,7 +99,8 @@ MIRROR_ENV = "SPLITCAM_MIRROR"
 
 _DEFAULT_ROOT = "~/.cache/splitcam/datasets"
 _CHUNK = 1 << 16
-_USER_AGENT = f"splitcam/{__version__} (+python-urllib)"
+_USER_AGENT = f"splitcam/{__version__}"
+_REGISTRY = "registry.tsv"
 
 
 class DownloadError(OSError):
@@ -96,12 +108,12 @@ class DownloadError(OSError):
 
 
 class ChecksumError(DownloadError):
-    """Downloaded data did not match its embedded hash; the partial file has been deleted."""
+    """Downloaded data did not match its registered hash; the download has been deleted."""
 
 
 @dataclass(frozen=True)
 class _File:
-    """One file of a downloadable dataset.
+    """One file of a downloadable dataset, as listed in the registry.
 
     Attributes:
         name: File name in the dataset folder, and on a mirror.
@@ -134,179 +146,90 @@ class _Dataset:
     files: tuple[_File, ...]
 
 
-def _github(repository: str, commit: str) -> str:
-    return f"https://raw.githubusercontent.com/{repository}/{commit}/"
-
-
-# The hashes below were computed from the verified copies in the project's shared data folder:
-# `sha256` is the SHA-256 of each file (listed in its MANIFEST.sha256), `git_blob` is the blob id
-# of the published file (listed in its SOURCES.tsv and, for Kodak24, recomputed from the bytes),
-# and `pixels_sha256` is the SHA-256 of the decoded RGB uint8 pixels of each McMaster PNG, which
-# equal those of the published TIFF.
-_KODAK24 = _Dataset(
-    name="kodak24",
-    description="Kodak Lossless True Color Image Suite, 24 images of 768x512 (PNG)",
-    base_url=_github("cszn/IRCNN", "d9dcd537bdac3ae5b753296cd675db8a303c8f72"),
-    files=(
-        _File("kodim01.png", "testsets/Set24/kodim01.png",
-              "a56e27cbf5f843c048b6af1d6e090760e9c92fadba88b7dee0205918a37523bd",
-              "14317f0301e7610026f61e78192ade6089025115"),
-        _File("kodim02.png", "testsets/Set24/kodim02.png",
-              "4f4b74a79237e311d72cad958237b5f7088d8bce1c82305ebefe1a70e3022dfd",
-              "20c720617e089f6854b313e712fc13354ecc707b"),
-        _File("kodim03.png", "testsets/Set24/kodim03.png",
-              "e25ca1ff2f0c0cb5fdfd5f9b0a0bb21ac4c3de3c84a67f35b09a85d3306249db",
-              "d57e8bd2ceb82ed2153c776b283a5a15f444f312"),
-        _File("kodim04.png", "testsets/Set24/kodim04.png",
-              "e3b946107c5d3441c022f678d0c3caf1e224d81b1604ba840a4f88e562de61aa",
-              "de0991c65ee41d9a7507ef1b6136b23a5f487944"),
-        _File("kodim05.png", "testsets/Set24/kodim05.png",
-              "10349e963c5c813d327852f82c1795fa4148d69fedffc4c589bee458e3ac3d53",
-              "400e4cfc91db5358a9b3cae17386e23a68e31734"),
-        _File("kodim06.png", "testsets/Set24/kodim06.png",
-              "363510303b715d4cbc384e1ce227e466b613a09e1b71ae985882bf8e7fbd9b18",
-              "949d1e29842184e8b7764b22049dd99e4c40f08b"),
-        _File("kodim07.png", "testsets/Set24/kodim07.png",
-              "b77d3f006f42414bb242222e0482e750c0fb9e5ee8d4bed2f6f11c5605fe54a4",
-              "d04374d24676b2d4b3456637f573b53313bd1035"),
-        _File("kodim08.png", "testsets/Set24/kodim08.png",
-              "ba23983c76b4832ee0e8af0592664756841a16779acd69f792e268fb6d13d6e7",
-              "d628801b140bdcc92224c1279ac309dec13e3534"),
-        _File("kodim09.png", "testsets/Set24/kodim09.png",
-              "6a4361c2fc194feb4edaa9f9a4a0620fb9943e460ac7fdf037fb0f6dd6607a7d",
-              "1d471889b4c565de18c07c1585996bbcec590beb"),
-        _File("kodim10.png", "testsets/Set24/kodim10.png",
-              "9dfb70f5867c29ff9ed6313683f19b3d867849e40fbc0c4c54a4a89df341cf23",
-              "2e4b18b6febe51e70afb5ff365ddaebc69fe9e7f"),
-        _File("kodim11.png", "testsets/Set24/kodim11.png",
-              "7936814b58b5387fce2e4e2488b4ec830dadd95fa9520f358ddb30990b50f2b6",
-              "3c66526c04bab5a4e87ea14adf1fa61b237a1391"),
-        _File("kodim12.png", "testsets/Set24/kodim12.png",
-              "d78c37c2f04f23761ed2367dd77e2db584ddd4c3950833fecf89f199a8126980",
-              "55db018bb61e6498517fff6dd92d0629d73718f1"),
-        _File("kodim13.png", "testsets/Set24/kodim13.png",
-              "bc34a3ce58dea09dce1704c997171602de90cb34d0c8503a988b77f473d39b08",
-              "b35c9d39b44b33140512bda5679c4f3381ce694f"),
-        _File("kodim14.png", "testsets/Set24/kodim14.png",
-              "55a94550ff18f3246c4074fd32b77b0c74447c26b6ad274d564d999c0450ba6e",
-              "e7b328346a6e0261705dc7b6d463df9bcc5154f5"),
-        _File("kodim15.png", "testsets/Set24/kodim15.png",
-              "7538cbb80cb9103606c48b806eae57d56c885c7f90b9b3be70a41160f9cbb683",
-              "9c5eacf7682c914d4269602a1c75aa8f57cc0150"),
-        _File("kodim16.png", "testsets/Set24/kodim16.png",
-              "a89c7268ccd4718ba424a99fc4643c572cf692ca6eae887185ceb4e9f11d2e54",
-              "54b0d0dec8178078159f32ccce5d54206c85a9b0"),
-        _File("kodim17.png", "testsets/Set24/kodim17.png",
-              "37afcc89fbdcb76d9518e04b2fc011027e2f4cd14b3b2f83cefd721641a47c5b",
-              "5e4583e820482f6285fda86a2b2e117a1b667efb"),
-        _File("kodim18.png", "testsets/Set24/kodim18.png",
-              "1a9258c365988961d87a0598725b609139c303ad48a5aad6c503c3b1a87849aa",
-              "48097fcfa7dca834345302195b696aa987c5f3db"),
-        _File("kodim19.png", "testsets/Set24/kodim19.png",
-              "b7450b264b1b0a411390d8931b112c27905a992520fc90569dc4b920aa32bbdc",
-              "e359a32a4833d25c903a6be72c3a8434cbc68a52"),
-        _File("kodim20.png", "testsets/Set24/kodim20.png",
-              "3b46c71e3b92a563820ba32936be8330c586c41f938efd94be938386aae4328a",
-              "86e2837b0bfabe3fa4f653e18339050f16a0642a"),
-        _File("kodim21.png", "testsets/Set24/kodim21.png",
-              "ac958597c82073f6bb65129c68f72b651db5b9efd82e11547d07350214bc268b",
-              "ccd4c3f69aacfd9d93505c763309db2caf102d14"),
-        _File("kodim22.png", "testsets/Set24/kodim22.png",
-              "1cee58eb1f2d9c7ebb254d208a03c783ce6cf2c4d8c2cf45e235dd23b4ce1b29",
-              "52bcd47b74f11e36d0a0ffe103171ab36a0481de"),
-        _File("kodim23.png", "testsets/Set24/kodim23.png",
-              "e3111a2fd4da24af15d6459ef9eacfe54106b38e27b4a21821b75c3f5d2d5baf",
-              "ff22e837372943b79e2b61dec9c16fecb5d0c31f"),
-        _File("kodim24.png", "testsets/Set24/kodim24.png",
-              "1071c68372cc5a01435c2c225a5cf7d4bb803846ec08bb6b3d6721b156d7cb96",
-              "85bd64fb8ac6adb421ed4746bc57b80f7c785854"),
+# Where each dataset is published: description, GitHub repository and the commit its files are
+# pinned to. The files and their hashes are in registry.tsv; both were taken from the verified
+# copies in the project's shared data folder (its MANIFEST.sha256 and SOURCES.tsv files).
+_SOURCES: dict[str, tuple[str, str, str]] = {
+    "kodak24": (
+        "Kodak Lossless True Color Image Suite, 24 images of 768x512 (PNG)",
+        "cszn/IRCNN", "d9dcd537bdac3ae5b753296cd675db8a303c8f72",
     ),
-)
-
-_MCMASTER = _Dataset(
-    name="mcmaster",
-    description="McMaster colour demosaicking set, 18 images of 500x500 (TIFF, stored as PNG)",
-    base_url=_github("cszn/FFDNet", "e787f46df2f374ff3591186706229cb9a0591fea"),
-    files=(
-        _File("01.png", "testsets/McMaster/1.tif",
-              "d94545a6290cf0d5740b7aee9bd74a4ff531c828fcc18a4297e67952f01e194b",
-              "5bca1b4b1876f1651f481d4edbeba6bb735babd0",
-              "70d880a0b4d3699134da3e8389a0b5506ba996e7fb06b0e0ba7c5f1a0d20dc5f"),
-        _File("02.png", "testsets/McMaster/2.tif",
-              "09a1f71e9fd288b043ec5d2e9614ab42b5e2a7fdccd256fc26b3da0f0f2aa333",
-              "b3bcca63645110a0b2a5fa93d038c9e68070703e",
-              "6f9a3ec7248d86e3361dac7b1f975f56de9fc44ec766faf83b77c76c70a149d9"),
-        _File("03.png", "testsets/McMaster/3.tif",
-              "20110da87588cf253b4f31fc287d9eaf0045c7b214a6694186d346df8ad861d9",
-              "3bde17ccb9c9e89ab7504ccbc14dcb76e52e7100",
-              "ba85adf6e91abb7849ff374ece8439fabf6b982c44242932df568bf15a193d46"),
-        _File("04.png", "testsets/McMaster/4.tif",
-              "b8e1768cf1afffc9f63e6d53df063ecc241bdf946ee2cacbb2abc7bc31d227cd",
-              "ca4a94cdc56a5dc12c919993e7ae2da64be274e8",
-              "4895cd9fabdac3d5564973996f0ceaff6324077dcf86f624569a29638cef3783"),
-        _File("05.png", "testsets/McMaster/5.tif",
-              "5ba385c2e6dd4e7e2d238b9a28734d3b93bb38709f27a45ee52bcfe3aac10d85",
-              "da527c1d679e398a06aa94c0e8e10fc762386f5d",
-              "e8544cebf3e2768cfb62e655a278b233f2c1b6585d615b4619d2c5a1a9448626"),
-        _File("06.png", "testsets/McMaster/6.tif",
-              "f2be18975401228b079473f0349a19ba94b9d8c82b31ca97cb90156459197302",
-              "ccc83682ee07ac2fa58625fc26ffcb132aaf591f",
-              "f01472bb940367a233d50eda3a6e04b4865c32b1ea46557a0f9b55a79e238277"),
-        _File("07.png", "testsets/McMaster/7.tif",
-              "30edc7b7152b0823f02dcb3b5098459b50f8e071bf6777530e3371d8440b5561",
-              "a53de4c2de7fa02e2ad04f3a6a8c25c914968ed6",
-              "9bab193e76304aa080a7d47c7518f841df831ef2bcba10abc49e13784aa09f2c"),
-        _File("08.png", "testsets/McMaster/8.tif",
-              "56ebb6db1bb7d1e98fef41085c94bc80aa87f84e8ffd71224815c57b772f7368",
-              "9265a9f3e68b526f3e0dd6233d12a42a479b589c",
-              "860b9a5d23ba75962c81f47b4b9d04a487d4aedb69ad6583a65654348fd35842"),
-        _File("09.png", "testsets/McMaster/9.tif",
-              "e02950fdcb2415c83fd4cc5d2ae5f712ae881d67dc3e567e56e6db1db9b65581",
-              "42855b1035c3945e7ae602f75093d09d9a3ea44e",
-              "4a918df72b5bc9aec1588c6af4efc4bc1038ca91beb494fc502438661586a455"),
-        _File("10.png", "testsets/McMaster/10.tif",
-              "665904fe088d3d686ace684ca861e92cffe043591c014e06788a231b49864e2d",
-              "ff2ec209aeaeed2c403daa1ddd5d4621a03d8dc4",
-              "7765fe9e799ec21cc52345247e24a67cd903c49292f4c9c98680511df5900a6f"),
-        _File("11.png", "testsets/McMaster/11.tif",
-              "eb8bd56692c4e29ab811fb56dafbead0ec36aa156a1b450e1802163b50768f83",
-              "1b9fdaf604deeeab2789e84d7453af955d5e59db",
-              "8b34ab8eb96d420efd208c5933b45a91e167133154943daabac4298fa7d6eb44"),
-        _File("12.png", "testsets/McMaster/12.tif",
-              "50b0e70487b1653041732687e56b7368681aca0059417fc15dfb7e79a529fc89",
-              "0538086d2d8e2f8f502bcb47f15fa8ed036ba48d",
-              "9eac57d83e7bd7e1175e3b439450b10e79030ae2d59d4d23e1916f24b10be82d"),
-        _File("13.png", "testsets/McMaster/13.tif",
-              "838b86d19d5a61374c30fe89a52a02c543ca72cd959605d7b21527235f75de09",
-              "d0e71315f4cb81836aa32a7361c90af5a7ee164c",
-              "68ed9b9b1137b86b2f3e520d12a382d83f709656fa29e0f008eb7367c2acdd7d"),
-        _File("14.png", "testsets/McMaster/14.tif",
-              "f7e9706a8eff515bbc7bdd416e934200863cb310fcba8d2eadb0a103d7555f07",
-              "8b6373dfed62f8d1a2b02d7cd926c1f26b58e198",
-              "be177da9e4e8221b3a2d548fbacde0d78113e5491f2aaa7bb0e5142270b3684b"),
-        _File("15.png", "testsets/McMaster/15.tif",
-              "884db8cd99a07c9ee3bcba780a033fd08a702d4167fc7ac557c0632e2375eecc",
-              "a440fd59d532d5d60a92395af675c574f1a3f02d",
-              "dde5cb76b77cd4a5b460579067c5c2821f62636bfa138285a6e818538733caa6"),
-        _File("16.png", "testsets/McMaster/16.tif",
-              "d57ef5ee8057c6010e2f0a46e49caf8407232f6e952043e6859b8497dcb9373c",
-              "0be20a110861cfece1ead74739cbed34f57ce252",
-              "292040375a7db79ca67577905481a59e92f2262c90aa66e1d8bd1b7b20a36226"),
-        _File("17.png", "testsets/McMaster/17.tif",
-              "9f6dfce8be14f9e8f817689dc5594a545d217c044d8884987a8b903d648f598c",
-              "a511b63c64c21e70d423bad078721eb8633f785a",
-              "5ba4f3f93175abbcf875e5bd33076c6f81faadd75368031190cb79d6fc339731"),
-        _File("18.png", "testsets/McMaster/18.tif",
-              "cdd352fd03a2795b9cc48833a753fd9a82cce5656aeb221a2d3f55820d118585",
-              "150dba1945ee9a06cff5380f46fc0db816e882d7",
-              "e6474ee7cdc1408e7e95ea2e6102b9c9957aa599ed625d3787c64198fb7d012e"),
+    "mcmaster": (
+        "McMaster colour demosaicking set, 18 images of 500x500 (TIFF, stored as PNG)",
+        "cszn/FFDNet", "e787f46df2f374ff3591186706229cb9a0591fea",
     ),
-)
+}
 
-_DATASETS: dict[str, _Dataset] = {d.name: d for d in (_KODAK24, _MCMASTER)}
+_REGISTRY_COLUMNS = ("dataset", "file", "source_path", "sha256", "git_blob", "pixels_sha256")
+_SHA256 = re.compile(r"[0-9a-f]{64}")
+_SHA1 = re.compile(r"[0-9a-f]{40}")
+
+
+def _parse_registry(text: str) -> dict[str, _Dataset]:
+    """The datasets described by the text of a registry file.
+
+    The registry is our own tab-separated table rather than pooch's registry format, because
+    pooch's holds one hash per file, and a converted file needs three (see the module
+    documentation). Lines starting with ``#`` are comments.
+
+    Args:
+        text: Contents of a registry file; columns as in :data:`_REGISTRY_COLUMNS`.
+
+    Returns:
+        The datasets of :data:`_SOURCES`, in that order, with their files in registry order.
+
+    Raises:
+        RuntimeError: The table is malformed: wrong columns, an unknown dataset, a malformed
+            hash, a repeated file, a converted file without pixel hash, or a dataset with no file.
+    """
+    lines = [line for line in text.splitlines() if line.strip() and not line.startswith("#")]
+    reader = csv.DictReader(lines, delimiter="\t")
+    if tuple(reader.fieldnames or ()) != _REGISTRY_COLUMNS:
+        raise RuntimeError(
+            f"dataset registry: expected the columns {', '.join(_REGISTRY_COLUMNS)}, "
+            f"got {', '.join(reader.fieldnames or ())}"
+        )
+    files: dict[str, dict[str, _File]] = {name: {} for name in _SOURCES}
+    for row in reader:
+        label = f"{row['dataset']}/{row['file']}"
+        if None in row or None in row.values():
+            raise RuntimeError(f"dataset registry: row {label} does not have six columns")
+        pixels = None if row["pixels_sha256"] == "-" else row["pixels_sha256"]
+        entry = _File(row["file"], row["source_path"], row["sha256"], row["git_blob"], pixels)
+        if row["dataset"] not in files:
+            raise RuntimeError(f"dataset registry: unknown dataset in row {label}")
+        if entry.name in files[row["dataset"]]:
+            raise RuntimeError(f"dataset registry: {label} is listed twice")
+        if not (_SHA256.fullmatch(entry.sha256) and _SHA1.fullmatch(entry.git_blob)
+                and (pixels is None or _SHA256.fullmatch(pixels))):
+            raise RuntimeError(f"dataset registry: malformed hash in row {label}")
+        if entry.converted and pixels is None:
+            # Without it a converted file could not be verified at all.
+            raise RuntimeError(f"dataset registry: {label} is converted but has no pixel hash")
+        files[row["dataset"]][entry.name] = entry
+    empty = [name for name, entries in files.items() if not entries]
+    if empty:
+        raise RuntimeError(f"dataset registry: no files listed for {', '.join(empty)}")
+    return {
+        name: _Dataset(
+            name, description, f"https://raw.githubusercontent.com/{repository}/{commit}/",
+            tuple(files[name].values()),
+        )
+        for name, (description, repository, commit) in _SOURCES.items()
+    }
+
+
+def _read_registry() -> dict[str, _Dataset]:
+    """The datasets of the registry file shipped in this package (see :func:`_parse_registry`)."""
+    resource = importlib.resources.files(__package__).joinpath(_REGISTRY)
+    return _parse_registry(resource.read_text(encoding="utf-8"))
+
+
+_DATASETS: dict[str, _Dataset] = _read_registry()
 
 DATASET_NAMES: tuple[str, ...] = tuple(_DATASETS)
 """Names of the datasets :func:`download` can fetch and :func:`resolve` looks up by name."""
+
 
 # Colour photographs bundled in scikit-image's package data: (name, file in skimage/data).
 # Synthetic colour images (colorwheel, chessboard) and RGBA graphics (logo, horse) are left out,
@@ -545,7 +468,12 @@ def _file_sha256(path: Path) -> str:
 
 
 def _is_verified(path: Path, entry: _File) -> bool:
-    """Whether an existing dataset file has the expected content."""
+    """Whether an existing dataset file has the expected content.
+
+    pooch would skip a present file whose SHA-256 matches by itself, but it cannot accept a
+    McMaster PNG that another encoder wrote with the same pixels, and for files converted on
+    download it has no hash of the stored file to check; so every file is checked here first.
+    """
     if not path.is_file():
         return False
     if _file_sha256(path) == entry.sha256:
@@ -568,6 +496,12 @@ def _mirror_base(mirror: str) -> str:
                 f"mirror '{mirror}' is neither a URL (http://, https://, file://) nor a folder"
             )
         return folder.resolve().as_uri()
+    scheme = urllib.parse.urlsplit(mirror).scheme.lower()
+    if scheme not in ("http", "https", "file"):
+        raise ValueError(
+            f"mirror '{mirror}' has the unsupported scheme '{scheme}://'; give an http://, "
+            "https:// or file:// URL, or a folder"
+        )
     return mirror.rstrip("/")
 
 
@@ -577,156 +511,212 @@ def _tqdm(**kwargs: Any) -> Any:
     return tqdm(**kwargs)
 
 
-_CONTENT_RANGE = re.compile(r"bytes\s+(\d+)-\d+/(\d+|\*)", re.IGNORECASE)
+@contextmanager
+def _pooch_quiet() -> Iterator[None]:
+    """Hold back pooch's log messages for the duration of a download.
+
+    pooch logs every file it fetches to stderr at INFO level, even when no progress is wanted,
+    and for a download without known hash (the McMaster TIFFs) it advises recording the file's
+    SHA-256, which does not apply here: those are checked by git blob id and pixels. Our progress
+    bars already show what is being fetched; warnings and errors still come through.
+
+    A filter does this rather than the logger's level: pooch's logger is not registered with the
+    logging module, so a change of level would not reset the answer it caches for INFO.
+    """
+    import pooch
+
+    logger = pooch.get_logger()
+    logger.addFilter(_warnings_only)
+    try:
+        yield
+    finally:
+        logger.removeFilter(_warnings_only)
 
 
-def _fetch(url: str, part: Path, label: str, timeout: float, progress: bool) -> None:
-    """Download ``url`` into ``part``, continuing a partial ``part`` where the server allows it.
+def _warnings_only(record: logging.LogRecord) -> bool:
+    return record.levelno >= logging.WARNING
+
+
+def _copy_local(url: str, output_file: str, pooch: object) -> None:
+    """A pooch downloader for ``file://`` URLs, which pooch has no downloader for.
+
+    pooch passes a temporary file in the dataset folder as ``output_file`` and, once this returns,
+    checks the copy's hash and moves it to its final name, exactly as for an HTTP download.
 
     Raises:
-        DownloadError: The request failed or the connection broke; what arrived stays in ``part``.
+        OSError: The file cannot be read (e.g. it is missing from the mirror).
     """
-    offset = part.stat().st_size if part.is_file() else 0
-    headers = {"User-Agent": _USER_AGENT}
-    if offset:
-        headers["Range"] = f"bytes={offset}-"
-    try:
-        response = urllib.request.urlopen(urllib.request.Request(url, headers=headers),
-                                          timeout=timeout)
-    except urllib.error.HTTPError as exc:
-        exc.close()
-        if exc.code == 416 and offset:
-            # The partial file is as long as the server's file, or longer: start afresh.
-            part.unlink()
-            _fetch(url, part, label, timeout, progress)
-            return
-        raise DownloadError(
-            f"downloading {label} from {url} failed: HTTP {exc.code} {exc.reason}"
-        ) from None
-    except (OSError, http.client.HTTPException, ValueError) as exc:
-        raise DownloadError(
-            f"downloading {label} from {url} failed: {_reason(exc)}; check the network "
-            "connection (or the --mirror address) and run the command again"
-        ) from None
-
-    with response:
-        # file:// URLs have no status; they, and servers without Range support, send everything.
-        resumed = bool(offset) and getattr(response, "status", None) == 206
-        if resumed:
-            match = _CONTENT_RANGE.match(response.headers.get("Content-Range", ""))
-            if match is None or int(match.group(1)) != offset:
-                # Not the range asked for: starting over is safer than guessing.
-                response.close()
-                part.unlink()
-                _fetch(url, part, label, timeout, progress)
-                return
-        else:
-            offset = 0
-        length_header = response.headers.get("Content-Length")
-        expected = int(length_header) if length_header and length_header.isdigit() else None
-        received = 0
-        bar = _tqdm(
-            total=None if expected is None else offset + expected, initial=offset, unit="B",
-            unit_scale=True, unit_divisor=1024, desc=label, leave=False, disable=not progress,
-        )
-        try:
-            with open(part, "ab" if resumed else "wb") as fh:
-                while chunk := response.read(_CHUNK):
-                    fh.write(chunk)
-                    received += len(chunk)
-                    bar.update(len(chunk))
-        except (OSError, http.client.HTTPException) as exc:
-            raise DownloadError(
-                f"downloading {label} from {url} broke off after {offset + received} bytes "
-                f"({_reason(exc)}); run the command again to resume"
-            ) from None
-        finally:
-            bar.close()
-    # http.client reports a connection closed early as a normal end of data.
-    if expected is not None and received < expected:
-        raise DownloadError(
-            f"downloading {label} from {url} broke off after {offset + received} of "
-            f"{offset + expected} bytes; run the command again to resume"
-        )
+    source = urllib.request.url2pathname(urllib.parse.urlsplit(url).path)
+    shutil.copyfile(source, output_file)
 
 
-def _reason(exc: BaseException) -> str:
-    if isinstance(exc, urllib.error.URLError) and not isinstance(exc.reason, str):
-        exc = exc.reason  # type: ignore[assignment]
+def _http_error(exc: OSError) -> str:
+    """What went wrong in a failed transfer, in words; HTTP errors by their status."""
+    response = getattr(exc, "response", None)  # set on requests' HTTPError
+    if response is not None and getattr(response, "status_code", None) is not None:
+        return f"HTTP {response.status_code} {response.reason}"
     return str(exc) or type(exc).__name__
 
 
-def _mismatch(
-    label: str, url: str, part: Path, what: str, expected: str, actual: str
-) -> NoReturn:
-    part.unlink(missing_ok=True)
-    raise ChecksumError(
-        f"{label}: the data downloaded from {url} is not the expected file "
-        f"({what} expected {expected}, got {actual}); the partial file was deleted. Run the "
-        "command again; if this persists, the source has changed or the connection is altered"
-    )
+_POOCH_MISMATCH = re.compile(r"expected (?:sha256:)?([0-9a-f]{64}) but got ([0-9a-f]{64})")
+
+
+def _retrieve(
+    url: str,
+    folder: Path,
+    fname: str,
+    known_hash: str | None,
+    label: str,
+    *,
+    timeout: float,
+    progress: bool,
+    processor: Any = None,
+) -> None:
+    """Fetch ``url`` to ``folder / fname`` with :func:`pooch.retrieve`, translating its errors.
+
+    Args:
+        url: ``http(s)://`` or ``file://`` URL.
+        folder: Folder to place the file in.
+        fname: File name to place it under.
+        known_hash: ``"sha256:<hex>"`` the downloaded bytes must have, or ``None`` where the
+            processor verifies them.
+        label: ``<dataset>/<file>``, for messages and the progress bar.
+        timeout: Seconds to wait for the server on connecting and on each read.
+        progress: Show a progress bar of the bytes received.
+        processor: A pooch processor run on the downloaded file.
+
+    Raises:
+        ChecksumError: The downloaded bytes did not match ``known_hash`` (pooch has deleted them),
+            or the processor found a mismatch.
+        DownloadError: The transfer failed.
+    """
+    import pooch
+
+    bar = None
+    if url.startswith("file:"):
+        downloader: Any = _copy_local
+    else:
+        if progress:
+            # pooch fills in a bar object it is given; it tests whether it has one by the bar's
+            # truth value, which tqdm makes `total > 0`, so the bar starts with a dummy total.
+            bar = _tqdm(total=1, unit="B", unit_scale=True, unit_divisor=1024, desc=label,
+                        leave=False)
+        downloader = pooch.HTTPDownloader(
+            progressbar=bar if bar is not None else False, chunk_size=_CHUNK, timeout=timeout,
+            headers={"User-Agent": _USER_AGENT},
+        )
+    try:
+        pooch.retrieve(url, known_hash, fname=fname, path=folder, downloader=downloader,
+                       processor=processor)
+    except DownloadError:
+        raise  # from the processor: already says what is wrong
+    except OSError as exc:
+        # requests' exceptions are OSErrors too (including the ones that are also ValueErrors).
+        hint = ("check the mirror folder" if downloader is _copy_local
+                else "check the network connection (or the mirror address)")
+        raise DownloadError(
+            f"downloading {label} from {url} failed: {_http_error(exc)}; {hint} and run the "
+            "command again"
+        ) from None
+    except ValueError as exc:
+        # pooch reports a hash mismatch as ValueError, after deleting the download; its message
+        # names both hashes, which are picked out to keep ours short.
+        found = _POOCH_MISMATCH.search(str(exc))
+        detail = f"SHA-256 expected {found[1]}, got {found[2]}" if found else str(exc)
+        raise ChecksumError(
+            f"{label}: the data downloaded from {url} is not the expected file ({detail}); it "
+            "was deleted. Run the command again; if this persists, the source has changed or the "
+            "connection is altered"
+        ) from None
+    finally:
+        if bar is not None:
+            bar.close()  # pooch closes it only after a complete transfer
+
+
+class _TiffToPng:
+    """pooch processor: verify a downloaded McMaster TIFF and store its pixels as PNG.
+
+    This is our code because pooch can check only plain digests of the downloaded file, while a
+    published TIFF is pinned by its git blob id and the hash of its decoded pixels.
+
+    Args:
+        entry: The registry entry; ``entry.git_blob`` and ``entry.pixels_sha256`` are checked.
+        final: Where the PNG goes; it is written to a temporary file beside it and renamed, so it
+            appears complete or not at all.
+        label: ``<dataset>/<file>``, for messages.
+        url: The address the TIFF came from, for messages.
+    """
+
+    def __init__(self, entry: _File, final: Path, label: str, url: str) -> None:
+        self.entry, self.final, self.label, self.url = entry, final, label, url
+
+    def __call__(self, fname: str, action: str, pooch: object) -> str:
+        """Check the file at ``fname`` and write the PNG; returns the PNG's path.
+
+        Raises:
+            ChecksumError: The bytes do not have the registered git blob id.
+            DownloadError: The bytes are right but decode to other pixels here.
+        """
+        import io
+
+        from PIL import Image
+
+        data = Path(fname).read_bytes()
+        blob = _git_blob_id(data)
+        if blob != self.entry.git_blob:
+            raise ChecksumError(
+                f"{self.label}: the data downloaded from {self.url} is not the expected file "
+                f"(git blob id expected {self.entry.git_blob}, got {blob}); it was deleted. Run "
+                "the command again; if this persists, the source has changed or the connection "
+                "is altered"
+            )
+        try:
+            with Image.open(io.BytesIO(data)) as im:
+                pixels = np.asarray(im.convert("RGB"), np.uint8)
+        except Exception as exc:
+            raise DownloadError(
+                f"{self.label}: the downloaded file is correct but the image library (Pillow) "
+                f"cannot decode it here: {exc}"
+            ) from None
+        actual = hashlib.sha256(pixels.tobytes()).hexdigest()
+        if actual != self.entry.pixels_sha256:
+            # The bytes matched their git blob id, so only the decoder can disagree.
+            raise DownloadError(
+                f"{self.label}: the downloaded file is correct but decodes to different pixels "
+                f"here (pixel SHA-256 expected {self.entry.pixels_sha256}, got {actual}); the "
+                "image library (Pillow) may decode TIFF differently on this machine"
+            )
+        fd, tmp = tempfile.mkstemp(dir=self.final.parent, prefix=f".{self.final.name}.",
+                                   suffix=".tmp")
+        try:
+            with os.fdopen(fd, "wb") as fh:
+                Image.fromarray(pixels).save(fh, format="PNG", optimize=True)
+            os.replace(tmp, self.final)
+        except BaseException:
+            Path(tmp).unlink(missing_ok=True)
+            raise
+        return str(self.final)
 
 
 def _install(dataset: _Dataset, entry: _File, folder: Path, mirror: str | None,
              timeout: float, progress: bool) -> None:
     """Download, verify and (if needed) convert one file to ``folder / entry.name``."""
-    final = folder / entry.name
     label = f"{dataset.name}/{entry.name}"
-    from_source = mirror is None
-    if from_source:
-        url = dataset.base_url + urllib.parse.quote(entry.source_path)
-        # The partial file carries the published file's suffix: a partial TIFF must never be
-        # continued with PNG bytes from a mirror, or the other way round.
-        part = folder / (Path(entry.name).stem + Path(entry.source_path).suffix + ".part")
-    else:
+    options: dict[str, Any] = {"timeout": timeout, "progress": progress}
+    if mirror is not None:
         url = f"{mirror}/{urllib.parse.quote(dataset.name)}/{urllib.parse.quote(entry.name)}"
-        part = folder / (entry.name + ".part")
-
-    _fetch(url, part, label, timeout, progress)
-
-    if not (from_source and entry.converted):
-        actual = _file_sha256(part)
-        if actual != entry.sha256:
-            _mismatch(label, url, part, "SHA-256", entry.sha256, actual)
-        if from_source:
-            blob = _git_blob_id(part.read_bytes())
-            if blob != entry.git_blob:
-                _mismatch(label, url, part, "git blob id", entry.git_blob, blob)
-        os.replace(part, final)
+        _retrieve(url, folder, entry.name, f"sha256:{entry.sha256}", label, **options)
         return
-
-    data = part.read_bytes()
-    blob = _git_blob_id(data)
-    if blob != entry.git_blob:
-        _mismatch(label, url, part, "git blob id", entry.git_blob, blob)
-    _convert_to_png(data, entry, final, label)
-    part.unlink()
-
-
-def _convert_to_png(data: bytes, entry: _File, final: Path, label: str) -> None:
-    """Decode a verified published file, check its pixels, and write them as PNG to ``final``."""
-    import io
-
-    from PIL import Image
-
-    with Image.open(io.BytesIO(data)) as im:
-        pixels = np.asarray(im.convert("RGB"), np.uint8)
-    actual = hashlib.sha256(pixels.tobytes()).hexdigest()
-    if actual != entry.pixels_sha256:
-        # The bytes matched their git blob id, so only the decoder can disagree.
-        raise DownloadError(
-            f"{label}: the downloaded file is correct but decodes to different pixels here "
-            f"(pixel SHA-256 expected {entry.pixels_sha256}, got {actual}); the image library "
-            "(Pillow) may decode TIFF differently on this machine"
-        )
-    fd, tmp = tempfile.mkstemp(dir=final.parent, prefix=f".{final.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            Image.fromarray(pixels).save(fh, format="PNG", optimize=True)
-        os.replace(tmp, final)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    url = dataset.base_url + urllib.parse.quote(entry.source_path)
+    if not entry.converted:
+        _retrieve(url, folder, entry.name, f"sha256:{entry.sha256}", label, **options)
+        return
+    # pooch keeps what it downloads under the name it is given, and a TIFF beside the PNGs would
+    # be read as a second image of the set; a hidden scratch folder (on the same file system, so
+    # the PNG's final rename stays atomic) keeps it out of sight and goes away in any case.
+    with tempfile.TemporaryDirectory(dir=folder, prefix=".download-") as scratch:
+        _retrieve(url, Path(scratch), Path(entry.source_path).name, None, label,
+                  processor=_TiffToPng(entry, folder / entry.name, label, url), **options)
 
 
 def download(
@@ -741,7 +731,7 @@ def download(
     """Download datasets into ``<to>/<dataset>``, verifying every file.
 
     See the module documentation for the sources and the checks. Files already present and
-    verified are skipped; a ``.part`` file left by an interrupted run is continued.
+    verified are skipped; a file whose download was interrupted is downloaded again in full.
 
     Args:
         names: Dataset names (see :data:`DATASET_NAMES`), or one name.
@@ -750,7 +740,7 @@ def download(
         mirror: Base URL (or local folder) of a mirror serving ``<dataset>/<file name>``.
             Default: ``$SPLITCAM_MIRROR`` if set, else the public sources.
         progress: Show progress bars (on stderr).
-        timeout: Seconds to wait for the server on each connection attempt and read.
+        timeout: Seconds to wait for the server on connecting and on each read.
         files: Only these file names (e.g. ``["kodim01.png"]``); default all files.
 
     Returns:
@@ -758,8 +748,8 @@ def download(
 
     Raises:
         ValueError: An unknown dataset or file name, or an invalid mirror.
-        ChecksumError: Downloaded data did not match its hash (the partial file is deleted).
-        DownloadError: A network failure; the partial file is kept, and the next run resumes it.
+        ChecksumError: Downloaded data did not match its hash (the download is deleted).
+        DownloadError: A network failure; nothing is left under the file's final name.
     """
     wanted = [names] if isinstance(names, str) else list(names)
     unknown = [n for n in wanted if n not in _DATASETS]
@@ -788,18 +778,19 @@ def download(
     paths = []
     bar = _tqdm(total=len(jobs), unit="file", desc="download", disable=not progress)
     try:
-        for dataset, entry in jobs:
-            folder = root / dataset.name
-            folder.mkdir(parents=True, exist_ok=True)
-            final = folder / entry.name
-            bar.set_postfix_str(f"{dataset.name}/{entry.name}", refresh=False)
-            if not _is_verified(final, entry):
-                if final.exists() and progress:
-                    bar.write(f"{final}: content does not match its checksum; downloading again",
-                              file=sys.stderr)
-                _install(dataset, entry, folder, base, timeout, progress)
-            paths.append(final)
-            bar.update(1)
+        with _pooch_quiet():
+            for dataset, entry in jobs:
+                folder = root / dataset.name
+                folder.mkdir(parents=True, exist_ok=True)
+                final = folder / entry.name
+                bar.set_postfix_str(f"{dataset.name}/{entry.name}", refresh=False)
+                if not _is_verified(final, entry):
+                    if final.exists() and progress:
+                        bar.write(f"{final}: content does not match its checksum; "
+                                  "downloading again", file=sys.stderr)
+                    _install(dataset, entry, folder, base, timeout, progress)
+                paths.append(final)
+                bar.update(1)
     finally:
         bar.close()
     return paths
@@ -828,8 +819,9 @@ def add_cli(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p = actions.add_parser(
         "download", help="download and verify datasets",
         description="Downloads from the public sources pinned to a commit (or from a mirror) and "
-        "checks every file against embedded hashes. Files already present and verified are "
-        "skipped; an interrupted download is resumed when run again.",
+        "checks every file against the hashes in the package's dataset registry. Files already "
+        "present and verified are skipped; a file whose download was interrupted is downloaded "
+        "again when the command is run again.",
     )
     p.add_argument("names", nargs="*", metavar="DATASET",
                    help=f"datasets to download (default: all of {', '.join(DATASET_NAMES)})")
