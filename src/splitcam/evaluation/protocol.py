@@ -5,7 +5,8 @@ with the method's pattern (:func:`splitcam.physics.simulate`: float64 sensor, ev
 seeded by the image name and sigma), reconstructed through the
 :class:`~splitcam.recon.Reconstructor` interface, clamped and scored on 8-bit images
 (:func:`score`). Training validation, ``splitcam evaluate`` and the LMMSE screening all call
-:func:`simulate_and_reconstruct` and :func:`score`, so a run's logged validation PSNR is what ``evaluate`` reports for the same images and sigmas.
+:func:`simulate_and_reconstruct` and :func:`score`, so a run's logged validation PSNR is what
+``evaluate`` reports for the same images and sigmas.
 
 :func:`evaluate` checks every argument before any work, appends each result to
 ``per_image.csv`` as soon as it is computed, and continues an interrupted evaluation of the same
