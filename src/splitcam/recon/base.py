@@ -70,7 +70,6 @@ class Reconstructor(Protocol):
         ...
 
 
-
 class NetworkReconstructor:
     """A trained network (with the pattern it was trained for) as a :class:`Reconstructor`.
 
@@ -85,8 +84,15 @@ class NetworkReconstructor:
         fast: bfloat16 autocast and channels-last inference.
     """
 
-    def __init__(self, network: nn.Module, pattern: Pattern, name: str, *,
-                 tile: int | None = 512, fast: bool = False) -> None:
+    def __init__(
+        self,
+        network: nn.Module,
+        pattern: Pattern,
+        name: str,
+        *,
+        tile: int | None = 512,
+        fast: bool = False,
+    ) -> None:
         self.network = network
         self.pattern = pattern
         self.name = name
@@ -97,8 +103,9 @@ class NetworkReconstructor:
         from .tiling import reconstruct
 
         check_sigma(sigma)
-        return reconstruct(self.network, raw, tile=self.tile, bf16=self.fast,
-                           channels_last=self.fast)
+        return reconstruct(
+            self.network, raw, tile=self.tile, bf16=self.fast, channels_last=self.fast
+        )
 
     def __repr__(self) -> str:
         return f"NetworkReconstructor({self.name!r}, pattern={self.pattern.name!r})"

@@ -26,6 +26,7 @@ from ..patterns import Pattern, PatternError, get
 from ..physics.periodic import phase_conv, phase_map
 from ..physics.sensor import SplitterSensor
 from .base import check_raw, check_sigma
+from .tiling import DEFAULT_TILE, tiled
 
 __all__ = [
     "DEFAULT_PATCHES",
@@ -58,9 +59,7 @@ class LMMSEFileError(ValueError):
     """A saved LMMSE statistics file is missing, damaged or inconsistent; the message says why."""
 
 
-def _phase_slices(
-    size: int, period: int, phase: int, radius: int, margin: int
-) -> tuple[int, int]:
+def _phase_slices(size: int, period: int, phase: int, radius: int, margin: int) -> tuple[int, int]:
     """Start and stop (in unfold coordinates) of the valid centres of one phase along one axis.
 
     Unfold position ``u`` is the neighbourhood centred on pixel ``u + radius``. A centre is valid
@@ -106,7 +105,10 @@ class LMMSEStatistics:
         ph, pw = self.pattern.period
         p, d = ph * pw, (2 * self.radius + 1) ** 2
         expected = {
-            "xx": (p, d + 1, d + 1), "xy": (p, d + 1, 3), "yy": (p, 3, 3), "counts": (p,),
+            "xx": (p, d + 1, d + 1),
+            "xy": (p, d + 1, 3),
+            "yy": (p, 3, 3),
+            "counts": (p,),
         }
         for key, shape in expected.items():
             got = tuple(getattr(self, key).shape)
@@ -128,8 +130,12 @@ class LMMSEStatistics:
                 f"{self.pattern.name}/r={self.radius} and {other.pattern.name}/r={other.radius}"
             )
         return LMMSEStatistics(
-            self.pattern, self.radius, self.xx + other.xx, self.xy + other.xy,
-            self.yy + other.yy, self.counts + other.counts,
+            self.pattern,
+            self.radius,
+            self.xx + other.xx,
+            self.xy + other.xy,
+            self.yy + other.yy,
+            self.counts + other.counts,
             {"pooled": [self.info, other.info]},
         )
 
@@ -213,8 +219,10 @@ class LMMSEStatistics:
         tensors_path.parent.mkdir(parents=True, exist_ok=True)
         save_file(
             {
-                "xx": self.xx.contiguous(), "xy": self.xy.contiguous(),
-                "yy": self.yy.contiguous(), "counts": self.counts.contiguous(),
+                "xx": self.xx.contiguous(),
+                "xy": self.xy.contiguous(),
+                "yy": self.yy.contiguous(),
+                "counts": self.counts.contiguous(),
             },
             str(tensors_path),
             metadata={"format": _FORMAT, "version": str(_VERSION)},
@@ -269,8 +277,13 @@ class LMMSEStatistics:
             tensors = load(blob)
             pattern = Pattern.from_dict(meta["pattern"], source=str(meta_path))
             stats = cls(
-                pattern, int(meta["radius"]), tensors["xx"], tensors["xy"], tensors["yy"],
-                tensors["counts"], dict(meta.get("info", {})),
+                pattern,
+                int(meta["radius"]),
+                tensors["xx"],
+                tensors["xy"],
+                tensors["yy"],
+                tensors["counts"],
+                dict(meta.get("info", {})),
             )
         except (SafetensorError, PatternError, KeyError, TypeError, ValueError) as exc:
             raise LMMSEFileError(f"damaged LMMSE statistics '{meta_path}': {exc}") from None
@@ -369,8 +382,10 @@ def fit_lmmse(
     if not isinstance(source, (torch.Tensor, PatchSampler)):
         if patches < 1:
             raise ValueError(f"expected patches >= 1, got {patches}")
-        cache = source if isinstance(source, ImageCache) else ImageCache(
-            source, min_size=patch_size, progress=progress
+        cache = (
+            source
+            if isinstance(source, ImageCache)
+            else ImageCache(source, min_size=patch_size, progress=progress)
         )
         source = PatchSampler(cache, patch_size=patch_size, seed=seed)
     ph, pw = pattern.period
@@ -406,8 +421,10 @@ def fit_lmmse(
             batches = tqdm(batches, total=len(sizes), desc=f"LMMSE {pattern.name}", leave=False)
         info = {
             "source": str(sampler.cache.paths[0].parent) if sampler.cache.paths else "",
-            "images": len(sampler.cache), "patches": patches,
-            "patch_size": sampler.patch_size, "seed": sampler.seed,
+            "images": len(sampler.cache),
+            "patches": patches,
+            "patch_size": sampler.patch_size,
+            "seed": sampler.seed,
         }
     with torch.no_grad():
         for rgb in batches:
@@ -434,8 +451,10 @@ class LMMSE:
 
     @classmethod
     def fit(
-        cls, pattern: Pattern | str,
-        source: torch.Tensor | PatchSampler | ImageCache | str | os.PathLike[str], **kwargs: Any,
+        cls,
+        pattern: Pattern | str,
+        source: torch.Tensor | PatchSampler | ImageCache | str | os.PathLike[str],
+        **kwargs: Any,
     ) -> LMMSE:
         """``LMMSE(fit_lmmse(pattern, source, **kwargs))``."""
         return cls(fit_lmmse(pattern, source, **kwargs))
@@ -452,6 +471,13 @@ class LMMSE:
     def reconstruct(self, raw: torch.Tensor, sigma: float) -> torch.Tensor:
         """Apply the phase filters for ``sigma``: one convolution, then a per-pixel phase pick.
 
+        Runs in tiles of :data:`splitcam.recon.tiling.DEFAULT_TILE` pixels
+        (:func:`splitcam.recon.tiling.tiled`, overlap = the filter radius rounded up to whole
+        periods): the convolution holds every phase's output for every pixel, ``Ph * Pw`` times
+        the size of the result, which on a whole 24-megapixel image is over a gigabyte. Each
+        output pixel reads only its ``(2r+1) x (2r+1)`` neighbourhood and its phase, so the
+        tiled result equals the whole-image one up to float rounding.
+
         Args:
             raw: Raw image of :attr:`pattern` (phase ``(0, 0)`` at the top-left pixel).
             sigma: Noise standard deviation in 8-bit units that the filters are solved for.
@@ -466,19 +492,21 @@ class LMMSE:
         check_raw(raw)
         weights, bias = self.statistics.filters(sigma)
         ph, pw = self.pattern.period
-        weights = weights.to(device=raw.device, dtype=raw.dtype)
+        weights = weights.to(device=raw.device, dtype=raw.dtype).unsqueeze(2)
         bias = bias.to(device=raw.device, dtype=raw.dtype)
-        out = phase_conv(raw, weights.unsqueeze(2), (ph, pw))
-        phase = phase_map(*raw.shape[-2:], (ph, pw), raw.device)
-        return out + bias[phase].permute(2, 0, 1).unsqueeze(0)
+
+        def run(tile: torch.Tensor) -> torch.Tensor:
+            out = phase_conv(tile, weights, (ph, pw))
+            phase = phase_map(*tile.shape[-2:], (ph, pw), tile.device)
+            return out + bias[phase].permute(2, 0, 1).unsqueeze(0)
+
+        return tiled(run, raw, (ph, pw), self.statistics.radius, tile=DEFAULT_TILE)
 
     def __repr__(self) -> str:
         return (
             f"LMMSE(pattern={self.pattern.name!r}, radius={self.statistics.radius}, "
             f"samples={int(self.statistics.counts.sum())})"
         )
-
-
 
 
 #: Folder of the shipped LMMSE fits (see ``scripts/fit_shipped_lmmse.py``).

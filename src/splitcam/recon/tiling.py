@@ -1,17 +1,22 @@
-"""Tiled reconstruction: run a network on a large raw image with bounded peak memory.
+"""Tiled reconstruction: run a reconstruction on a large raw image with bounded peak memory.
 
 The image is cut into overlapping tiles that are reconstructed one at a time and written into a
-preallocated result. Two things make the tiled result equal the untiled one up to float error:
+preallocated result (:func:`tiled`, the one mechanism; :func:`reconstruct` runs a network
+through it, and the LMMSE filters and classical demosaicking use it too). Two things make the
+tiled result equal the untiled one up to float error:
 
-- every tile starts at a multiple of the period, because the networks assign position classes
+- every tile starts at a multiple of the period, because the methods assign position classes
   from tile-local coordinates (and the packed network groups pixels into cells from there);
-- every output pixel is taken from a tile in which it lies at least ``overlap >=
-  net.receptive_radius`` pixels from each tile edge that is not an image edge, so zero padding at
-  tile edges never reaches it.
+- every output pixel is taken from a tile in which it lies at least ``overlap >= radius`` pixels
+  from each tile edge that is not an image edge, where ``radius`` is the reach of the method (the
+  network's receptive radius, the LMMSE filter radius, a demosaicking algorithm's support), so
+  whatever the method does at tile edges never reaches it. Tile edges that are image edges are
+  the image's own edges, so the method's border handling applies there unchanged.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from numbers import Integral
 from typing import Any, NamedTuple
 
@@ -20,7 +25,11 @@ from torch import nn
 
 from .base import check_raw
 
-__all__ = ["Span", "reconstruct", "tile_spans"]
+__all__ = ["DEFAULT_TILE", "Span", "reconstruct", "tile_spans", "tiled"]
+
+#: Tile size of the methods that tile on their own (LMMSE, classical demosaicking): a 512x512
+#: tile keeps their intermediates to tens of megabytes, and larger tiles are no faster.
+DEFAULT_TILE = 512
 
 
 class Span(NamedTuple):
@@ -103,6 +112,94 @@ def _network_device(net: nn.Module, fallback: torch.device) -> torch.device:
     return fallback
 
 
+def tiled(
+    fn: Callable[[torch.Tensor], torch.Tensor],
+    raw: torch.Tensor,
+    period: tuple[int, int],
+    radius: int,
+    *,
+    tile: int | None = 512,
+    overlap: int | None = None,
+    progress: bool = False,
+) -> torch.Tensor:
+    """Apply a reconstruction ``fn`` to a raw image in overlapping tiles.
+
+    ``fn`` must be *local* and *periodic*: each output pixel depends only on the raw pixels
+    within ``radius`` of it (and on the image border where that lies within ``radius``), and on
+    its position only through its phase within the period counted from the input's top-left
+    pixel. The result then equals ``fn(raw)`` up to the float error of running ``fn`` on
+    smaller inputs. The result is assembled on the device of ``raw``, in the dtype of ``fn``'s
+    output; ``fn`` itself decides where it runs.
+
+    Args:
+        fn: The reconstruction of one tile: ``(N, 1, h, w)`` in, ``(N, C, h, w)`` out.
+        raw: Raw image batch.
+        period: ``(Ph, Pw)``: tiles start at multiples of it.
+        radius: How far (in pixels) a raw pixel can influence an output pixel of ``fn``.
+        tile: Maximum tile height and width in pixels; ``None`` runs the whole image at once, as
+            does an image no larger than one tile.
+        overlap: Context kept around each tile's output; at least ``radius``. Default: ``radius``
+            rounded up to a multiple of the period (per axis), which loses no tile length since
+            tiles advance in whole periods anyway.
+        progress: Show a tqdm progress bar over the tiles.
+
+    Returns:
+        ``fn(raw)``, computed tile by tile.
+
+    Raises:
+        ValueError: ``tile``, ``overlap``, ``radius`` or ``period`` are invalid, ``overlap`` is
+            smaller than ``radius``, or ``tile`` is too small for the overlap.
+
+    Shape:
+        - raw: ``(N, 1, H, W)``.
+        - Output: ``(N, C, H, W)``.
+    """
+    check_raw(raw)
+    ph, pw = _check_period(period)
+    if not _is_int(radius) or radius < 0:
+        raise ValueError(f"radius must be an integer >= 0, got {radius!r}")
+    if tile is not None and (not _is_int(tile) or tile < 1):
+        raise ValueError(f"tile must be a positive integer or None, got {tile!r}")
+    if overlap is None:
+        overlap_h, overlap_w = _ceil_to(radius, ph), _ceil_to(radius, pw)
+    elif not _is_int(overlap) or overlap < radius:
+        raise ValueError(
+            f"overlap must be an integer >= the receptive radius {radius}, got {overlap!r}"
+        )
+    else:
+        overlap_h = overlap_w = int(overlap)
+
+    n, _, h, w = raw.shape
+    if tile is None or (h <= tile and w <= tile):
+        return fn(raw).to(raw.device).contiguous()
+    rows = tile_spans(h, tile, overlap_h, ph)
+    cols = tile_spans(w, tile, overlap_w, pw)
+    out: torch.Tensor | None = None
+    jobs = [(r, c) for r in rows for c in cols]
+    for r, c in _maybe_progress(jobs, progress):
+        rgb = fn(raw[:, :, r.start : r.stop, c.start : c.stop])
+        if out is None:
+            out = torch.empty((n, rgb.shape[1], h, w), dtype=rgb.dtype, device=raw.device)
+        out[:, :, r.keep_start : r.keep_stop, c.keep_start : c.keep_stop] = rgb[
+            :,
+            :,
+            r.keep_start - r.start : r.keep_stop - r.start,
+            c.keep_start - c.start : c.keep_stop - c.start,
+        ]
+    assert out is not None  # there is always at least one tile
+    return out
+
+
+def _check_period(period: Any) -> tuple[int, int]:
+    if (
+        not isinstance(period, (tuple, list, torch.Size))
+        or len(period) != 2
+        or not all(_is_int(p) and p >= 1 for p in period)
+    ):
+        raise ValueError(f"period must be two positive integers (Ph, Pw), got {period!r}")
+    return int(period[0]), int(period[1])
+
+
 def reconstruct(
     net: nn.Module,
     raw: torch.Tensor,
@@ -113,7 +210,7 @@ def reconstruct(
     bf16: bool = False,
     channels_last: bool = False,
 ) -> torch.Tensor:
-    """Reconstruct RGB from a raw image in overlapping tiles, without autograd.
+    """Reconstruct RGB from a raw image in overlapping tiles (:func:`tiled`), without autograd.
 
     The network's mode (train/eval) is left as it is. Tiles are moved to the device of the
     network's parameters and the result is assembled on the device of ``raw``, so a large image
@@ -148,21 +245,8 @@ def reconstruct(
         - Output: ``(N, 3, H, W)``.
     """
     check_raw(raw)
-    ph, pw = _network_period(net)
+    period = _network_period(net)
     radius = int(net.receptive_radius)
-    if tile is not None and (not _is_int(tile) or tile < 1):
-        raise ValueError(f"tile must be a positive integer or None, got {tile!r}")
-    if overlap is None:
-        overlap_h, overlap_w = _ceil_to(radius, ph), _ceil_to(radius, pw)
-    elif not _is_int(overlap) or overlap < radius:
-        raise ValueError(
-            f"overlap must be an integer >= the network's receptive radius {radius}, "
-            f"got {overlap!r}"
-        )
-    else:
-        overlap_h = overlap_w = int(overlap)
-
-    n, _, h, w = raw.shape
     device = _network_device(net, raw.device)
     memory_format = torch.channels_last if channels_last else torch.contiguous_format
     if channels_last:
@@ -175,23 +259,7 @@ def reconstruct(
         return y.to(raw.dtype) if bf16 else y
 
     with torch.inference_mode():
-        if tile is None or (h <= tile and w <= tile):
-            return run(raw).to(raw.device).contiguous()
-        rows = tile_spans(h, tile, overlap_h, ph)
-        cols = tile_spans(w, tile, overlap_w, pw)
-        out: torch.Tensor | None = None
-        jobs = [(r, c) for r in rows for c in cols]
-        for r, c in _maybe_progress(jobs, progress):
-            rgb = run(raw[:, :, r.start : r.stop, c.start : c.stop])
-            if out is None:
-                out = torch.empty((n, rgb.shape[1], h, w), dtype=rgb.dtype, device=raw.device)
-            out[:, :, r.keep_start : r.keep_stop, c.keep_start : c.keep_stop] = rgb[
-                :,
-                :,
-                r.keep_start - r.start : r.keep_stop - r.start,
-                c.keep_start - c.start : c.keep_stop - c.start,
-            ]
-    return out
+        return tiled(run, raw, period, radius, tile=tile, overlap=overlap, progress=progress)
 
 
 def _maybe_progress(items: list[Any], progress: bool) -> Any:
