@@ -77,8 +77,10 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     preview = Path(args.preview) if args.preview else out.with_name(out.stem + "_preview.png")
     write_image(preview, false_colour(raw, pattern))
     stored = f"16-bit PNG, full scale {scale:g}" if out.suffix.lower() == ".png" else "float32"
-    print(f"pattern {pattern.name}, sigma {args.sigma:g}: raw {raw.shape[1]}x{raw.shape[0]}, "
-          f"values {raw.min():.3f}..{raw.max():.3f}")
+    print(
+        f"pattern {pattern.name}, sigma {args.sigma:g}: raw {raw.shape[1]}x{raw.shape[0]}, "
+        f"values {raw.min():.3f}..{raw.max():.3f}"
+    )
     print(f"wrote {out} ({stored}) and {preview} (false-colour preview)")
     return 0
 
@@ -137,8 +139,11 @@ def cmd_train(args: argparse.Namespace) -> int:
     result = train(config, resume=args.resume, progress=not args.quiet)
     if int(os.environ.get("RANK", "0")) != 0:
         return 0  # under torchrun only rank 0 reports
-    summary = ", ".join(f"{k} {v:.4g}" for k, v in result.last_metrics.items()
-                        if k in ("loss", "train_psnr", "val_psnr"))
+    summary = ", ".join(
+        f"{k} {v:.4g}"
+        for k, v in result.last_metrics.items()
+        if k in ("loss", "train_psnr", "val_psnr")
+    )
     state = "interrupted at" if result.interrupted else "finished at"
     print(f"{state} step {result.step}: {summary}; run folder {result.run_dir}")
     return 130 if result.interrupted else 0
@@ -169,11 +174,18 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
     spec = args.method or args.checkpoint
     if spec is None:
         raise ValueError("give --method (lmmse, malvar2004, ..., or a run folder) or --checkpoint")
-    method = build_method(spec, pattern=args.pattern, lmmse_train=args.lmmse_train,
-                          tile=args.tile, fast=args.fast, progress=not args.quiet)
+    method = build_method(
+        spec,
+        pattern=args.pattern,
+        lmmse_train=args.lmmse_train,
+        tile=args.tile,
+        fast=args.fast,
+        progress=not args.quiet,
+    )
     if args.pattern is not None and not patterns.get(args.pattern).equals(method.pattern):
-        raise ValueError(f"--pattern {args.pattern} differs from the pattern of {spec} "
-                         f"({method.pattern.name})")
+        raise ValueError(
+            f"--pattern {args.pattern} differs from the pattern of {spec} ({method.pattern.name})"
+        )
     if args.image:
         rgb = torch.from_numpy(read_image(args.image)).permute(2, 0, 1)[None]
         raw = simulate(SplitterSensor(method.pattern), rgb, Path(args.image).stem, args.sigma)
@@ -206,20 +218,37 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     from .methods import build_methods
 
     zooms = [parse_zoom(z) for z in args.zoom or ()]  # bad syntax fails before any work
-    specs = [*args.checkpoint, *(args.method or ([] if args.checkpoint else
-                                                 ["lmmse", "malvar2004"]))]
-    methods = build_methods(specs, patterns_for_lmmse=args.patterns,
-                            lmmse_train=args.lmmse_train, tile=args.tile, fast=args.fast,
-                            progress=not args.quiet)
+    specs = [
+        *args.checkpoint,
+        *(args.method or ([] if args.checkpoint else ["lmmse", "malvar2004"])),
+    ]
+    methods = build_methods(
+        specs,
+        patterns_for_lmmse=args.patterns,
+        lmmse_train=args.lmmse_train,
+        tile=args.tile,
+        fast=args.fast,
+        progress=not args.quiet,
+    )
     datasets = load_datasets(args.datasets, args.max_images)
     try:
-        rows = evaluate(methods, datasets, args.sigmas, args.out, save_images=args.save_images,
-                        zoom_images=zooms if args.zoom else None, crop=args.crop,
-                        progress=not args.quiet, resume=not args.restart)
+        rows = evaluate(
+            methods,
+            datasets,
+            args.sigmas,
+            args.out,
+            save_images=args.save_images,
+            zoom_images=zooms if args.zoom else None,
+            crop=args.crop,
+            progress=not args.quiet,
+            resume=not args.restart,
+        )
     except KeyboardInterrupt:
-        print(f"splitcam evaluate: interrupted; the results so far are in "
-              f"{args.out}/per_image.csv: run the same command again to continue",
-              file=sys.stderr)
+        print(
+            f"splitcam evaluate: interrupted; the results so far are in "
+            f"{args.out}/per_image.csv: run the same command again to continue",
+            file=sys.stderr,
+        )
         return 130
     print(markdown_tables(summarise(rows)))
     print(f"wrote {args.out}/per_image.csv, summary.json and table.md")
@@ -237,7 +266,8 @@ def cmd_report(args: argparse.Namespace) -> int:
 
 def _add_train_parser(sub) -> None:
     p = sub.add_parser(
-        "train", help="train a reconstruction network (optionally with the pattern)",
+        "train",
+        help="train a reconstruction network (optionally with the pattern)",
         description="Train the reconstruction network for a pattern, or the pattern and the "
         "network jointly (--learn-pattern). Settings: defaults (the paper's recipe) < --config "
         "FILE (TOML/YAML/JSON) < flags. Ctrl-C saves a checkpoint and exits; --resume "
@@ -257,6 +287,21 @@ def _add_train_parser(sub) -> None:
     p.set_defaults(handler=cmd_train)
 
 
+def _add_method_options(p: argparse.ArgumentParser) -> None:
+    """Options of how methods are built and run, shared by `evaluate` and `reconstruct`."""
+    p.add_argument(
+        "--lmmse-train",
+        metavar="DIR",
+        help="fit LMMSE on these training images (default: the shipped fits)",
+    )
+    p.add_argument("--tile", type=int, default=512, help="tile size in pixels (default 512)")
+    p.add_argument(
+        "--fast",
+        action="store_true",
+        help="bfloat16 + channels-last network inference (see README for its cost)",
+    )
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="splitcam",
@@ -268,7 +313,8 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
 
     p = sub.add_parser(
-        "patterns", help="list, draw or export splitter patterns",
+        "patterns",
+        help="list, draw or export splitter patterns",
         description="`splitcam patterns` prints the design-principle measures of every pattern; "
         "`patterns show D --out d.png` draws one; `patterns export D --out d.toml` writes its "
         "pattern file (a starting point for your own).",
@@ -279,14 +325,16 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(handler=cmd_patterns)
 
     p = sub.add_parser(
-        "simulate", help="simulate the raw image a splitter sensor records of a picture",
+        "simulate",
+        help="simulate the raw image a splitter sensor records of a picture",
         description="Writes the raw image (16-bit PNG with its scale recorded, or .npy) and a "
         "false-colour preview PNG beside it.",
     )
     p.add_argument("image", help="colour image (PNG, JPEG, TIFF, BMP; 8 or 16 bit)")
     p.add_argument("--pattern", default="D", help="pattern name or file (default: D)")
-    p.add_argument("--sigma", type=float, default=0.0,
-                   help="Gaussian noise sigma in 8-bit units (default: 0)")
+    p.add_argument(
+        "--sigma", type=float, default=0.0, help="Gaussian noise sigma in 8-bit units (default: 0)"
+    )
     p.add_argument("--out", required=True, help="raw output, .png or .npy")
     p.add_argument("--preview", help="preview PNG (default: <out>_preview.png)")
     p.set_defaults(handler=cmd_simulate)
@@ -294,44 +342,71 @@ def build_parser() -> argparse.ArgumentParser:
     _add_train_parser(sub)
 
     p = sub.add_parser(
-        "evaluate", help="score trained runs and baselines with the paper's protocol",
+        "evaluate",
+        help="score trained runs and baselines with the paper's protocol",
         description="Simulates every test image with each method's pattern, adds the same "
         "deterministic noise for every method, reconstructs, and scores PSNR, SSIM and "
         "CIEDE2000 on 8-bit images. With no --checkpoint and no --method: the training-free "
         "baselines (LMMSE for every pattern, bayer + Malvar 2004).",
     )
-    p.add_argument("--checkpoint", action="append", default=[], metavar="RUN",
-                   help="a trained run (repeatable)")
-    p.add_argument("--method", action="append", metavar="NAME",
-                   help="baseline: bilinear, malvar2004, menon2007 (bayer) or lmmse (repeatable)")
-    p.add_argument("--patterns", type=lambda s: [x for x in s.split(",") if x],
-                   default=["A", "B", "C", "D", "E", "bayer"],
-                   help="patterns for lmmse, comma-separated names or files (default: all)")
-    p.add_argument("--lmmse-train", metavar="DIR",
-                   help="fit LMMSE on these training images (default: the shipped fits)")
-    p.add_argument("--datasets", default="default",
-                   help="comma-separated: kodak24, mcmaster, folders; default: the sample photos "
-                   "shipped with scikit-image")
+    p.add_argument(
+        "--checkpoint",
+        action="append",
+        default=[],
+        metavar="RUN",
+        help="a trained run (repeatable)",
+    )
+    p.add_argument(
+        "--method",
+        action="append",
+        metavar="NAME",
+        help="baseline: bilinear, malvar2004, menon2007 (bayer) or lmmse (repeatable)",
+    )
+    p.add_argument(
+        "--patterns",
+        type=lambda s: [x for x in s.split(",") if x],
+        default=["A", "B", "C", "D", "E", "bayer"],
+        help="patterns for lmmse, comma-separated names or files (default: all)",
+    )
+    p.add_argument(
+        "--datasets",
+        default="default",
+        help="comma-separated: kodak24, mcmaster, folders; default: the sample photos "
+        "shipped with scikit-image",
+    )
     p.add_argument("--sigmas", type=float, nargs="+", default=[0.0, 5.0, 10.0, 15.0, 20.0])
     p.add_argument("--max-images", type=int, help="use at most N images per dataset")
-    p.add_argument("--crop", type=int, default=0,
-                   help="border pixels left out of the scores (default 0, as in the paper)")
+    p.add_argument(
+        "--crop",
+        type=int,
+        default=0,
+        help="border pixels left out of the scores (default 0, as in the paper)",
+    )
     p.add_argument("--out", default="results", help="output folder (default: results)")
-    p.add_argument("--save-images", action="store_true",
-                   help="write reconstructions and zoomed side-by-side crops")
-    p.add_argument("--zoom", action="append", metavar="IMAGE[:TOP,LEFT,SIZE]",
-                   help="image (and region) for zoomed side-by-side crops (default: the most "
-                   "detailed region of the first image of each dataset)")
-    p.add_argument("--tile", type=int, default=512, help="network tile size")
-    p.add_argument("--fast", action="store_true",
-                   help="bfloat16 + channels-last network inference (see README for its cost)")
-    p.add_argument("--restart", action="store_true",
-                   help="recompute everything instead of continuing the results in --out")
+    p.add_argument(
+        "--save-images",
+        action="store_true",
+        help="write reconstructions and zoomed side-by-side crops",
+    )
+    p.add_argument(
+        "--zoom",
+        action="append",
+        metavar="IMAGE[:TOP,LEFT,SIZE]",
+        help="image (and region) for zoomed side-by-side crops (default: the most "
+        "detailed region of the first image of each dataset)",
+    )
+    _add_method_options(p)
+    p.add_argument(
+        "--restart",
+        action="store_true",
+        help="recompute everything instead of continuing the results in --out",
+    )
     p.add_argument("--quiet", action="store_true")
     p.set_defaults(handler=cmd_evaluate)
 
     p = sub.add_parser(
-        "report", help="one report over evaluation results, beside the paper's numbers",
+        "report",
+        help="one report over evaluation results, beside the paper's numbers",
         description="Takes folders written by `splitcam evaluate` and writes DIR/report.md (all "
         "methods side by side with the paper's Table 1-3 and the differences), a figure of "
         "every pattern (learned ones too) and a chart of PSNR and CIEDE2000 against sigma.",
@@ -345,7 +420,8 @@ def build_parser() -> argparse.ArgumentParser:
     add_data_cli(sub)
 
     p = sub.add_parser(
-        "plot", help="draw a run's loss and validation PSNR curves (several runs: compare them)",
+        "plot",
+        help="draw a run's loss and validation PSNR curves (several runs: compare them)",
         description="One run: loss and PSNR against step (RUN/curves.png). Several runs: their "
         "validation PSNR against wall-clock time and against step, side by side.",
     )
@@ -354,23 +430,21 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(handler=cmd_plot)
 
     p = sub.add_parser(
-        "reconstruct", help="reconstruct a colour image with a trained run or a baseline",
+        "reconstruct",
+        help="reconstruct a colour image with a trained run or a baseline",
         description="--image: simulate the sensor on a colour image (with --sigma noise), then "
         "reconstruct; --raw: reconstruct a raw image (.png written by `simulate`, or .npy). "
         "Large images are processed in overlapping tiles.",
     )
-    p.add_argument("--method", help="lmmse, bilinear, malvar2004, menon2007, or a run folder / "
-                   "checkpoint file")
+    p.add_argument(
+        "--method", help="lmmse, bilinear, malvar2004, menon2007, or a run folder / checkpoint file"
+    )
     p.add_argument("--checkpoint", help="run folder or checkpoint file (same as --method RUN)")
     p.add_argument("--pattern", help="pattern name or file (for --method lmmse)")
-    p.add_argument("--lmmse-train", metavar="DIR",
-                   help="fit LMMSE on these training images (default: the shipped fits)")
     p.add_argument("--image", help="colour image to simulate and reconstruct")
     p.add_argument("--raw", help="raw image to reconstruct")
     p.add_argument("--sigma", type=float, default=0.0, help="noise sigma for --image")
-    p.add_argument("--tile", type=int, default=512, help="tile size in pixels (default 512)")
-    p.add_argument("--fast", action="store_true",
-                   help="bfloat16 + channels-last network inference (see README for its cost)")
+    _add_method_options(p)
     p.add_argument("--out", required=True, help="output PNG")
     p.add_argument("--quiet", action="store_true")
     p.set_defaults(handler=cmd_reconstruct)
