@@ -1,0 +1,453 @@
+"""Closed-form LMMSE for any kernels, from pattern-free image statistics (differentiable).
+
+The raw neighbourhood ``x`` of a pixel of phase ``p`` is a linear function of the RGB scene in a
+slightly larger window, ``x = A_p f`` (plus noise), where ``A_p`` holds the pixel kernels of Eq. 2
+(:func:`splitcam.physics.sensor.pixel_kernels`) placed at each neighbour's offset. Natural images
+are (to a good approximation) stationary, so the second-order statistics of ``f`` are those of
+one small table that does not depend on the pattern: the mean colour ``mu`` and the
+cross-channel autocovariance ``C[c, c', dy, dx] = Cov(f_c(y, x), f_c'(y + dy, x + dx))``
+(:class:`ImageStatistics`, estimated once from training images and shipped). The LMMSE filters of
+every pattern and every sigma then follow in closed form::
+
+    W_p = C_yf A_pᵀ (A_p C_ff A_pᵀ + σ² I)⁻¹,      b_p = mu - W_p A_p mu_f
+
+where ``C_ff`` is the covariance of the scene window, ``C_yf`` its rows at the centre pixel, and the
+expected squared error per colour is ``tr(C_yy - W_p A_p C_fy) / 3``, with no images at all.
+
+Compared with :func:`splitcam.recon.lmmse.fit_lmmse` (simulate the sensor on training patches and
+gather the moments of its raw neighbourhoods) this needs no simulation, works for kernels that
+change at every step of an optimisation, and is differentiable in the kernels, so gradients reach
+a learned pattern through it (:func:`closed_form_filters`).
+"""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+import json
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from ..data.patches import ImageCache
+from ..patterns import Pattern, get
+from ..physics.sensor import pixel_kernels
+from .base import check_sigma
+from .lmmse import DEFAULT_RADIUS, LMMSE, LMMSEFileError
+
+__all__ = [
+    "DEFAULT_MAX_OFFSET",
+    "ClosedFormFilters",
+    "ImageStatistics",
+    "closed_form_filters",
+    "closed_form_lmmse",
+    "closed_form_mse",
+    "estimate_image_statistics",
+    "shipped_image_statistics",
+]
+
+#: Largest offset (pixels, per axis) of the shipped autocovariance. The closed form needs offsets
+#: up to ``2 * (radius + kernel half size)``: 12 for the default radius 4 and the built-in
+#: kernels (at most 5 wide), so 16 leaves room for radius 6.
+DEFAULT_MAX_OFFSET = 16
+
+# Relative ridge added to the raw covariance, as in fit_lmmse: it only keeps the solve defined
+# when a direction carries no signal (a dark pixel at sigma 0); far below any noise level.
+_RIDGE = 1e-8
+_FORMAT = "splitcam-image-statistics"
+_VERSION = 1
+SHIPPED_PATH = Path(__file__).resolve().parent.parent / "weights" / "image_statistics.json"
+
+
+@dataclass(eq=False)
+class ImageStatistics:
+    """Second-order statistics of RGB images, independent of any pattern.
+
+    Attributes:
+        mean: Mean colour ``mu``, float64, shape ``(3,)``, values in [0, 1] units.
+        second: Non-centred second moment ``E[f_c(y, x) f_c'(y + dy, x + dx)]`` at
+            ``[c, c', dy + L, dx + L]``, float64, shape ``(3, 3, 2L + 1, 2L + 1)``; symmetric
+            (``second[c, c', d] == second[c', c, -d]``).
+        count: Number of pixel positions the moments were averaged over.
+        info: Free-form description of the estimate (source, images), saved with the file.
+    """
+
+    mean: torch.Tensor
+    second: torch.Tensor
+    count: int
+    info: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        s = self.second
+        if self.mean.shape != (3,):
+            raise ValueError(f"expected mean of shape (3,), got {tuple(self.mean.shape)}")
+        if s.ndim != 4 or s.shape[:2] != (3, 3) or s.shape[2] != s.shape[3] or s.shape[2] % 2 == 0:
+            raise ValueError(f"expected second of shape (3, 3, 2L+1, 2L+1), got {tuple(s.shape)}")
+        if not (torch.isfinite(self.mean).all() and torch.isfinite(s).all()):
+            raise ValueError("expected finite image statistics")
+        self.mean = self.mean.to(torch.float64)
+        self.second = s.to(torch.float64)
+
+    @property
+    def max_offset(self) -> int:
+        """``L``: the largest offset (per axis) the autocovariance covers."""
+        return (self.second.shape[-1] - 1) // 2
+
+    def covariance(self) -> torch.Tensor:
+        """``C[c, c', dy + L, dx + L]``: the autocovariance (second moment minus mean product)."""
+        return self.second - (self.mean[:, None] * self.mean[None, :])[:, :, None, None]
+
+    def save(self, path: str | os.PathLike[str]) -> Path:
+        """Write ``<path>.safetensors`` plus ``<path>.json`` (checksum of the tensors); no pickle.
+
+        Returns:
+            The path of the ``.json`` file.
+        """
+        from safetensors.torch import save_file
+
+        tensors_path, meta_path = _paired_paths(path)
+        tensors_path.parent.mkdir(parents=True, exist_ok=True)
+        save_file(
+            {"mean": self.mean.contiguous(), "second": self.second.contiguous()},
+            str(tensors_path),
+            metadata={"format": _FORMAT, "version": str(_VERSION)},
+        )
+        meta = {
+            "format": _FORMAT,
+            "version": _VERSION,
+            "max_offset": self.max_offset,
+            "count": int(self.count),
+            "tensors": tensors_path.name,
+            "sha256": hashlib.sha256(tensors_path.read_bytes()).hexdigest(),
+            "info": self.info,
+        }
+        meta_path.write_text(json.dumps(meta, indent=1) + "\n")
+        return meta_path
+
+    @classmethod
+    def load(cls, path: str | os.PathLike[str]) -> ImageStatistics:
+        """Read statistics written by :meth:`save`.
+
+        Raises:
+            LMMSEFileError: A file is missing, damaged, or does not match its checksum.
+        """
+        from safetensors import SafetensorError
+        from safetensors.torch import load
+
+        tensors_path, meta_path = _paired_paths(path)
+        try:
+            meta = json.loads(meta_path.read_text())
+            blob = tensors_path.read_bytes()
+        except OSError as exc:
+            raise LMMSEFileError(f"cannot read image statistics '{meta_path}': {exc}") from None
+        except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+            raise LMMSEFileError(f"'{meta_path}' is not valid JSON (damaged?): {exc}") from None
+        if not isinstance(meta, dict) or meta.get("format") != _FORMAT:
+            raise LMMSEFileError(f"'{meta_path}' is not an image statistics file ({_FORMAT})")
+        if hashlib.sha256(blob).hexdigest() != meta.get("sha256"):
+            raise LMMSEFileError(
+                f"'{tensors_path}' does not match the checksum recorded in '{meta_path}'"
+            )
+        try:
+            tensors = load(blob)
+            return cls(
+                tensors["mean"], tensors["second"], int(meta["count"]), dict(meta.get("info", {}))
+            )
+        except (SafetensorError, KeyError, TypeError, ValueError) as exc:
+            raise LMMSEFileError(f"damaged image statistics '{meta_path}': {exc}") from None
+
+
+def _paired_paths(path: str | os.PathLike[str]) -> tuple[Path, Path]:
+    path = Path(path)
+    if path.suffix.lower() in (".safetensors", ".json"):
+        path = path.with_suffix("")
+    return path.with_name(path.name + ".safetensors"), path.with_name(path.name + ".json")
+
+
+@functools.lru_cache(maxsize=1)
+def shipped_image_statistics() -> ImageStatistics:
+    """The statistics shipped with splitcam (``scripts/estimate_image_statistics.py``)."""
+    return ImageStatistics.load(SHIPPED_PATH)
+
+
+def estimate_image_statistics(
+    source: torch.Tensor | ImageCache | str | os.PathLike[str] | list,
+    *,
+    max_offset: int = DEFAULT_MAX_OFFSET,
+    max_images: int | None = None,
+    progress: bool = False,
+) -> ImageStatistics:
+    """Estimate :class:`ImageStatistics` from whole training images.
+
+    For every image, the second moment at offset ``d`` is summed over the pixels ``q`` at least
+    ``L`` from every edge, ``sum_q f_c(q) f_c'(q + d)``, so every product is of two real pixels
+    (no padding); it is computed for all offsets at once by FFT cross-correlation. The sums of all
+    images are divided by the number of terms and symmetrised (``d`` and ``-d`` with the channels
+    swapped estimate the same moment). The mean is taken over the same interior pixels.
+
+    Args:
+        source: Images ``(N, 3, H, W)`` in [0, 1], an :class:`ImageCache`, a folder, or a list of
+            image files.
+        max_offset: ``L``, the largest offset per axis.
+        max_images: Use at most this many images (from the start of the sorted list).
+        progress: Show a progress bar over the images.
+
+    Raises:
+        ValueError: No image larger than ``2L + 1`` pixels in each direction.
+    """
+    if isinstance(max_offset, bool) or not isinstance(max_offset, int) or max_offset < 0:
+        raise ValueError(f"expected max_offset as an integer >= 0, got {max_offset!r}")
+    lo = max_offset
+    if isinstance(source, torch.Tensor):
+        if source.ndim != 4 or source.shape[1] != 3:
+            raise ValueError(f"expected images of shape (N, 3, H, W), got {tuple(source.shape)}")
+        images: Any = list(source[:max_images] if max_images else source)
+        info: dict[str, Any] = {"source": "tensor"}
+    else:
+        cache = (
+            source
+            if isinstance(source, ImageCache)
+            else ImageCache(source, min_size=2 * lo + 2, max_images=max_images, progress=progress)
+        )
+        images = (cache.image(i) for i in range(len(cache)))
+        info = {"source": str(cache.paths[0].parent) if cache.paths else "", "images": len(cache)}
+        if progress:
+            from tqdm.auto import tqdm
+
+            images = tqdm(images, total=len(cache), desc="image statistics", leave=False)
+    k = 2 * lo + 1
+    second = torch.zeros(3, 3, k, k, dtype=torch.float64)
+    total = torch.zeros(3, dtype=torch.float64)
+    count = 0
+    for img in images:
+        f = img.to(torch.float64)
+        _, h, w = f.shape
+        if h <= 2 * lo or w <= 2 * lo:
+            continue
+        interior = torch.zeros_like(f)
+        interior[:, lo : h - lo, lo : w - lo] = f[:, lo : h - lo, lo : w - lo]
+        size = (h + lo, w + lo)  # no wrap-around for |d| <= L
+        spec_in = torch.fft.rfft2(interior, s=size)
+        spec = torch.fft.rfft2(f, s=size)
+        # corr[c, c', d] = sum_q interior_c(q) f_c'(q + d): ifft(conj(F_interior) F_f).
+        corr = torch.fft.irfft2(spec_in.conj()[:, None] * spec[None, :], s=size)
+        rows = torch.arange(-lo, lo + 1) % size[0]
+        cols = torch.arange(-lo, lo + 1) % size[1]
+        second += corr[:, :, rows][:, :, :, cols]
+        total += interior.sum((1, 2))
+        count += (h - 2 * lo) * (w - 2 * lo)
+    if count == 0:
+        raise ValueError(f"expected images larger than {k}x{k} pixels, got none")
+    second /= count
+    second = 0.5 * (second + second.transpose(0, 1).flip(-1, -2))
+    info["max_offset"] = lo
+    return ImageStatistics(total / count, second, count, info)
+
+
+@functools.lru_cache(maxsize=64)
+def _design_index(
+    period: tuple[int, int], kh: int, kw: int, radius: int
+) -> tuple[torch.Tensor, tuple[int, int]]:
+    """Index table of the matrices ``A_p`` (raw neighbourhood from scene window), per phase.
+
+    ``A[p, a * k + b, c * wh * ww + y * ww + x]`` (``k = 2r + 1``, window ``wh x ww`` with
+    ``wh = 2 (r + kh//2) + 1``) is the pixel-kernel entry ``pixel_kernels[q, c, u, v]`` with which
+    the raw pixel at offset ``(a - r, b - r)`` from a pixel of phase ``p`` (that raw pixel has phase
+    ``q``) collects scene pixel ``(y, x) = (a + u, b + v)`` of the window; the table holds the flat
+    index of that entry in ``pixel_kernels`` (shape ``(Ph, Pw, 3, kh, kw)``), or the index of one
+    extra zero slot where no tap lands.
+    """
+    ph, pw = period
+    k = 2 * radius + 1
+    wh, ww = k + kh - 1, k + kw - 1
+    zero = ph * pw * 3 * kh * kw
+    index = np.full((ph * pw, k * k, 3, wh, ww), zero, dtype=np.int64)
+    for i in range(ph):
+        for j in range(pw):
+            for a in range(k):
+                for b in range(k):
+                    qi, qj = (i + a - radius) % ph, (j + b - radius) % pw
+                    for c in range(3):
+                        for u in range(kh):
+                            for v in range(kw):
+                                flat = (((qi * pw + qj) * 3 + c) * kh + u) * kw + v
+                                index[i * pw + j, a * k + b, c, a + u, b + v] = flat
+    return torch.from_numpy(index.reshape(ph * pw, k * k, 3 * wh * ww)), (wh, ww)
+
+
+@functools.lru_cache(maxsize=16)
+def _window_index(wh: int, ww: int, lo: int) -> torch.Tensor:
+    """Flat index into the ``(3, 3, 2L+1, 2L+1)`` autocovariance of every pair of window entries."""
+    c = np.arange(3)[:, None, None]
+    y = np.arange(wh)[None, :, None]
+    x = np.arange(ww)[None, None, :]
+    c, y, x = (np.broadcast_to(t, (3, wh, ww)).reshape(-1) for t in (c, y, x))
+    k = 2 * lo + 1
+    dy = y[None, :] - y[:, None] + lo
+    dx = x[None, :] - x[:, None] + lo
+    return torch.from_numpy(((c[:, None] * 3 + c[None, :]) * k + dy) * k + dx)
+
+
+def _moments(
+    kernels: torch.Tensor, stats: ImageStatistics, radius: int
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+    """``(C_xx, C_yx, mean_x, C_yy)`` of the clean raw neighbourhoods, per phase (float64)."""
+    ph, pw, _, kh, kw = kernels.shape
+    index, (wh, ww) = _design_index((ph, pw), kh, kw, radius)
+    lo = stats.max_offset
+    if max(wh, ww) - 1 > lo:
+        raise ValueError(
+            f"radius {radius} with {kh}x{kw} kernels needs image statistics up to offset "
+            f"{max(wh, ww) - 1}, these cover {lo}"
+        )
+    flat = torch.cat([kernels.reshape(-1), kernels.new_zeros(1)])
+    a = flat[index.to(kernels.device)]  # (P, d, n)
+    cov = stats.covariance().to(kernels.device)
+    cff = cov.reshape(-1)[_window_index(wh, ww, lo).to(kernels.device)]  # (n, n)
+    mean_f = stats.mean.to(kernels.device).repeat_interleave(wh * ww)
+    centre = torch.tensor([c * wh * ww + (wh // 2) * ww + ww // 2 for c in range(3)])
+    cxx = a @ cff @ a.transpose(1, 2)
+    cyx = cff[centre.to(kernels.device)] @ a.transpose(1, 2)  # (P, 3, d)
+    mean_x = a @ mean_f
+    cyy = cov[:, :, lo, lo]
+    return cxx, cyx, mean_x, cyy
+
+
+def _solve(
+    kernels: torch.Tensor, stats: ImageStatistics, radius: int, sigma: torch.Tensor
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Filters ``(S, P, 3, d)``, biases ``(S, P, 3)`` and per-phase MSE ``(S, P)`` per sigma."""
+    cxx, cyx, mean_x, cyy = _moments(kernels, stats, radius)
+    d = cxx.shape[-1]
+    trace = torch.diagonal(cxx, dim1=-2, dim2=-1).sum(-1)
+    eye = torch.eye(d, dtype=cxx.dtype, device=cxx.device)
+    diag = (sigma.to(cxx) / 255.0)[:, None] ** 2 + _RIDGE * trace.detach()[None] / d  # (S, P)
+    system = cxx[None] + diag[..., None, None] * eye
+    # W^T = (C_xx + s^2 I)^-1 C_xy
+    wt = torch.linalg.solve(system, cyx.transpose(-1, -2).expand(system.shape[0], -1, -1, -1))
+    weights = wt.transpose(-1, -2)  # (S, P, 3, d)
+    bias = stats.mean.to(cxx)[None, None] - (weights @ mean_x[None, ..., None]).squeeze(-1)
+    mse = (torch.diagonal(cyy).sum() - (weights * cyx[None]).sum((-2, -1))) / 3.0
+    return weights, bias, mse
+
+
+def _as_kernels(pattern_or_kernels: Pattern | str | torch.Tensor) -> torch.Tensor:
+    if isinstance(pattern_or_kernels, torch.Tensor):
+        k = pattern_or_kernels
+        if k.ndim != 5 or k.shape[2] != 3:
+            raise ValueError(
+                f"expected pixel kernels of shape (Ph, Pw, 3, kh, kw), got {tuple(k.shape)}"
+            )
+        return k.to(torch.float64)
+    pattern = get(pattern_or_kernels)
+    weights = torch.from_numpy(np.array(pattern.kernels, dtype=np.float64))
+    return pixel_kernels(weights, pattern.layout)
+
+
+def _as_sigmas(sigma: float | torch.Tensor) -> tuple[torch.Tensor, bool]:
+    if isinstance(sigma, torch.Tensor) and sigma.ndim == 1:
+        if not torch.isfinite(sigma).all() or bool((sigma < 0).any()):
+            raise ValueError("expected finite sigmas >= 0")
+        return sigma.to(torch.float64), True
+    return torch.tensor([check_sigma(float(sigma))], dtype=torch.float64), False
+
+
+def closed_form_filters(
+    kernels: Pattern | str | torch.Tensor,
+    sigma: float | torch.Tensor,
+    *,
+    statistics: ImageStatistics | None = None,
+    radius: int = DEFAULT_RADIUS,
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """LMMSE filters and biases of any kernels at noise level(s) ``sigma``, differentiable.
+
+    Args:
+        kernels: A pattern (name, file or :class:`Pattern`), or pixel kernels
+            ``(Ph, Pw, 3, kh, kw)`` (:func:`splitcam.physics.sensor.pixel_kernels`; gradients
+            flow back to them).
+        sigma: Noise standard deviation in 8-bit units, a number or a 1-D tensor of several.
+        statistics: Image statistics (default: the shipped ones).
+        radius: Neighbourhood radius ``r``; filters are ``(2r+1) x (2r+1)``.
+
+    Returns:
+        ``(weights, bias)`` in float64, laid out as :meth:`LMMSEStatistics.filters`:
+        weights ``(P, 3, 2r+1, 2r+1)``, bias ``(P, 3)``; with a 1-D ``sigma`` a leading
+        ``(S,)`` axis.
+    """
+    k = _as_kernels(kernels)
+    sig, many = _as_sigmas(sigma)
+    stats = statistics if statistics is not None else shipped_image_statistics()
+    weights, bias, _ = _solve(k, stats, radius, sig)
+    side = 2 * radius + 1
+    weights = weights.reshape(*weights.shape[:3], side, side)
+    return (weights, bias) if many else (weights[0], bias[0])
+
+
+def closed_form_mse(
+    kernels: Pattern | str | torch.Tensor,
+    sigma: float | torch.Tensor,
+    *,
+    statistics: ImageStatistics | None = None,
+    radius: int = DEFAULT_RADIUS,
+) -> torch.Tensor:
+    """Expected squared error of the LMMSE per colour (``[0, 1]`` units), averaged over phases.
+
+    ``mean_p tr(C_yy - W_p C_xy,p) / 3``: what the LMMSE filters of these kernels achieve on
+    images with these statistics, away from image borders; no images needed. Differentiable in
+    the kernels. A scalar tensor, or one value per sigma for a 1-D ``sigma``.
+    """
+    k = _as_kernels(kernels)
+    sig, many = _as_sigmas(sigma)
+    stats = statistics if statistics is not None else shipped_image_statistics()
+    _, _, mse = _solve(k, stats, radius, sig)
+    mse = mse.mean(-1)
+    return mse if many else mse[0]
+
+
+class ClosedFormFilters:
+    """The LMMSE filters of one pattern from :class:`ImageStatistics` (cached per sigma).
+
+    Provides what :class:`splitcam.recon.lmmse.LMMSE` needs of its statistics (``pattern``,
+    ``radius``, ``filters(sigma)``, ``expected_mse(sigma)``), so ``LMMSE(ClosedFormFilters(...))``
+    reconstructs with the closed-form filters through the same tiled code path.
+    """
+
+    def __init__(
+        self,
+        pattern: Pattern | str,
+        statistics: ImageStatistics | None = None,
+        radius: int = DEFAULT_RADIUS,
+    ) -> None:
+        self.pattern = get(pattern)
+        self.statistics = statistics if statistics is not None else shipped_image_statistics()
+        self.radius = radius
+        self._kernels = _as_kernels(self.pattern)
+        self._cache: dict[float, tuple[torch.Tensor, torch.Tensor]] = {}
+
+    def filters(self, sigma: float) -> tuple[torch.Tensor, torch.Tensor]:
+        sigma = check_sigma(sigma)
+        if sigma not in self._cache:
+            self._cache[sigma] = closed_form_filters(
+                self._kernels, sigma, statistics=self.statistics, radius=self.radius
+            )
+        return self._cache[sigma]
+
+    def expected_mse(self, sigma: float) -> float:
+        return float(
+            closed_form_mse(self._kernels, sigma, statistics=self.statistics, radius=self.radius)
+        )
+
+
+def closed_form_lmmse(
+    pattern: Pattern | str,
+    statistics: ImageStatistics | None = None,
+    *,
+    radius: int = DEFAULT_RADIUS,
+    name: str = "lmmse",
+) -> LMMSE:
+    """An :class:`LMMSE` reconstructor of any pattern, from image statistics (default shipped)."""
+    return LMMSE(ClosedFormFilters(pattern, statistics, radius), name=name)  # type: ignore[arg-type]
