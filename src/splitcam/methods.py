@@ -41,12 +41,18 @@ def method_names() -> list[str]:
 def _is_path(spec: str | os.PathLike) -> bool:
     """A run folder or checkpoint file, as opposed to a method name."""
     text = str(spec)
-    return (isinstance(spec, os.PathLike) or "/" in text or os.sep in text
-            or text.endswith(".safetensors") or Path(text).exists())
+    return (
+        isinstance(spec, os.PathLike)
+        or "/" in text
+        or os.sep in text
+        or text.endswith(".safetensors")
+        or Path(text).exists()
+    )
 
 
-def _lmmse_label(pattern_spec: str | os.PathLike | patterns.Pattern,
-                 pattern: patterns.Pattern) -> str:
+def _lmmse_label(
+    pattern_spec: str | os.PathLike | patterns.Pattern, pattern: patterns.Pattern
+) -> str:
     """``lmmse-D`` for a built-in pattern, ``lmmse-<file name>`` for a pattern file (even if the
     file's pattern is named like a built-in, so a table never passes one off as the other)."""
     if isinstance(pattern_spec, (str, os.PathLike)) and str(pattern_spec).lower() not in (
@@ -102,8 +108,9 @@ def build_method(
         path = resolve(spec)
         system = load_system(path)
         label = path.parent.name if path.name == CHECKPOINT_NAME else path.stem
-        method = NetworkReconstructor(system.network, system.sensor.to_pattern(), label,
-                                      tile=tile, fast=fast)
+        method = NetworkReconstructor(
+            system.network, system.sensor.to_pattern(), label, tile=tile, fast=fast
+        )
         stat = path.stat()
         method.fingerprint = f"{path.resolve()}:{stat.st_size}:{stat.st_mtime_ns}"
         return method

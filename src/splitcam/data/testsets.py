@@ -152,11 +152,13 @@ class _Dataset:
 _SOURCES: dict[str, tuple[str, str, str]] = {
     "kodak24": (
         "Kodak Lossless True Color Image Suite, 24 images of 768x512 (PNG)",
-        "cszn/IRCNN", "d9dcd537bdac3ae5b753296cd675db8a303c8f72",
+        "cszn/IRCNN",
+        "d9dcd537bdac3ae5b753296cd675db8a303c8f72",
     ),
     "mcmaster": (
         "McMaster colour demosaicking set, 18 images of 500x500 (TIFF, stored as PNG)",
-        "cszn/FFDNet", "e787f46df2f374ff3591186706229cb9a0591fea",
+        "cszn/FFDNet",
+        "e787f46df2f374ff3591186706229cb9a0591fea",
     ),
 }
 
@@ -200,8 +202,11 @@ def _parse_registry(text: str) -> dict[str, _Dataset]:
             raise RuntimeError(f"dataset registry: unknown dataset in row {label}")
         if entry.name in files[row["dataset"]]:
             raise RuntimeError(f"dataset registry: {label} is listed twice")
-        if not (_SHA256.fullmatch(entry.sha256) and _SHA1.fullmatch(entry.git_blob)
-                and (pixels is None or _SHA256.fullmatch(pixels))):
+        if not (
+            _SHA256.fullmatch(entry.sha256)
+            and _SHA1.fullmatch(entry.git_blob)
+            and (pixels is None or _SHA256.fullmatch(pixels))
+        ):
             raise RuntimeError(f"dataset registry: malformed hash in row {label}")
         if entry.converted and pixels is None:
             # Without it a converted file could not be verified at all.
@@ -212,7 +217,9 @@ def _parse_registry(text: str) -> dict[str, _Dataset]:
         raise RuntimeError(f"dataset registry: no files listed for {', '.join(empty)}")
     return {
         name: _Dataset(
-            name, description, f"https://raw.githubusercontent.com/{repository}/{commit}/",
+            name,
+            description,
+            f"https://raw.githubusercontent.com/{repository}/{commit}/",
             tuple(files[name].values()),
         )
         for name, (description, repository, commit) in _SOURCES.items()
@@ -326,8 +333,10 @@ def resolve(
             folder = Path(spec)
         elif not folder.is_dir():
             where = f"data root '{base}'" + (
-                " (from the root argument)" if root is not None
-                else f" (from ${DATA_ENV})" if os.environ.get(DATA_ENV)
+                " (from the root argument)"
+                if root is not None
+                else f" (from ${DATA_ENV})"
+                if os.environ.get(DATA_ENV)
                 else f" (the default; set ${DATA_ENV} to use another)"
             )
             if spec in _DATASETS:
@@ -599,21 +608,28 @@ def _retrieve(
         if progress:
             # pooch fills in a bar object it is given; it tests whether it has one by the bar's
             # truth value, which tqdm makes `total > 0`, so the bar starts with a dummy total.
-            bar = _tqdm(total=1, unit="B", unit_scale=True, unit_divisor=1024, desc=label,
-                        leave=False)
+            bar = _tqdm(
+                total=1, unit="B", unit_scale=True, unit_divisor=1024, desc=label, leave=False
+            )
         downloader = pooch.HTTPDownloader(
-            progressbar=bar if bar is not None else False, chunk_size=_CHUNK, timeout=timeout,
+            progressbar=bar if bar is not None else False,
+            chunk_size=_CHUNK,
+            timeout=timeout,
             headers={"User-Agent": _USER_AGENT},
         )
     try:
-        pooch.retrieve(url, known_hash, fname=fname, path=folder, downloader=downloader,
-                       processor=processor)
+        pooch.retrieve(
+            url, known_hash, fname=fname, path=folder, downloader=downloader, processor=processor
+        )
     except DownloadError:
         raise  # from the processor: already says what is wrong
     except OSError as exc:
         # requests' exceptions are OSErrors too (including the ones that are also ValueErrors).
-        hint = ("check the mirror folder" if downloader is _copy_local
-                else "check the network connection (or the mirror address)")
+        hint = (
+            "check the mirror folder"
+            if downloader is _copy_local
+            else "check the network connection (or the mirror address)"
+        )
         raise DownloadError(
             f"downloading {label} from {url} failed: {_http_error(exc)}; {hint} and run the "
             "command again"
@@ -686,8 +702,9 @@ class _TiffToPng:
                 f"here (pixel SHA-256 expected {self.entry.pixels_sha256}, got {actual}); the "
                 "image library (Pillow) may decode TIFF differently on this machine"
             )
-        fd, tmp = tempfile.mkstemp(dir=self.final.parent, prefix=f".{self.final.name}.",
-                                   suffix=".tmp")
+        fd, tmp = tempfile.mkstemp(
+            dir=self.final.parent, prefix=f".{self.final.name}.", suffix=".tmp"
+        )
         try:
             with os.fdopen(fd, "wb") as fh:
                 Image.fromarray(pixels).save(fh, format="PNG", optimize=True)
@@ -698,8 +715,14 @@ class _TiffToPng:
         return str(self.final)
 
 
-def _install(dataset: _Dataset, entry: _File, folder: Path, mirror: str | None,
-             timeout: float, progress: bool) -> None:
+def _install(
+    dataset: _Dataset,
+    entry: _File,
+    folder: Path,
+    mirror: str | None,
+    timeout: float,
+    progress: bool,
+) -> None:
     """Download, verify and (if needed) convert one file to ``folder / entry.name``."""
     label = f"{dataset.name}/{entry.name}"
     options: dict[str, Any] = {"timeout": timeout, "progress": progress}
@@ -715,8 +738,15 @@ def _install(dataset: _Dataset, entry: _File, folder: Path, mirror: str | None,
     # be read as a second image of the set; a hidden scratch folder (on the same file system, so
     # the PNG's final rename stays atomic) keeps it out of sight and goes away in any case.
     with tempfile.TemporaryDirectory(dir=folder, prefix=".download-") as scratch:
-        _retrieve(url, Path(scratch), Path(entry.source_path).name, None, label,
-                  processor=_TiffToPng(entry, folder / entry.name, label, url), **options)
+        _retrieve(
+            url,
+            Path(scratch),
+            Path(entry.source_path).name,
+            None,
+            label,
+            processor=_TiffToPng(entry, folder / entry.name, label, url),
+            **options,
+        )
 
 
 def download(
@@ -786,8 +816,10 @@ def download(
                 bar.set_postfix_str(f"{dataset.name}/{entry.name}", refresh=False)
                 if not _is_verified(final, entry):
                     if final.exists() and progress:
-                        bar.write(f"{final}: content does not match its checksum; "
-                                  "downloading again", file=sys.stderr)
+                        bar.write(
+                            f"{final}: content does not match its checksum; downloading again",
+                            file=sys.stderr,
+                        )
                     _install(dataset, entry, folder, base, timeout, progress)
                 paths.append(final)
                 bar.update(1)
@@ -810,34 +842,51 @@ def add_cli(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
         The ``data`` parser; its handler is :func:`cmd_data` (``set_defaults(handler=...)``).
     """
     parser = subparsers.add_parser(
-        "data", help="download the test datasets (Kodak24, McMaster) or list them",
+        "data",
+        help="download the test datasets (Kodak24, McMaster) or list them",
         description="`splitcam data download kodak24 mcmaster --to DIR` downloads the datasets "
         "into DIR/<name>, verifying every file; use them by name with SPLITCAM_DATA=DIR. "
         "`splitcam data list` shows which are present.",
     )
     actions = parser.add_subparsers(dest="data_action", metavar="ACTION", required=True)
     p = actions.add_parser(
-        "download", help="download and verify datasets",
+        "download",
+        help="download and verify datasets",
         description="Downloads from the public sources pinned to a commit (or from a mirror) and "
         "checks every file against the hashes in the package's dataset registry. Files already "
         "present and verified are skipped; a file whose download was interrupted is downloaded "
         "again when the command is run again.",
     )
-    p.add_argument("names", nargs="*", metavar="DATASET",
-                   help=f"datasets to download (default: all of {', '.join(DATASET_NAMES)})")
-    p.add_argument("--to", metavar="DIR",
-                   help=f"data root; each dataset goes to DIR/<name> (default: ${DATA_ENV} or "
-                   f"{_DEFAULT_ROOT})")
-    p.add_argument("--mirror", metavar="URL",
-                   help="download <URL>/<dataset>/<file> instead of the public sources; also "
-                   f"a local folder (default: ${MIRROR_ENV} if set)")
-    p.add_argument("--timeout", type=float, default=30.0,
-                   help="network timeout in seconds (default: 30)")
+    p.add_argument(
+        "names",
+        nargs="*",
+        metavar="DATASET",
+        help=f"datasets to download (default: all of {', '.join(DATASET_NAMES)})",
+    )
+    p.add_argument(
+        "--to",
+        metavar="DIR",
+        help=f"data root; each dataset goes to DIR/<name> (default: ${DATA_ENV} or "
+        f"{_DEFAULT_ROOT})",
+    )
+    p.add_argument(
+        "--mirror",
+        metavar="URL",
+        help="download <URL>/<dataset>/<file> instead of the public sources; also "
+        f"a local folder (default: ${MIRROR_ENV} if set)",
+    )
+    p.add_argument(
+        "--timeout", type=float, default=30.0, help="network timeout in seconds (default: 30)"
+    )
     p.add_argument("--quiet", action="store_true", help="no progress bars")
-    p = actions.add_parser("list", help="list the datasets and whether they are present",
-                           description="Counts the files of each dataset under the data root.")
-    p.add_argument("--root", metavar="DIR",
-                   help=f"data root (default: ${DATA_ENV} or {_DEFAULT_ROOT})")
+    p = actions.add_parser(
+        "list",
+        help="list the datasets and whether they are present",
+        description="Counts the files of each dataset under the data root.",
+    )
+    p.add_argument(
+        "--root", metavar="DIR", help=f"data root (default: ${DATA_ENV} or {_DEFAULT_ROOT})"
+    )
     parser.set_defaults(handler=cmd_data)
     return parser
 
@@ -846,8 +895,9 @@ def cmd_data(args: argparse.Namespace) -> int:
     """Run ``splitcam data download`` or ``splitcam data list``; returns the exit status."""
     if args.data_action == "download":
         names = args.names or list(DATASET_NAMES)
-        paths = download(names, args.to, mirror=args.mirror, progress=not args.quiet,
-                         timeout=args.timeout)
+        paths = download(
+            names, args.to, mirror=args.mirror, progress=not args.quiet, timeout=args.timeout
+        )
         root = data_root(args.to)
         for name in dict.fromkeys(names):
             count = sum(1 for p in paths if p.parent.name == name)
@@ -860,7 +910,12 @@ def cmd_data(args: argparse.Namespace) -> int:
     for dataset in _DATASETS.values():
         folder = root / dataset.name
         present = sum(1 for f in dataset.files if (folder / f.name).is_file())
-        state = ("complete" if present == len(dataset.files)
-                 else f"{present}/{len(dataset.files)} files" if present else "not downloaded")
+        state = (
+            "complete"
+            if present == len(dataset.files)
+            else f"{present}/{len(dataset.files)} files"
+            if present
+            else "not downloaded"
+        )
         print(f"  {dataset.name:10s} {state:16s} {dataset.description}")
     return 0

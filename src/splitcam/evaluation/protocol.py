@@ -48,8 +48,9 @@ Images = Sequence[tuple[str, torch.Tensor]]
 SETTINGS_NAME = "evaluation.json"
 
 
-def simulate_and_reconstruct(method: Reconstructor, sensor: SplitterSensor, image_name: str,
-                             rgb: torch.Tensor, sigma: float) -> torch.Tensor:
+def simulate_and_reconstruct(
+    method: Reconstructor, sensor: SplitterSensor, image_name: str, rgb: torch.Tensor, sigma: float
+) -> torch.Tensor:
     """One step of the protocol: the noisy raw image of ``rgb`` (:func:`splitcam.physics.simulate`)
     and the method's reconstruction, clamped to [0, 1].
 
@@ -66,9 +67,14 @@ def score(pred: torch.Tensor, rgb: torch.Tensor, *, crop: int = 0) -> dict[str, 
     return compute_all(pred, rgb.cpu(), crop=crop)
 
 
-def score_images(method: Reconstructor, images: Images, sigmas: Sequence[float], *,
-                 crop: int = 0, sensor: SplitterSensor | None = None
-                 ) -> Iterator[tuple[str, float, torch.Tensor, dict[str, float]]]:
+def score_images(
+    method: Reconstructor,
+    images: Images,
+    sigmas: Sequence[float],
+    *,
+    crop: int = 0,
+    sensor: SplitterSensor | None = None,
+) -> Iterator[tuple[str, float, torch.Tensor, dict[str, float]]]:
     """``(image name, sigma, reconstruction, scores)`` for every image at every sigma."""
     sensor = sensor if sensor is not None else SplitterSensor(method.pattern)
     for sigma in sigmas:
@@ -77,8 +83,13 @@ def score_images(method: Reconstructor, images: Images, sigmas: Sequence[float],
             yield name, float(sigma), pred, score(pred, rgb, crop=crop)
 
 
-def mean_psnr(method: Reconstructor, images: Images, sigmas: Sequence[float], *,
-              sensor: SplitterSensor | None = None) -> dict[float, float]:
+def mean_psnr(
+    method: Reconstructor,
+    images: Images,
+    sigmas: Sequence[float],
+    *,
+    sensor: SplitterSensor | None = None,
+) -> dict[float, float]:
     """Mean PSNR per sigma over ``images`` (infinite PSNRs left out, as in the tables)."""
     scores: dict[float, list[float]] = {float(s): [] for s in sigmas}
     for _, sigma, _, values in score_images(method, images, sigmas, sensor=sensor):
@@ -118,8 +129,10 @@ def _check_zooms(zooms: Sequence[Zoom], datasets: Sequence[tuple[str, Images]]) 
     for zoom in zooms:
         if zoom.image not in shapes:
             known = ", ".join(list(shapes)[:8]) + (", ..." if len(shapes) > 8 else "")
-            raise ValueError(f"--zoom names image {zoom.image!r}, which is not among the "
-                             f"images evaluated ({known})")
+            raise ValueError(
+                f"--zoom names image {zoom.image!r}, which is not among the "
+                f"images evaluated ({known})"
+            )
         if zoom.region is not None:
             check_region(zoom.region, shapes[zoom.image])
         out[zoom.image] = zoom
@@ -130,8 +143,11 @@ def _fingerprint(method: Reconstructor, crop: int) -> str:
     """What a stored result depends on besides its key: the method's kind, its pattern's kernels
     and the border crop. A result is reused on resume only if this is unchanged."""
     pattern: Pattern = method.pattern
-    text = json.dumps([type(method).__name__, pattern.to_dict(), crop,
-                       getattr(method, "fingerprint", None)], sort_keys=True, default=str)
+    text = json.dumps(
+        [type(method).__name__, pattern.to_dict(), crop, getattr(method, "fingerprint", None)],
+        sort_keys=True,
+        default=str,
+    )
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
@@ -192,21 +208,27 @@ def evaluate(
         write_summary(list(done.values()), out_dir)
         (out_dir / SETTINGS_NAME).write_text(
             json.dumps({"crop": crop, "fingerprints": fingerprints}, indent=2) + "\n",
-            encoding="utf-8")
+            encoding="utf-8",
+        )
         (out_dir / "patterns").mkdir(exist_ok=True)
         for method in methods:
             save(method.pattern, out_dir / "patterns" / f"{method.name}.json")
 
     sensors = {m.name: SplitterSensor(m.pattern) for m in methods}
-    jobs = [(dataset, name, rgb, sigma)
-            for dataset, images in datasets for name, rgb in images for sigma in sigmas]
+    jobs = [
+        (dataset, name, rgb, sigma)
+        for dataset, images in datasets
+        for name, rgb in images
+        for sigma in sigmas
+    ]
     total = len(jobs) * len(methods)
     bar = None
     if progress:
         from tqdm import tqdm
 
-        bar = tqdm(total=total, initial=len(done), unit="recon", desc="evaluate",
-                   dynamic_ncols=True)
+        bar = tqdm(
+            total=total, initial=len(done), unit="recon", desc="evaluate", dynamic_ncols=True
+        )
     rows: list[EvalRow] = []
     try:
         for dataset, image_name, rgb, sigma in jobs:
@@ -217,11 +239,13 @@ def evaluate(
                 if key in done and not zoomed:
                     rows.append(done[key])
                     continue
-                pred = simulate_and_reconstruct(method, sensors[method.name], image_name, rgb,
-                                                sigma)
+                pred = simulate_and_reconstruct(
+                    method, sensors[method.name], image_name, rgb, sigma
+                )
                 scores = score(pred, rgb, crop=crop)
-                row = EvalRow(method.name, method.pattern.name, dataset, image_name, sigma,
-                              **scores)
+                row = EvalRow(
+                    method.name, method.pattern.name, dataset, image_name, sigma, **scores
+                )
                 rows.append(row)
                 outputs[method.name] = (pred, scores)
                 if out_dir is not None and key not in done:
@@ -229,11 +253,14 @@ def evaluate(
                 if bar is not None:
                     if key not in done:
                         bar.update(1)
-                    bar.set_postfix_str(f"{dataset}/{image_name} s{sigma:g} "
-                                        f"{method.name} {scores['psnr']:.2f} dB", refresh=False)
+                    bar.set_postfix_str(
+                        f"{dataset}/{image_name} s{sigma:g} {method.name} {scores['psnr']:.2f} dB",
+                        refresh=False,
+                    )
             if save_images and out_dir is not None and outputs:
-                _save_images(out_dir, dataset, image_name, sigma, rgb, outputs,
-                             zoom.get(image_name))
+                _save_images(
+                    out_dir, dataset, image_name, sigma, rgb, outputs, zoom.get(image_name)
+                )
     finally:
         if bar is not None:
             bar.close()
@@ -251,17 +278,32 @@ def _previous_rows(out_dir: Path, fingerprints: dict[str, str]) -> dict[tuple, E
         before = json.loads(settings_path.read_text(encoding="utf-8"))["fingerprints"]
     except (OSError, ValueError, KeyError, TypeError):
         return {}
-    return {row.key: row for row in read_rows(csv_path)
-            if row.method in fingerprints and before.get(row.method) == fingerprints[row.method]}
+    return {
+        row.key: row
+        for row in read_rows(csv_path)
+        if row.method in fingerprints and before.get(row.method) == fingerprints[row.method]
+    }
 
 
-def _save_images(out_dir: Path, dataset: str, image: str, sigma: float, rgb: torch.Tensor,
-                 outputs: dict, zoom: Zoom | None) -> None:
+def _save_images(
+    out_dir: Path,
+    dataset: str,
+    image: str,
+    sigma: float,
+    rgb: torch.Tensor,
+    outputs: dict,
+    zoom: Zoom | None,
+) -> None:
     safe = image.replace("/", "_")
     for name, (pred, _) in outputs.items():
         path = out_dir / "images" / name / dataset / f"{safe}_sigma{sigma:g}.png"
         path.parent.mkdir(parents=True, exist_ok=True)
         write_image(path, pred)
     if zoom is not None:
-        zoom_figure(rgb, outputs, out_dir / "zoom" / f"{dataset}_{safe}_sigma{sigma:g}.png",
-                    region=zoom.region, title=f"{dataset}/{image}, sigma {sigma:g}")
+        zoom_figure(
+            rgb,
+            outputs,
+            out_dir / "zoom" / f"{dataset}_{safe}_sigma{sigma:g}.png",
+            region=zoom.region,
+            title=f"{dataset}/{image}, sigma {sigma:g}",
+        )

@@ -14,15 +14,25 @@ from ..viz.patterns import draw_pattern
 #: SPEC section 8: mean over Kodak24 and McMaster (42 images), PSNR dB / SSIM, from 10^6 GPU
 #: training steps on DIV2K (Liu & Lam, Tables 1-3).
 PAPER = {
-    "A": [(40.02, .9764), (37.58, .9569), (35.72, .9376), (34.44, .9207), (33.47, .9052)],
-    "B": [(32.93, .9198), (32.70, .9132), (32.33, .9035), (31.93, .8937), (31.54, .8836)],
-    "C": [(31.53, .9159), (31.37, .9088), (31.08, .8986), (30.77, .8881), (30.45, .8773)],
-    "D": [(40.35, .9773), (38.56, .9650), (36.62, .9491), (35.17, .9341), (34.02, .9195)],
-    "E": [(35.65, .9674), (34.84, .9552), (33.89, .9404), (33.08, .9264), (32.37, .9125)],
-    "A optimised": [(40.33, .9772), (38.38, .9631), (36.57, .9468), (35.27, .9319),
-                    (34.25, .9178)],
-    "D optimised": [(41.03, .9797), (38.98, .9668), (36.96, .9508), (35.49, .9361),
-                    (34.34, .9219)],
+    "A": [(40.02, 0.9764), (37.58, 0.9569), (35.72, 0.9376), (34.44, 0.9207), (33.47, 0.9052)],
+    "B": [(32.93, 0.9198), (32.70, 0.9132), (32.33, 0.9035), (31.93, 0.8937), (31.54, 0.8836)],
+    "C": [(31.53, 0.9159), (31.37, 0.9088), (31.08, 0.8986), (30.77, 0.8881), (30.45, 0.8773)],
+    "D": [(40.35, 0.9773), (38.56, 0.9650), (36.62, 0.9491), (35.17, 0.9341), (34.02, 0.9195)],
+    "E": [(35.65, 0.9674), (34.84, 0.9552), (33.89, 0.9404), (33.08, 0.9264), (32.37, 0.9125)],
+    "A optimised": [
+        (40.33, 0.9772),
+        (38.38, 0.9631),
+        (36.57, 0.9468),
+        (35.27, 0.9319),
+        (34.25, 0.9178),
+    ],
+    "D optimised": [
+        (41.03, 0.9797),
+        (38.98, 0.9668),
+        (36.96, 0.9508),
+        (35.49, 0.9361),
+        (34.34, 0.9219),
+    ],
 }
 PAPER_SIGMAS = ("0", "5", "10", "15", "20")
 
@@ -52,12 +62,17 @@ def _load(results: list[str | os.PathLike]) -> list[tuple[str, str, dict, patter
             if not isinstance(summary, dict):
                 raise ValueError("not a JSON object")
         except (ValueError, UnicodeDecodeError) as exc:
-            raise ValueError(f"{str(summary_path)!r} is damaged ({exc}); run `splitcam evaluate` "
-                             f"again to rewrite it") from None
+            raise ValueError(
+                f"{str(summary_path)!r} is damaged ({exc}); run `splitcam evaluate` "
+                f"again to rewrite it"
+            ) from None
         for method, entry in summary.items():
             pattern_file = folder / "patterns" / f"{method}.json"
-            pattern = (patterns.load(pattern_file) if pattern_file.is_file()
-                       else patterns.get(entry["pattern"]))
+            pattern = (
+                patterns.load(pattern_file)
+                if pattern_file.is_file()
+                else patterns.get(entry["pattern"])
+            )
             out.append((folder.name, method, entry, pattern))
     if not out:
         raise ValueError("no methods found in the given result folders")
@@ -79,8 +94,9 @@ def make_report(results: list[str | os.PathLike], out: str | os.PathLike) -> Pat
         "",
     ]
     sigmas = list(dict.fromkeys(s for _, _, e, _ in entries for s in e["all"]))
-    lines.append("| result | method | pattern | images | " +
-                 " | ".join(f"σ={s}" for s in sigmas) + " |")
+    lines.append(
+        "| result | method | pattern | images | " + " | ".join(f"σ={s}" for s in sigmas) + " |"
+    )
     lines.append("|---|---|---|---|" + "---|" * len(sigmas))
     for folder, method, entry, pattern in entries:
         ref = paper_row(pattern)
@@ -101,8 +117,9 @@ def make_report(results: list[str | os.PathLike], out: str | os.PathLike) -> Pat
     lines.append("| result | method | " + " | ".join(f"σ={s}" for s in sigmas) + " |")
     lines.append("|---|---|" + "---|" * len(sigmas))
     for folder, method, entry, _ in entries:
-        cells = [f"{entry['all'][s]['ciede2000']:.3f}" if s in entry["all"] else "–"
-                 for s in sigmas]
+        cells = [
+            f"{entry['all'][s]['ciede2000']:.3f}" if s in entry["all"] else "–" for s in sigmas
+        ]
         lines.append(f"| {folder} | {method} | " + " | ".join(cells) + " |")
     lines += ["", "## Patterns", ""]
     drawn: set[str] = set()
@@ -115,11 +132,15 @@ def make_report(results: list[str | os.PathLike], out: str | os.PathLike) -> Pat
         draw_pattern(pattern, path)
         lines.append(f"![pattern {pattern.name}](patterns/{path.name})")
     several = len({f for f, *_ in entries}) > 1
-    curves = [(f"{folder}: {method}" if several else method, entry["all"])
-              for folder, method, entry, _ in entries]
+    curves = [
+        (f"{folder}: {method}" if several else method, entry["all"])
+        for folder, method, entry, _ in entries
+    ]
     refs = dict.fromkeys(r for *_, pattern in entries if (r := paper_row(pattern)))
-    references = {ref: [(float(s), p) for s, (p, _) in zip(PAPER_SIGMAS, PAPER[ref], strict=True)]
-                  for ref in refs}
+    references = {
+        ref: [(float(s), p) for s, (p, _) in zip(PAPER_SIGMAS, PAPER[ref], strict=True)]
+        for ref in refs
+    }
     chart = sigma_chart(curves, out / "sigma_curves.png", references)
     lines += ["", "## PSNR and CIEDE2000 against noise", "", f"![curves]({chart.name})", ""]
     report = out / "report.md"

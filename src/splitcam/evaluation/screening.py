@@ -155,8 +155,10 @@ def screen_patterns(
     names = [p.name for p in resolved]
     if len(set(names)) != len(names):
         raise ValueError(f"expected distinct pattern names, got {names}")
-    cache = train_dir if isinstance(train_dir, ImageCache) else ImageCache(
-        train_dir, min_size=patch_size, progress=progress
+    cache = (
+        train_dir
+        if isinstance(train_dir, ImageCache)
+        else ImageCache(train_dir, min_size=patch_size, progress=progress)
     )
     decode_seconds = time.perf_counter() - start
     data = _test_images(test_images)
@@ -167,7 +169,12 @@ def screen_patterns(
     for pattern in resolved:
         t0 = time.perf_counter()
         stats = fit_lmmse(
-            pattern, cache, radius=radius, patches=patches, patch_size=patch_size, seed=seed,
+            pattern,
+            cache,
+            radius=radius,
+            patches=patches,
+            patch_size=patch_size,
+            seed=seed,
             progress=progress,
         )
         method = LMMSE(stats)
@@ -181,12 +188,16 @@ def screen_patterns(
             eval_seconds = time.perf_counter() - t1
             per_image += [{"pattern": pattern.name, **r} for r in image_rows]
             mse = stats.expected_mse(sigma)
-            rows.append({
-                "pattern": pattern.name, "sigma": float(sigma),
-                **_means(image_rows, ("psnr", "ssim", "ciede2000", *crop_keys)),
-                "expected_psnr": -10.0 * math.log10(mse) if mse > 0 else math.inf,
-                "fit_seconds": fit_seconds, "eval_seconds": eval_seconds,
-            })
+            rows.append(
+                {
+                    "pattern": pattern.name,
+                    "sigma": float(sigma),
+                    **_means(image_rows, ("psnr", "ssim", "ciede2000", *crop_keys)),
+                    "expected_psnr": -10.0 * math.log10(mse) if mse > 0 else math.inf,
+                    "fit_seconds": fit_seconds,
+                    "eval_seconds": eval_seconds,
+                }
+            )
     ranking = _rank(rows)
     return ScreenResult(
         rows, ranking, per_image, statistics, decode_seconds, time.perf_counter() - start

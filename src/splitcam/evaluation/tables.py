@@ -51,8 +51,10 @@ class EvalRow:
         return (self.method, self.dataset, self.image, self.sigma)
 
     def cells(self) -> list[str]:
-        return [_FORMATS.get(f.name, "{}").format(v)
-                for f, v in zip(fields(self), astuple(self), strict=True)]
+        return [
+            _FORMATS.get(f.name, "{}").format(v)
+            for f, v in zip(fields(self), astuple(self), strict=True)
+        ]
 
 
 def append_rows(path: str | os.PathLike, rows: Iterable[EvalRow]) -> None:
@@ -143,8 +145,15 @@ def markdown_tables(summary: dict) -> str:
     sigmas = list(dict.fromkeys(s for m in methods for g in groups for s in summary[m].get(g, {})))
     lines: list[str] = []
     for group in groups:
-        n = max((summary[m][group][s]["n_images"] for m in methods if group in summary[m]
-                 for s in summary[m][group]), default=0)
+        n = max(
+            (
+                summary[m][group][s]["n_images"]
+                for m in methods
+                if group in summary[m]
+                for s in summary[m][group]
+            ),
+            default=0,
+        )
         lines += [f"### {group} ({n} images): PSNR (dB) / SSIM", ""]
         lines.append("| method | pattern | " + " | ".join(f"σ={s}" for s in sigmas) + " |")
         lines.append("|---|---|" + "---|" * len(sigmas))
@@ -159,8 +168,10 @@ def markdown_tables(summary: dict) -> str:
         lines.append("|---|" + "---|" * len(sigmas))
         for m in methods:
             cells = [
-                "–" if (st := summary[m].get(group, {}).get(s)) is None
-                else f"{st['ciede2000']:.3f}" for s in sigmas
+                "–"
+                if (st := summary[m].get(group, {}).get(s)) is None
+                else f"{st['ciede2000']:.3f}"
+                for s in sigmas
             ]
             lines.append(f"| {m} | " + " | ".join(cells) + " |")
         lines.append("")

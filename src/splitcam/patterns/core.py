@@ -100,9 +100,7 @@ class Pattern:
         kernels = _as_kernels(self.kernels)
         n_split, n_col, kh, kw = kernels.shape
         if n_col != 3:
-            raise PatternError(
-                f"kernels must have 3 colours (R, G, B) on axis 1, got {n_col}"
-            )
+            raise PatternError(f"kernels must have 3 colours (R, G, B) on axis 1, got {n_col}")
         if n_split < 1:
             raise PatternError("kernels must define at least one splitter")
         if kh % 2 == 0 or kw % 2 == 0:
@@ -184,7 +182,13 @@ class Pattern:
         if missing:
             raise PatternError(f"{source}: missing field(s) {', '.join(missing)}")
         unknown = set(data) - {
-            "name", "provenance", "description", "reference", "layout", "kernels", "metadata",
+            "name",
+            "provenance",
+            "description",
+            "reference",
+            "layout",
+            "kernels",
+            "metadata",
         }
         if unknown:
             raise PatternError(f"{source}: unknown field(s) {', '.join(sorted(unknown))}")

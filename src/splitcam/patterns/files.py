@@ -74,10 +74,15 @@ def _toml(data: dict) -> str:
     def row(values) -> str:
         return "[" + ", ".join(repr(float(v)) for v in values) + "]"
 
-    lines = [f"{key} = {json.dumps(data[key])}" for key in
-             ("name", "provenance", "description", "reference")]
-    lines.append("layout = [" + ", ".join(
-        "[" + ", ".join(str(int(v)) for v in r) + "]" for r in data["layout"]) + "]")
+    lines = [
+        f"{key} = {json.dumps(data[key])}"
+        for key in ("name", "provenance", "description", "reference")
+    ]
+    lines.append(
+        "layout = ["
+        + ", ".join("[" + ", ".join(str(int(v)) for v in r) + "]" for r in data["layout"])
+        + "]"
+    )
     if data.get("metadata"):
         lines += ["", tomli_w.dumps({"metadata": data["metadata"]}).strip()]
     for s, kernel in enumerate(data["kernels"]):

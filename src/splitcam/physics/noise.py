@@ -51,7 +51,10 @@ class GaussianNoise:
     """
 
     def __init__(
-        self, sigma: float | tuple[float, float] = (0.0, 30.0), *, per_sample: bool = False,
+        self,
+        sigma: float | tuple[float, float] = (0.0, 30.0),
+        *,
+        per_sample: bool = False,
         seed: int = 0,
     ) -> None:
         lo, hi = (sigma, sigma) if isinstance(sigma, (int, float)) else tuple(sigma)
@@ -86,7 +89,11 @@ def evaluation_seed(image_name: str, sigma: float) -> int:
 
 
 def evaluation_noise(
-    shape: tuple[int, ...], image_name: str, sigma: float, *, dtype: torch.dtype = torch.float32,
+    shape: tuple[int, ...],
+    image_name: str,
+    sigma: float,
+    *,
+    dtype: torch.dtype = torch.float32,
     device: torch.device | str = "cpu",
 ) -> torch.Tensor:
     """The deterministic evaluation noise ``N(0, (sigma/255)^2)`` of one image at one sigma.

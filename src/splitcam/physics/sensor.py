@@ -45,9 +45,7 @@ def _check(x: torch.Tensor, channels: int, what: str) -> None:
     if not isinstance(x, torch.Tensor):
         raise TypeError(f"expected {what} as a torch.Tensor, got {type(x).__name__}")
     if x.ndim != 4 or x.shape[1] != channels:
-        raise ValueError(
-            f"expected {what} of shape (N, {channels}, H, W), got {tuple(x.shape)}"
-        )
+        raise ValueError(f"expected {what} of shape (N, {channels}, H, W), got {tuple(x.shape)}")
     if not x.is_floating_point():
         raise TypeError(f"expected {what} with a floating dtype (float32/float64), got {x.dtype}")
     if x.shape[0] == 0 or x.shape[2] == 0 or x.shape[3] == 0:
@@ -111,9 +109,7 @@ def _period(layout: Layout) -> tuple[int, int]:
     return (int(layout.shape[0]), int(layout.shape[1]))
 
 
-def splitter_forward(
-    rgb: torch.Tensor, weights: torch.Tensor, layout: Layout
-) -> torch.Tensor:
+def splitter_forward(rgb: torch.Tensor, weights: torch.Tensor, layout: Layout) -> torch.Tensor:
     r"""Raw image of a splitter sensor, paper Eq. 1 (noise-free).
 
     .. math:: g = \sum_{s} (f \downarrow_s) \star w_s
@@ -149,9 +145,7 @@ def splitter_forward(
     return period_shuffle(raw, (ph, pw), (h, w))
 
 
-def splitter_adjoint(
-    raw: torch.Tensor, weights: torch.Tensor, layout: Layout
-) -> torch.Tensor:
+def splitter_adjoint(raw: torch.Tensor, weights: torch.Tensor, layout: Layout) -> torch.Tensor:
     r"""Exact adjoint of :func:`splitter_forward` in the image.
 
     .. math:: (A^T g)[c, y, x] = \sum_{a,b} w[s(y,x), c, a, b]\, g[y + a - kh//2, x + b - kw//2]
@@ -209,9 +203,7 @@ def pixel_kernels(weights: torch.Tensor, layout: Layout) -> torch.Tensor:
     return weights.reshape(-1)[index]
 
 
-def pixel_gather(
-    rgb: torch.Tensor, weights: torch.Tensor, layout: Layout
-) -> torch.Tensor:
+def pixel_gather(rgb: torch.Tensor, weights: torch.Tensor, layout: Layout) -> torch.Tensor:
     r"""Raw image by paper Eq. 2: each pixel correlates the scene with its own kernel.
 
     .. math:: g = \sum_{p} ((f * k_p) \downarrow_p)

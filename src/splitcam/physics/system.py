@@ -69,7 +69,11 @@ SIMULATE_STRIP = 256
 
 
 def simulate(
-    sensor: SplitterSensor, rgb: torch.Tensor, image_name: str, sigma: float, *,
+    sensor: SplitterSensor,
+    rgb: torch.Tensor,
+    image_name: str,
+    sigma: float,
+    *,
     strip: int = SIMULATE_STRIP,
 ) -> torch.Tensor:
     """The noisy raw image of a test scene: the protocol of ``evaluate``, validation,
@@ -95,5 +99,5 @@ def simulate(
         for top in range(0, h, step):
             lo, hi = max(0, top - halo), min(h, top + step + halo)
             raw = sensor(rgb[:, :, lo:hi].double())
-            out[:, :, top:min(h, top + step)] = raw[:, :, top - lo:top - lo + step].float()
+            out[:, :, top : min(h, top + step)] = raw[:, :, top - lo : top - lo + step].float()
         return add_evaluation_noise(out, image_name, sigma)

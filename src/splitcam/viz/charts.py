@@ -37,8 +37,15 @@ def sigma_chart(
     for ref, points in (references or {}).items():
         xs, values = zip(*points, strict=True)
         ax1.plot(xs, values, "--", color="grey", alpha=0.7, lw=1)
-        ax1.annotate(f"paper {ref}", (xs[-1], values[-1]), fontsize=7,
-                     color="dimgrey", xytext=(3, 0), textcoords="offset points", va="center")
+        ax1.annotate(
+            f"paper {ref}",
+            (xs[-1], values[-1]),
+            fontsize=7,
+            color="dimgrey",
+            xytext=(3, 0),
+            textcoords="offset points",
+            va="center",
+        )
     ax1.set_xlabel("noise σ (8-bit units)")
     ax1.set_ylabel("PSNR (dB)")
     ax1.set_title("PSNR (grey dashed: the paper's trained network)", fontsize=10)

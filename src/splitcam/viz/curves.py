@@ -12,9 +12,15 @@ from pathlib import Path
 
 def _valid(row: object) -> bool:
     """A logged step: a JSON object with an integer step and numbers for every other value."""
-    return (isinstance(row, dict) and isinstance(row.get("step"), int)
-            and all(isinstance(v, Real) and not isinstance(v, bool) and not math.isnan(v)
-                    for k, v in row.items() if k != "step"))
+    return (
+        isinstance(row, dict)
+        and isinstance(row.get("step"), int)
+        and all(
+            isinstance(v, Real) and not isinstance(v, bool) and not math.isnan(v)
+            for k, v in row.items()
+            if k != "step"
+        )
+    )
 
 
 def read_metrics(run: str | os.PathLike) -> list[dict]:
@@ -42,8 +48,11 @@ def read_metrics(run: str | os.PathLike) -> list[dict]:
             damaged.append(number)
     if damaged:
         shown = ", ".join(map(str, damaged[:10])) + (", ..." if len(damaged) > 10 else "")
-        warnings.warn(f"{str(path)!r}: skipped {len(damaged)} damaged line(s): {shown}",
-                      UserWarning, stacklevel=2)
+        warnings.warn(
+            f"{str(path)!r}: skipped {len(damaged)} damaged line(s): {shown}",
+            UserWarning,
+            stacklevel=2,
+        )
     if not rows:
         raise ValueError(f"{str(path)!r} holds no logged steps yet")
     return rows
@@ -65,22 +74,35 @@ def plot_run(run: str | os.PathLike, out: str | os.PathLike | None = None) -> Pa
     ax1.set_xlabel("step")
     ax1.set_ylabel("training loss (MSE)")
     ax1.grid(alpha=0.3)
-    ax2.plot([r["step"] for r in train], [r["train_psnr"] for r in train], lw=0.8, alpha=0.6,
-             label="training batches (noisy, all sigmas)")
-    sigmas = sorted({k for r in val for k in r if k.startswith("val_psnr_")},
-                    key=lambda k: float(k.rsplit("_", 1)[1]))
+    ax2.plot(
+        [r["step"] for r in train],
+        [r["train_psnr"] for r in train],
+        lw=0.8,
+        alpha=0.6,
+        label="training batches (noisy, all sigmas)",
+    )
+    sigmas = sorted(
+        {k for r in val for k in r if k.startswith("val_psnr_")},
+        key=lambda k: float(k.rsplit("_", 1)[1]),
+    )
     for key in sigmas:
-        ax2.plot([r["step"] for r in val], [r[key] for r in val], marker="o", ms=3,
-                 label=f"validation, sigma {key.rsplit('_', 1)[1]}")
+        ax2.plot(
+            [r["step"] for r in val],
+            [r[key] for r in val],
+            marker="o",
+            ms=3,
+            label=f"validation, sigma {key.rsplit('_', 1)[1]}",
+        )
     ax2.set_xlabel("step")
     ax2.set_ylabel("PSNR (dB)")
     ax2.grid(alpha=0.3)
     ax2.legend(fontsize=8)
     last = val[-1] if val else train[-1]
     name = Path(run).name if Path(run).is_dir() else Path(run).parent.name
-    fig.suptitle(f"run {name}: step {last['step']}"
-                 + (f", validation PSNR {last['val_psnr']:.2f} dB (mean over sigmas)"
-                    if val else ""))
+    fig.suptitle(
+        f"run {name}: step {last['step']}"
+        + (f", validation PSNR {last['val_psnr']:.2f} dB (mean over sigmas)" if val else "")
+    )
     fig.tight_layout()
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=120)
@@ -101,15 +123,23 @@ def compare_runs(runs: list[str | os.PathLike], out: str | os.PathLike) -> Path:
         if not rows:
             raise ValueError(f"run {str(run)!r} has no validation results")
         t0 = rows[0]["time"]
-        keys = sorted((k for k in rows[0] if k.startswith("val_psnr_")),
-                      key=lambda k: float(k.rsplit("_", 1)[1]))
+        keys = sorted(
+            (k for k in rows[0] if k.startswith("val_psnr_")),
+            key=lambda k: float(k.rsplit("_", 1)[1]),
+        )
         for j, key in enumerate(keys):
             style = ["o-", "s--", "^:"][j % 3]
             label = f"{Path(run).name}, sigma {key.rsplit('_', 1)[1]}"
             minutes = [(r["time"] - t0) / 60 for r in rows]
             ax1.plot(minutes, [r[key] for r in rows], style, color=colours[i], ms=3, label=label)
-            ax2.plot([r["step"] for r in rows], [r[key] for r in rows], style, color=colours[i],
-                     ms=3, label=label)
+            ax2.plot(
+                [r["step"] for r in rows],
+                [r[key] for r in rows],
+                style,
+                color=colours[i],
+                ms=3,
+                label=label,
+            )
     ax1.set_xlabel("wall-clock minutes since the first validation")
     ax2.set_xlabel("step")
     ax2.set_xscale("symlog", linthresh=100)

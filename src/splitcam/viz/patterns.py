@@ -55,8 +55,15 @@ def draw_pattern(pattern: Pattern, out: str | os.PathLike | None = None, *, dpi:
         text = f"s{pattern.layout[i, j]}\n" + " ".join(
             f"{c}{_fmt(v)}" for c, v in zip(COLOURS, response[i, j], strict=True)
         )
-        ax.text(j + 0.5, i + 0.5, text, ha="center", va="center", fontsize=7,
-                color="white" if rgb.mean() < 0.5 else "black")
+        ax.text(
+            j + 0.5,
+            i + 0.5,
+            text,
+            ha="center",
+            va="center",
+            fontsize=7,
+            color="white" if rgb.mean() < 0.5 else "black",
+        )
     ax.set_xlim(0, pw)
     ax.set_ylim(ph, 0)
     ax.set_axis_off()
@@ -66,8 +73,14 @@ def draw_pattern(pattern: Pattern, out: str | os.PathLike | None = None, *, dpi:
     for r, (i, j) in enumerate(sites):
         y0 = top - (r + 1) * (mini_h + 0.45) + 0.1
         s = pattern.layout[i, j]
-        fig.text((x0 - 0.15) / fig_w, (y0 + mini_h / 2) / fig_h, f"site ({i},{j})\ns{s}",
-                 ha="right", va="center", fontsize=8)
+        fig.text(
+            (x0 - 0.15) / fig_w,
+            (y0 + mini_h / 2) / fig_h,
+            f"site ({i},{j})\ns{s}",
+            ha="right",
+            va="center",
+            fontsize=8,
+        )
         for c, colour in enumerate(COLOURS):
             ax = box(x0 + c * (mini_w + 0.35), y0, mini_w, mini_h)
             k = pattern.kernels[s, c]
@@ -77,12 +90,28 @@ def draw_pattern(pattern: Pattern, out: str | os.PathLike | None = None, *, dpi:
                     f = float(k[a, b])
                     shade = np.array(_RGB[colour]) * f + np.ones(3) * (1 - f)
                     centre = (a, b) == (kh // 2, kw // 2)
-                    ax.add_patch(Rectangle((ox + b, a), 1, 1, fc=shade,
-                                           ec="black" if centre else "#aaaaaa",
-                                           lw=1.6 if centre else 0.6, zorder=2 if centre else 1))
+                    ax.add_patch(
+                        Rectangle(
+                            (ox + b, a),
+                            1,
+                            1,
+                            fc=shade,
+                            ec="black" if centre else "#aaaaaa",
+                            lw=1.6 if centre else 0.6,
+                            zorder=2 if centre else 1,
+                        )
+                    )
                     if f > 1e-3:
-                        ax.text(ox + b + 0.5, a + 0.5, _fmt(f), ha="center", va="center",
-                                fontsize=7, color="white" if f > 0.55 else "black", zorder=3)
+                        ax.text(
+                            ox + b + 0.5,
+                            a + 0.5,
+                            _fmt(f),
+                            ha="center",
+                            va="center",
+                            fontsize=7,
+                            color="white" if f > 0.55 else "black",
+                            zorder=3,
+                        )
             ax.set_xlim(0, max(kw, 3))
             ax.set_ylim(kh, 0)
             ax.set_aspect("equal")
@@ -100,9 +129,15 @@ def draw_pattern(pattern: Pattern, out: str | os.PathLike | None = None, *, dpi:
         + (f"pools light in {m.pooling_unit}-pixel units" if m.pooling else "no pooling"),
     ]
     fig.text(0.5, 1 - 0.1 / fig_h, "\n".join(lines), ha="center", va="top", fontsize=8.5)
-    fig.text(0.5, 0.12 / fig_h, "Outlined centre: the pixel where the light arrives; other cells: "
-             "its neighbours. Numbers: fraction of that colour's light.", ha="center",
-             fontsize=7, color="#555555")
+    fig.text(
+        0.5,
+        0.12 / fig_h,
+        "Outlined centre: the pixel where the light arrives; other cells: "
+        "its neighbours. Numbers: fraction of that colour's light.",
+        ha="center",
+        fontsize=7,
+        color="#555555",
+    )
     if out is not None:
         Path(out).parent.mkdir(parents=True, exist_ok=True)
         fig.savefig(out, dpi=dpi)

@@ -24,8 +24,12 @@ def detail_region(rgb: torch.Tensor, size: int = 96) -> tuple[int, int, int, int
     energy[:, 1:] += np.diff(grey, axis=1) ** 2
     energy[1:, :] += np.diff(grey, axis=0) ** 2
     integral = np.pad(energy.cumsum(0).cumsum(1), ((1, 0), (1, 0)))
-    sums = (integral[size:, size:] - integral[:-size, size:] - integral[size:, :-size]
-            + integral[:-size, :-size])
+    sums = (
+        integral[size:, size:]
+        - integral[:-size, size:]
+        - integral[size:, :-size]
+        + integral[:-size, :-size]
+    )
     top, left = np.unravel_index(int(np.argmax(sums)), sums.shape)
     return int(top), int(left), size, size
 
@@ -44,9 +48,13 @@ def check_region(region: tuple[int, int, int], shape: tuple[int, int]) -> tuple[
     return top, left, h, w
 
 
-def zoom_figure(rgb: torch.Tensor, outputs: Mapping[str, tuple[torch.Tensor, dict | None]],
-                path: str | os.PathLike, title: str = "",
-                region: tuple[int, int, int] | None = None) -> Path:
+def zoom_figure(
+    rgb: torch.Tensor,
+    outputs: Mapping[str, tuple[torch.Tensor, dict | None]],
+    path: str | os.PathLike,
+    title: str = "",
+    region: tuple[int, int, int] | None = None,
+) -> Path:
     """Ground truth and each method's output, zoomed on ``region`` (top, left, size), by
     default the most detailed region of the scene (:func:`detail_region`).
 
@@ -61,8 +69,9 @@ def zoom_figure(rgb: torch.Tensor, outputs: Mapping[str, tuple[torch.Tensor, dic
     from matplotlib.figure import Figure
     from matplotlib.patches import Rectangle
 
-    top, left, h, w = (detail_region(rgb) if region is None
-                       else check_region(region, tuple(rgb.shape[1:])))
+    top, left, h, w = (
+        detail_region(rgb) if region is None else check_region(region, tuple(rgb.shape[1:]))
+    )
     panels = [("ground truth", rgb, None), *((n, p, s) for n, (p, s) in outputs.items())]
     fig = Figure(figsize=(2.6 * (len(panels) + 1), 3.1))
     axes = fig.subplots(1, len(panels) + 1)
@@ -70,11 +79,16 @@ def zoom_figure(rgb: torch.Tensor, outputs: Mapping[str, tuple[torch.Tensor, dic
     axes[0].add_patch(Rectangle((left, top), w, h, fill=False, ec="yellow", lw=1.5))
     axes[0].set_title("scene (region in yellow)", fontsize=8)
     for ax, (name, img, scores) in zip(axes[1:], panels, strict=True):
-        crop = img[:, top:top + h, left:left + w].permute(1, 2, 0).numpy()
+        crop = img[:, top : top + h, left : left + w].permute(1, 2, 0).numpy()
         ax.imshow(crop, interpolation="nearest")
-        label = name if scores is None else (
-            f"{name}\n{scores['psnr']:.2f} dB, SSIM {scores['ssim']:.3f}, "
-            f"ΔE {scores['ciede2000']:.2f}")
+        label = (
+            name
+            if scores is None
+            else (
+                f"{name}\n{scores['psnr']:.2f} dB, SSIM {scores['ssim']:.3f}, "
+                f"ΔE {scores['ciede2000']:.2f}"
+            )
+        )
         ax.set_title(label, fontsize=7)
     for ax in axes:
         ax.set_xticks([])
