@@ -33,6 +33,7 @@ from .periodic import period_shuffle, period_unshuffle, phase_conv
 __all__ = [
     "LearnableSplitterSensor",
     "SplitterSensor",
+    "pattern_pixel_kernels",
     "pixel_gather",
     "pixel_kernels",
     "splitter_adjoint",
@@ -201,6 +202,17 @@ def pixel_kernels(weights: torch.Tensor, layout: Layout) -> torch.Tensor:
     s, _, kh, kw = weights.shape
     index = _pixel_kernel_index(_layout_key(layout), s, kh, kw).to(weights.device)
     return weights.reshape(-1)[index]
+
+
+def pattern_pixel_kernels(pattern: Pattern | str) -> torch.Tensor:
+    """:func:`pixel_kernels` of a pattern (name, file or :class:`Pattern`), in float64.
+
+    Shape:
+        - output: ``(Ph, Pw, 3, kh, kw)``.
+    """
+    pattern = get(pattern)
+    weights = torch.from_numpy(np.array(pattern.kernels, dtype=np.float64))
+    return pixel_kernels(weights, pattern.layout)
 
 
 def pixel_gather(rgb: torch.Tensor, weights: torch.Tensor, layout: Layout) -> torch.Tensor:

@@ -56,11 +56,18 @@ class ImagingSystem(nn.Module):
         # network runs in reduced precision.
         with torch.autocast(rgb.device.type, enabled=False):
             raw = self.sensor(rgb)
+        sigma = torch.zeros(rgb.shape[0], device=rgb.device)
         if noise is not None:
-            raw, _ = noise(raw)
+            raw, sigma = noise(raw)
         if self.channels_last:
             raw = raw.contiguous(memory_format=torch.channels_last)
         network = self._compiled if self._compiled is not None else self.network
+        if getattr(self.network, "uses_physics", False):
+            # A network that is told the physics: the noise level and the sensor's current
+            # kernels (through which gradients reach a learned pattern).
+            with torch.autocast(rgb.device.type, enabled=False):
+                kernels = self.sensor.pixel_kernels()
+            return network(raw, sigma, kernels)
         return network(raw)
 
 

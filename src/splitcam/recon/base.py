@@ -16,6 +16,7 @@ from torch import nn
 
 from ..patterns import Pattern
 from ..physics.noise import check_sigma
+from ..physics.sensor import pattern_pixel_kernels
 
 __all__ = ["NetworkReconstructor", "Reconstructor", "check_raw", "check_sigma"]
 
@@ -98,13 +99,20 @@ class NetworkReconstructor:
         self.name = name
         self.tile = tile
         self.fast = fast
+        self._kernels = pattern_pixel_kernels(pattern)
 
     def reconstruct(self, raw: torch.Tensor, sigma: float) -> torch.Tensor:
         from .tiling import reconstruct
 
         check_sigma(sigma)
         return reconstruct(
-            self.network, raw, tile=self.tile, bf16=self.fast, channels_last=self.fast
+            self.network,
+            raw,
+            tile=self.tile,
+            bf16=self.fast,
+            channels_last=self.fast,
+            sigma=sigma,
+            kernels=self._kernels,
         )
 
     def __repr__(self) -> str:

@@ -35,9 +35,9 @@ import torch
 
 from ..data.patches import ImageCache
 from ..patterns import Pattern, get
-from ..physics.sensor import pixel_kernels
+from ..physics.sensor import pattern_pixel_kernels
 from .base import check_sigma
-from .lmmse import DEFAULT_RADIUS, LMMSE, LMMSEFileError
+from .lmmse import DEFAULT_RADIUS, LMMSE, LMMSEFileError, apply_filters
 
 __all__ = [
     "DEFAULT_MAX_OFFSET",
@@ -47,6 +47,7 @@ __all__ = [
     "closed_form_lmmse",
     "closed_form_mse",
     "estimate_image_statistics",
+    "lmmse_estimate",
     "shipped_image_statistics",
 ]
 
@@ -343,9 +344,7 @@ def _as_kernels(pattern_or_kernels: Pattern | str | torch.Tensor) -> torch.Tenso
                 f"expected pixel kernels of shape (Ph, Pw, 3, kh, kw), got {tuple(k.shape)}"
             )
         return k.to(torch.float64)
-    pattern = get(pattern_or_kernels)
-    weights = torch.from_numpy(np.array(pattern.kernels, dtype=np.float64))
-    return pixel_kernels(weights, pattern.layout)
+    return pattern_pixel_kernels(pattern_or_kernels)
 
 
 def _as_sigmas(sigma: float | torch.Tensor) -> tuple[torch.Tensor, bool]:
@@ -451,3 +450,49 @@ def closed_form_lmmse(
 ) -> LMMSE:
     """An :class:`LMMSE` reconstructor of any pattern, from image statistics (default shipped)."""
     return LMMSE(ClosedFormFilters(pattern, statistics, radius), name=name)  # type: ignore[arg-type]
+
+
+def lmmse_estimate(
+    raw: torch.Tensor,
+    kernels: torch.Tensor,
+    sigma: float | torch.Tensor,
+    statistics: ImageStatistics,
+    radius: int = DEFAULT_RADIUS,
+) -> torch.Tensor:
+    """The closed-form LMMSE reconstruction of a raw batch, differentiable in the kernels.
+
+    The filters are solved in float64 for the kernels and noise level(s) given, then applied in
+    the dtype of ``raw`` with autocast off (a reduced-precision estimate would cap the accuracy of
+    whatever is built on it). The raw image is taken as 0 outside the image, as in
+    :class:`~splitcam.recon.lmmse.LMMSE`; its top-left pixel has phase ``(0, 0)``.
+
+    Args:
+        raw: Raw images.
+        kernels: Pixel kernels ``(Ph, Pw, 3, kh, kw)`` of the sensor that recorded them.
+        sigma: Noise level in 8-bit units: one for the batch, or one per image ``(N,)``.
+        statistics: Image statistics.
+        radius: Filter radius.
+
+    Shape:
+        - raw: ``(N, 1, H, W)``; output ``(N, 3, H, W)``.
+    """
+    ph, pw = kernels.shape[:2]
+    if isinstance(sigma, torch.Tensor) and sigma.ndim == 1 and sigma.numel() > 1:
+        if bool((sigma == sigma[0]).all()):
+            sigma = sigma[:1]
+        else:
+            return torch.cat(
+                [
+                    lmmse_estimate(raw[i : i + 1], kernels, sigma[i : i + 1], statistics, radius)
+                    for i in range(raw.shape[0])
+                ]
+            )
+    if isinstance(sigma, torch.Tensor):
+        sigma = sigma.reshape(-1)[:1].detach().to("cpu", torch.float64)
+    with torch.autocast(raw.device.type, enabled=False):
+        weights, bias = closed_form_filters(
+            kernels.to(torch.float64), sigma, statistics=statistics, radius=radius
+        )
+        if weights.ndim == 5:
+            weights, bias = weights[0], bias[0]
+        return apply_filters(raw, weights, bias, (ph, pw))

@@ -35,6 +35,7 @@ __all__ = [
     "LMMSE",
     "LMMSEFileError",
     "LMMSEStatistics",
+    "apply_filters",
     "fit_lmmse",
     "shipped_lmmse",
 ]
@@ -432,6 +433,25 @@ def fit_lmmse(
     return LMMSEStatistics(pattern, radius, *stats, info=info)
 
 
+def apply_filters(
+    raw: torch.Tensor, weights: torch.Tensor, bias: torch.Tensor, period: tuple[int, int]
+) -> torch.Tensor:
+    """Per-phase linear filters plus bias: one convolution, then a per-pixel phase pick.
+
+    The filters are cast to the dtype and device of ``raw``; the raw image is taken as 0 outside
+    the image, and its top-left pixel has phase ``(0, 0)``.
+
+    Shape:
+        - raw: ``(N, 1, H, W)``; weights ``(Ph * Pw, 3, k, k)``; bias ``(Ph * Pw, 3)``.
+        - output: ``(N, 3, H, W)``.
+    """
+    weights = weights.to(device=raw.device, dtype=raw.dtype).unsqueeze(2)
+    bias = bias.to(device=raw.device, dtype=raw.dtype)
+    out = phase_conv(raw, weights, period)
+    phase = phase_map(*raw.shape[-2:], period, raw.device)
+    return out + bias[phase].permute(2, 0, 1).unsqueeze(0)
+
+
 class LMMSE:
     """Linear MMSE reconstruction of any pattern, from precomputed :class:`LMMSEStatistics`.
 
@@ -491,16 +511,12 @@ class LMMSE:
         """
         check_raw(raw)
         weights, bias = self.statistics.filters(sigma)
-        ph, pw = self.pattern.period
-        weights = weights.to(device=raw.device, dtype=raw.dtype).unsqueeze(2)
-        bias = bias.to(device=raw.device, dtype=raw.dtype)
+        period = self.pattern.period
 
         def run(tile: torch.Tensor) -> torch.Tensor:
-            out = phase_conv(tile, weights, (ph, pw))
-            phase = phase_map(*tile.shape[-2:], (ph, pw), tile.device)
-            return out + bias[phase].permute(2, 0, 1).unsqueeze(0)
+            return apply_filters(tile, weights, bias, period)
 
-        return tiled(run, raw, (ph, pw), self.statistics.radius, tile=DEFAULT_TILE)
+        return tiled(run, raw, period, self.statistics.radius, tile=DEFAULT_TILE)
 
     def __repr__(self) -> str:
         return (

@@ -9,8 +9,14 @@ conv, a long skip from the head, tail conv; all 3x3, zero padding, biases, no ou
 - :class:`PackedReconNet` (``arch="packed"``) rearranges each period cell into channels
   (:func:`period_unshuffle`), runs the trunk at ``1 / (Ph * Pw)`` of the pixels and rearranges the
   ``3 * Ph * Pw`` output channels back (:func:`period_shuffle`).
+- :class:`PhysicsReconNet` (``arch="physics"``) is the packed network given the physics: besides
+  the packed raw image it receives the closed-form LMMSE estimate for the sensor's kernels and
+  noise level (:func:`splitcam.recon.closed_form.lmmse_estimate`) and the noise level itself, and
+  predicts the correction to that estimate (its last layer starts at zero, so an untrained
+  network *is* the LMMSE). It is called as ``net(raw, sigma, kernels)`` (``uses_physics``); the
+  other two are blind and take only ``raw``.
 
-Both store ``period``, report ``receptive_radius`` (what :func:`splitcam.recon.tiling.reconstruct`
+All store ``period``, report ``receptive_radius`` (what :func:`splitcam.recon.tiling.reconstruct`
 needs to tile exactly) and round-trip through ``config()`` / :func:`build_network`.
 """
 
@@ -27,11 +33,14 @@ from torch import nn
 from ..physics.periodic import as_period as _as_period
 from ..physics.periodic import period_shuffle, period_unshuffle, phase_map
 from .base import check_raw
+from .closed_form import ImageStatistics, lmmse_estimate, shipped_image_statistics
+from .lmmse import DEFAULT_RADIUS
 
 __all__ = [
     "ARCHITECTURES",
     "PackedReconNet",
     "PeriodicSampling",
+    "PhysicsReconNet",
     "ReconNet",
     "build_network",
 ]
@@ -222,10 +231,94 @@ class PackedReconNet(_Reconstructor):
         return (self.trunk.reach + 1) * max(self.period) - 1
 
 
+class PhysicsReconNet(_Reconstructor):
+    """The packed network, given the physics: it corrects the closed-form LMMSE estimate.
+
+    Inputs of the trunk, all at cell resolution: the packed raw image (``Ph * Pw`` channels), the
+    packed LMMSE estimate for the sensor's current kernels and the noise level (``3 * Ph * Pw``),
+    and the noise level as a constant map (``sigma / 25.5``). The trunk predicts a packed
+    correction that is added to the estimate. The trunk's last layer starts at zero, so at
+    initialisation the output *is* the LMMSE estimate, and training starts from the best linear
+    reconstruction instead of from nothing. With a learned pattern the estimate follows the
+    kernels (the filters are solved in closed form at every call, differentiably), so the joint
+    optimisation trains through it.
+
+    The image statistics the filters are solved from are kept as (float64) buffers, so a
+    checkpoint carries them. Arguments as :class:`_Reconstructor`, plus ``radius``, the LMMSE
+    filter radius.
+
+    Shape:
+        - raw: ``(N, 1, H, W)``; sigma: a number or ``(N,)``; kernels ``(Ph, Pw, 3, kh, kw)``.
+        - Output: ``(N, 3, H, W)``.
+    """
+
+    arch = "physics"
+    uses_physics = True
+
+    def __init__(
+        self,
+        period: tuple[int, int],
+        features: int = 64,
+        blocks: int = 10,
+        radius: int = DEFAULT_RADIUS,
+        statistics: ImageStatistics | None = None,
+    ) -> None:
+        super().__init__(period, features, blocks)
+        ph, pw = self.period
+        self.radius = _as_count(radius, "radius", 0)
+        p = ph * pw
+        self.trunk = _Trunk(p + 3 * p + 1, 3 * p, self.features, self.num_blocks)
+        nn.init.zeros_(self.trunk.tail.weight)
+        nn.init.zeros_(self.trunk.tail.bias)
+        stats = statistics if statistics is not None else shipped_image_statistics()
+        self.register_buffer("stat_mean", stats.mean.clone())
+        self.register_buffer("stat_second", stats.second.clone())
+
+    def statistics(self) -> ImageStatistics:
+        return ImageStatistics(self.stat_mean.double(), self.stat_second.double(), 0)
+
+    def forward(
+        self,
+        raw: torch.Tensor,
+        sigma: float | torch.Tensor | None = None,
+        kernels: torch.Tensor | None = None,
+    ) -> torch.Tensor:
+        check_raw(raw)
+        if sigma is None or kernels is None:
+            raise ValueError(
+                "the physics network needs the noise level and the sensor's pixel kernels: "
+                "call net(raw, sigma, kernels)"
+            )
+        if tuple(kernels.shape[:2]) != self.period:
+            raise ValueError(
+                f"expected kernels of period {self.period}, got {tuple(kernels.shape[:2])}"
+            )
+        n = raw.shape[0]
+        estimate = lmmse_estimate(raw, kernels, sigma, self.statistics(), self.radius)
+        sig = torch.as_tensor(sigma, dtype=raw.dtype, device=raw.device).reshape(-1)
+        sig = sig.expand(n) if sig.numel() == 1 else sig
+        cells = period_unshuffle(raw, self.period)
+        level = (sig / 25.5).view(n, 1, 1, 1).expand(n, 1, *cells.shape[-2:])
+        x = torch.cat([cells, period_unshuffle(estimate, self.period), level.to(cells.dtype)], 1)
+        correction = period_shuffle(self.trunk(x), self.period, raw.shape[-2:])
+        return estimate + correction
+
+    @property
+    def receptive_radius(self) -> int:
+        """Pixels of context on each side that can influence an output pixel: the packed trunk's
+        reach (see :class:`PackedReconNet`) over the estimate, which itself reads ``radius``
+        pixels around each of its pixels."""
+        return (self.trunk.reach + 1) * max(self.period) - 1 + self.radius
+
+    def config(self) -> dict[str, Any]:
+        return {**super().config(), "radius": self.radius}
+
+
 #: Network classes by their ``config()["arch"]`` name.
 ARCHITECTURES: dict[str, type[nn.Module]] = {
     ReconNet.arch: ReconNet,
     PackedReconNet.arch: PackedReconNet,
+    PhysicsReconNet.arch: PhysicsReconNet,
 }
 
 
@@ -249,13 +342,16 @@ def build_network(config: Mapping[str, Any]) -> nn.Module:
     if not isinstance(arch, str) or arch not in ARCHITECTURES:
         known = ", ".join(repr(a) for a in ARCHITECTURES)
         raise ValueError(f"unknown network arch {arch!r}; expected one of {known}")
-    unknown = sorted(set(config) - {"arch", "period", "features", "blocks"})
+    extra = {"radius"} if arch == PhysicsReconNet.arch else set()
+    unknown = sorted(set(config) - {"arch", "period", "features", "blocks"} - extra)
     if unknown:
         raise ValueError(f"unknown network config field(s): {', '.join(map(str, unknown))}")
     if "period" not in config:
         raise ValueError("network config needs a 'period' [Ph, Pw]")
+    kwargs = {k: config[k] for k in extra if k in config}
     return ARCHITECTURES[arch](
         period=config["period"],
         features=config.get("features", 64),
         blocks=config.get("blocks", 10),
+        **kwargs,
     )

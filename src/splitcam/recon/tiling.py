@@ -209,6 +209,8 @@ def reconstruct(
     progress: bool = False,
     bf16: bool = False,
     channels_last: bool = False,
+    sigma: float | None = None,
+    kernels: torch.Tensor | None = None,
 ) -> torch.Tensor:
     """Reconstruct RGB from a raw image in overlapping tiles (:func:`tiled`), without autograd.
 
@@ -230,6 +232,9 @@ def reconstruct(
             AMX; the output is returned in float32; costs some accuracy, see the README).
         channels_last: Run the convolutions in channels-last memory format (converts the
             network's weights in place; the results are unchanged).
+        sigma: Noise level of ``raw`` (8-bit units), for networks that take it
+            (``net.uses_physics``, see :class:`splitcam.recon.networks.PhysicsReconNet`).
+        kernels: Pixel kernels ``(Ph, Pw, 3, kh, kw)`` of the sensor, for the same networks.
 
     Returns:
         The RGB reconstruction, equal to ``net(raw)`` up to float error (bfloat16 error with
@@ -252,10 +257,18 @@ def reconstruct(
     if channels_last:
         net.to(memory_format=torch.channels_last)
 
+    physics: tuple[Any, ...] = ()
+    if getattr(net, "uses_physics", False):
+        if sigma is None or kernels is None:
+            raise ValueError(
+                f"network {type(net).__name__} needs the noise level and the sensor's kernels"
+            )
+        physics = (sigma, kernels.to(device))
+
     def run(x: torch.Tensor) -> torch.Tensor:
         x = x.to(device).contiguous(memory_format=memory_format)
         with torch.autocast(device.type, dtype=torch.bfloat16, enabled=bf16):
-            y = net(x)
+            y = net(x, *physics)
         return y.to(raw.dtype) if bf16 else y
 
     with torch.inference_mode():
