@@ -83,3 +83,16 @@ def test_config_round_trip_and_clear_errors() -> None:
         net(torch.zeros(1, 1, 9, 9), 0.0, pattern_pixel_kernels("D"))
     with pytest.raises(ValueError, match="unknown network config"):
         build_network({"arch": "packed", "period": [2, 2], "radius": 3})
+
+
+def test_precision_switch(monkeypatch: pytest.MonkeyPatch) -> None:
+    from splitcam.recon import base
+
+    assert base.fast_precision("fp32", "cpu") is False
+    assert base.fast_precision("bf16", "cpu") is True
+    monkeypatch.setattr(base, "_cpu_has_native_bf16", lambda: True)
+    assert base.fast_precision("auto", "cpu") is True
+    monkeypatch.setattr(base, "_cpu_has_native_bf16", lambda: False)
+    assert base.fast_precision("auto", "cpu") is False
+    with pytest.raises(ValueError, match="unknown precision"):
+        base.fast_precision("fp16", "cpu")

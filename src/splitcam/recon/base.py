@@ -18,7 +18,52 @@ from ..patterns import Pattern
 from ..physics.noise import check_sigma
 from ..physics.sensor import pattern_pixel_kernels
 
-__all__ = ["NetworkReconstructor", "Reconstructor", "check_raw", "check_sigma"]
+__all__ = [
+    "PRECISIONS",
+    "NetworkReconstructor",
+    "Reconstructor",
+    "check_raw",
+    "check_sigma",
+    "fast_precision",
+]
+
+#: Network precision settings: ``auto`` (bfloat16 + channels-last where the hardware runs it
+#: fast, float32 elsewhere), ``fp32`` (bit-exact float32) and ``bf16`` (bfloat16 + channels-last
+#: everywhere; slow on CPUs without native bfloat16).
+PRECISIONS = ("auto", "fp32", "bf16")
+
+
+def _cpu_has_native_bf16() -> bool:
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8") as f:
+            for line in f:
+                if line.startswith("flags"):
+                    flags = set(line.split(":", 1)[1].split())
+                    return bool({"avx512_bf16", "amx_bf16"} & flags)
+    except OSError:
+        pass
+    return False
+
+
+def fast_precision(precision: str, device: torch.device | str) -> bool:
+    """Whether a network runs in bfloat16 + channels-last for this ``precision`` on ``device``.
+
+    ``auto`` picks it where it pays: CUDA GPUs with bfloat16 support, and CPUs with native
+    bfloat16 dot products (AVX512-BF16 or AMX), where the README measures about 4x faster
+    training; elsewhere (e.g. AVX2-only CPUs, which emulate bfloat16) float32.
+
+    Raises:
+        ValueError: An unknown ``precision``.
+    """
+    if precision not in PRECISIONS:
+        known = ", ".join(PRECISIONS)
+        raise ValueError(f"unknown precision {precision!r}; expected one of {known}")
+    if precision != "auto":
+        return precision == "bf16"
+    device = torch.device(device)
+    if device.type == "cuda":
+        return bool(torch.cuda.is_available() and torch.cuda.is_bf16_supported())
+    return device.type == "cpu" and _cpu_has_native_bf16()
 
 
 def check_raw(raw: Any) -> None:
