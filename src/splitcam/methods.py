@@ -4,8 +4,9 @@
 ``splitcam evaluate``, ``splitcam reconstruct`` and Python code all build their methods here, so a
 name means the same thing everywhere:
 
-- ``lmmse``: the LMMSE filters of a pattern (shipped fits for the built-in patterns, or fitted on
-  a folder of training images with ``lmmse_train``);
+- ``lmmse``: the LMMSE filters of a pattern (shipped fits for the built-in patterns, closed-form
+  filters from the shipped image statistics for any other kernels, or fitted on a folder of
+  training images with ``lmmse_train``);
 - ``bilinear``, ``malvar2004``, ``menon2007``: classical demosaicking of the ``bayer`` pattern;
 - a run folder or checkpoint file: a trained network with the pattern it was trained for.
 
@@ -23,6 +24,7 @@ from pathlib import Path
 
 from . import patterns
 from .recon.base import NetworkReconstructor, Reconstructor
+from .recon.closed_form import closed_form_lmmse
 from .recon.demosaic import ClassicalDemosaic
 from .recon.lmmse import LMMSE, shipped_lmmse
 from .training.checkpoint import CHECKPOINT_NAME, load_system, resolve
@@ -86,7 +88,6 @@ def build_method(
     Raises:
         ValueError: Unknown name (the message lists the valid ones), or ``lmmse`` without a
             pattern.
-        FileNotFoundError: No shipped LMMSE fit for the pattern and no ``lmmse_train``.
     """
     key = str(spec).strip().lower()
     if key in DEMOSAICKING:
@@ -100,7 +101,10 @@ def build_method(
         if lmmse_train is not None:
             lmmse = LMMSE.fit(resolved, lmmse_train, progress=progress)
         else:
-            lmmse = shipped_lmmse(resolved)
+            try:
+                lmmse = shipped_lmmse(resolved)
+            except FileNotFoundError:  # not a built-in's kernels: solve its filters in closed form
+                lmmse = closed_form_lmmse(resolved)
         lmmse.pattern = resolved
         lmmse.name = _lmmse_label(pattern, resolved)
         return lmmse
