@@ -16,8 +16,11 @@ from PIL import Image
 
 from splitcam import patterns
 from splitcam.cli import main
+from splitcam.evaluation.protocol import mean_psnr
+from splitcam.recon.closed_form import closed_form_lmmse
 from splitcam.training import CheckpointError, ConfigError, TrainConfig, load_system, train
 from splitcam.training import checkpoint as ckpt_io
+from splitcam.training.trainer import _val_images
 
 
 @pytest.fixture(scope="module")
@@ -37,6 +40,7 @@ def tiny(folder, out, **changes) -> TrainConfig:
         "data.train": str(folder), "data.val_split": 2, "data.val_max_images": 2,
         "data.val_crop": 32, "data.patch_size": 16, "data.batch_size": 4,
         "network.features": 8, "network.blocks": 1, "optim.steps": 6, "optim.lr": 1e-3,
+        "optim.warmup_steps": 5,
         "run.out": str(out), "run.log_every": 1, "run.val_every": 3,
         "run.checkpoint_every": 3, "run.threads": 1,
     }
@@ -49,28 +53,62 @@ def losses(run) -> list[float]:
     return [r["loss"] for r in rows if "loss" in r]
 
 
-def test_a_few_steps_lower_the_loss(image_folder, tmp_path):
-    result = train(tiny(image_folder, tmp_path / "r", **{"optim.steps": 40}), progress=False)
+@pytest.mark.parametrize("arch", ["packed", "physics"])
+def test_a_few_steps_lower_the_loss(image_folder, tmp_path, arch):
+    config = tiny(image_folder, tmp_path / "r", **{"optim.steps": 40, "network.arch": arch})
+    result = train(config, progress=False)
     values = losses(tmp_path / "r")
     assert len(values) == 40 and result.step == 40
-    assert np.mean(values[-5:]) < 0.5 * np.mean(values[:5])
+    if arch == "packed":  # from scratch, the blind network halves its loss
+        assert np.mean(values[-5:]) < 0.5 * np.mean(values[:5])
     rows = [json.loads(line) for line in (tmp_path / "r/metrics.jsonl").read_text().splitlines()]
     val = [r for r in rows if "val_psnr" in r]
     assert val[0]["step"] == 0 and val[-1]["step"] == 40
-    assert val[-1]["val_psnr"] > val[0]["val_psnr"]
+    assert val[-1]["val_psnr"] > val[0]["val_psnr"] + 0.5
+    if arch == "physics":  # it starts at the LMMSE estimate: its correction is zero
+        lmmse = mean_psnr(
+            closed_form_lmmse("D"), _val_images(config), config.data.val_sigmas
+        )
+        assert val[0]["val_psnr"] == pytest.approx(np.mean(list(lmmse.values())), abs=1e-3)
     assert json.loads((tmp_path / "r/config.json").read_text())["optim"]["steps"] == 40
 
 
 def test_resume_equals_the_uninterrupted_run(image_folder, tmp_path):
-    train(tiny(image_folder, tmp_path / "full"), progress=False)
-    train(tiny(image_folder, tmp_path / "split", **{"optim.steps": 3}), progress=False)
-    train(tiny(image_folder, tmp_path / "split"), resume=True, progress=False)
+    # A constant learning rate, so that stopping at 3 steps first changes nothing else.
+    constant = {"optim.schedule": "constant"}
+    train(tiny(image_folder, tmp_path / "full", **constant), progress=False)
+    train(tiny(image_folder, tmp_path / "split", **{**constant, "optim.steps": 3}), progress=False)
+    train(tiny(image_folder, tmp_path / "split", **constant), resume=True, progress=False)
     assert losses(tmp_path / "split") == losses(tmp_path / "full")
     a = ckpt_io.load(tmp_path / "full").tensors
     b = ckpt_io.load(tmp_path / "split").tensors
     assert a.keys() == b.keys()
     for key in a:
         assert torch.equal(a[key], b[key]), key
+
+
+def test_schedule_survives_a_resume(image_folder, tmp_path):
+    """The learning rate is a function of the step and the run's length: a run stopped early
+    and resumed uses, after the resume, the learning rates of the uninterrupted run."""
+
+    def lrs(run):
+        rows = [json.loads(line) for line in (run / "metrics.jsonl").read_text().splitlines()]
+        return {r["step"]: r["lr"] for r in rows if "lr" in r}
+
+    cosine = {"optim.schedule": "cosine", "optim.warmup_steps": 2, "optim.steps": 8}
+    train(tiny(image_folder, tmp_path / "full", **cosine), progress=False)
+    train(tiny(image_folder, tmp_path / "split", **{**cosine, "optim.steps": 4}), progress=False)
+    train(tiny(image_folder, tmp_path / "split", **cosine), resume=True, progress=False)
+    full, split = lrs(tmp_path / "full"), lrs(tmp_path / "split")
+    peak = 1e-3
+    # Logged after step s: the rate used for step s (0-based s - 1).
+    expected = {
+        s: peak * min(1.0, s / 2) * 0.5 * (1 + np.cos(np.pi * (s - 1) / 8)) for s in range(1, 9)
+    }
+    assert full == pytest.approx(expected, rel=1e-9)
+    assert {s: split[s] for s in range(5, 9)} == pytest.approx(
+        {s: expected[s] for s in range(5, 9)}, rel=1e-9
+    )
 
 
 def test_joint_training_changes_the_pattern_and_keeps_it_valid(image_folder, tmp_path):

@@ -99,11 +99,13 @@ TRAIN_FLAGS: dict[str, tuple[str, type | None, str]] = {
     "val_sigmas": ("data.val_sigmas", float, "validation noise levels (default 0 15)"),
     "patch_size": ("data.patch_size", int, "patch size (default 64)"),
     "batch_size": ("data.batch_size", int, "batch size (default 80)"),
-    "arch": ("network.arch", str, "network: packed (default) or paper (the paper's)"),
+    "arch": ("network.arch", str, "network: physics (default), packed, or paper (the paper's)"),
     "features": ("network.features", int, "network width (default 64)"),
     "blocks": ("network.blocks", int, "residual blocks (default 10)"),
     "steps": ("optim.steps", int, "training steps (default 10^6)"),
-    "lr": ("optim.lr", float, "Adam learning rate (default 1e-4)"),
+    "lr": ("optim.lr", float, "peak Adam learning rate (default 5e-4; the paper: 1e-4)"),
+    "schedule": ("optim.schedule", str, "cosine (default) or constant (the paper's)"),
+    "warmup_steps": ("optim.warmup_steps", int, "linear learning-rate warm-up steps (default 100)"),
     "per_sample_sigma": ("optim.per_sample_sigma", None, "one noise sigma per patch"),
     "out": ("run.out", str, "run folder (default runs/default)"),
     "device": ("run.device", str, "auto, cpu, cuda, cuda:N or mps"),
@@ -112,12 +114,24 @@ TRAIN_FLAGS: dict[str, tuple[str, type | None, str]] = {
     "val_every": ("run.val_every", int, "validate every N steps"),
     "checkpoint_every": ("run.checkpoint_every", int, "checkpoint every N steps"),
     "threads": ("run.threads", int, "torch CPU threads"),
-    "time_limit": ("run.time_limit", float, "stop and save after this many minutes"),
+    "time_limit": ("run.time_limit", float, "stop and save after this many minutes in total"),
+    "precision": ("run.precision", str, "auto (default: bfloat16 where native), fp32 or bf16"),
     "tensorboard": ("run.tensorboard", None, "also log to TensorBoard (if installed)"),
     "channels_last": ("run.channels_last", None, "channels-last memory format"),
     "bf16": ("run.bf16", None, "bfloat16 autocast for the network"),
     "compile": ("run.compile", None, "torch.compile the network (slow start, faster steps)"),
 }
+
+
+def _end_distributed() -> None:
+    """Under torchrun: wait for every rank, then take the process group down cleanly. Left to
+    interpreter shutdown, gloo's threads can outlive it and abort the process ("terminate
+    called without an active exception") after the work is done."""
+    import torch.distributed as dist
+
+    if dist.is_available() and dist.is_initialized():
+        dist.barrier()
+        dist.destroy_process_group()
 
 
 def cmd_train(args: argparse.Namespace) -> int:
@@ -137,6 +151,7 @@ def cmd_train(args: argparse.Namespace) -> int:
             overrides[key] = value
     config = config.override(overrides)
     result = train(config, resume=args.resume, progress=not args.quiet)
+    _end_distributed()
     if int(os.environ.get("RANK", "0")) != 0:
         return 0  # under torchrun only rank 0 reports
     summary = ", ".join(

@@ -172,7 +172,8 @@ def _paired_paths(path: str | os.PathLike[str]) -> tuple[Path, Path]:
 @functools.lru_cache(maxsize=1)
 def shipped_image_statistics() -> ImageStatistics:
     """The statistics shipped with splitcam (``scripts/estimate_image_statistics.py``)."""
-    return ImageStatistics.load(SHIPPED_PATH)
+    with torch.inference_mode(False):  # cached: must not become inference tensors
+        return ImageStatistics.load(SHIPPED_PATH)
 
 
 def estimate_image_statistics(
@@ -252,7 +253,7 @@ def estimate_image_statistics(
 @functools.lru_cache(maxsize=64)
 def _design_index(
     period: tuple[int, int], kh: int, kw: int, radius: int
-) -> tuple[torch.Tensor, tuple[int, int]]:
+) -> tuple[np.ndarray, tuple[int, int]]:
     """Index table of the matrices ``A_p`` (raw neighbourhood from scene window), per phase.
 
     ``A[p, a * k + b, c * wh * ww + y * ww + x]`` (``k = 2r + 1``, window ``wh x ww`` with
@@ -277,11 +278,11 @@ def _design_index(
                             for v in range(kw):
                                 flat = (((qi * pw + qj) * 3 + c) * kh + u) * kw + v
                                 index[i * pw + j, a * k + b, c, a + u, b + v] = flat
-    return torch.from_numpy(index.reshape(ph * pw, k * k, 3 * wh * ww)), (wh, ww)
+    return index.reshape(ph * pw, k * k, 3 * wh * ww), (wh, ww)
 
 
 @functools.lru_cache(maxsize=16)
-def _window_index(wh: int, ww: int, lo: int) -> torch.Tensor:
+def _window_index(wh: int, ww: int, lo: int) -> np.ndarray:
     """Flat index into the ``(3, 3, 2L+1, 2L+1)`` autocovariance of every pair of window entries."""
     c = np.arange(3)[:, None, None]
     y = np.arange(wh)[None, :, None]
@@ -290,7 +291,7 @@ def _window_index(wh: int, ww: int, lo: int) -> torch.Tensor:
     k = 2 * lo + 1
     dy = y[None, :] - y[:, None] + lo
     dx = x[None, :] - x[:, None] + lo
-    return torch.from_numpy(((c[:, None] * 3 + c[None, :]) * k + dy) * k + dx)
+    return ((c[:, None] * 3 + c[None, :]) * k + dy) * k + dx
 
 
 def _moments(
@@ -306,9 +307,11 @@ def _moments(
             f"{max(wh, ww) - 1}, these cover {lo}"
         )
     flat = torch.cat([kernels.reshape(-1), kernels.new_zeros(1)])
-    a = flat[index.to(kernels.device)]  # (P, d, n)
+    # The caches hold numpy arrays: a tensor made under inference_mode (validation) could not
+    # be saved for backward when training reuses it.
+    a = flat[torch.from_numpy(index).to(kernels.device)]  # (P, d, n)
     cov = stats.covariance().to(kernels.device)
-    cff = cov.reshape(-1)[_window_index(wh, ww, lo).to(kernels.device)]  # (n, n)
+    cff = cov.reshape(-1)[torch.from_numpy(_window_index(wh, ww, lo)).to(kernels.device)]
     mean_f = stats.mean.to(kernels.device).repeat_interleave(wh * ww)
     centre = torch.tensor([c * wh * ww + (wh // 2) * ww + ww // 2 for c in range(3)])
     cxx = a @ cff @ a.transpose(1, 2)

@@ -155,9 +155,7 @@ def load_module(
                 f"{k} has shape {tuple(state[k].shape)} in the checkpoint, "
                 f"{tuple(own[k].shape)} here"
             )
-        raise CheckpointError(
-            "checkpoint belongs to another architecture: " + "; ".join(details)
-        )
+        raise CheckpointError("checkpoint belongs to another architecture: " + "; ".join(details))
     module.load_state_dict(state)
 
 

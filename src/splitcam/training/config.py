@@ -1,8 +1,11 @@
 """Typed training configuration: dataclasses that load from TOML/YAML/JSON, take command-line
 overrides, and are written resolved into every run folder.
 
-Defaults are the paper's recipe (SPEC section 6): batch 80 of 64x64 patches, Adam at 1e-4,
-MSE, ``sigma ~ U[0, 30]``, 10^6 steps, the 10-block 64-feature network.
+Defaults follow the paper's recipe (SPEC section 6: batch 80 of 64x64 patches, Adam, MSE,
+``sigma ~ U[0, 30]``, 10^6 steps, 10 blocks of 64 features) except where measurement chose
+better per CPU-hour (docs/results/convergence.md): the physics-informed network and Adam peaking
+at 5e-4 after 100 warm-up steps with cosine decay. ``--arch paper --schedule constant --lr 1e-4``
+is the paper's.
 """
 
 from __future__ import annotations
@@ -40,9 +43,11 @@ class PatternConfig:
 
 @dataclass
 class NetworkConfig:
-    arch: str = "packed"
-    """packed (runs at 1/(Ph*Pw) of the positions; the default because it wins at equal CPU
-    time, see docs/results) or paper (full resolution, SPEC section 5)."""
+    arch: str = "physics"
+    """physics (corrects the closed-form LMMSE estimate for the sensor's kernels and noise
+    level; the default because it wins at equal CPU time, see docs/results/convergence.md),
+    packed (blind, runs at 1/(Ph*Pw) of the positions) or paper (full resolution, SPEC
+    section 5)."""
     features: int = 64
     blocks: int = 10
 
@@ -67,7 +72,12 @@ class DataConfig:
 @dataclass
 class OptimConfig:
     steps: int = 1_000_000
-    lr: float = 1e-4
+    lr: float = 5e-4
+    """Peak learning rate (the paper: 1e-4, constant)."""
+    schedule: str = "cosine"
+    """constant (the paper's) or cosine: decay to 0 over the run's steps or time limit."""
+    warmup_steps: int = 100
+    """Linear warm-up from lr/warmup_steps to lr over the first steps (0: none)."""
     betas: list[float] = field(default_factory=lambda: [0.9, 0.999])
     sigma_min: float = 0.0
     sigma_max: float = 30.0
@@ -85,14 +95,18 @@ class RunConfig:
     val_every: int = 500
     checkpoint_every: int = 200
     time_limit: float | None = None
-    """Stop (and save) after this many minutes of training in this process."""
+    """Stop (and save) after this many minutes of training in total (a resumed run continues
+    the count; validation and checkpoints not counted). The cosine schedule decays over it."""
+    precision: str = "auto"
+    """Network precision: auto (bfloat16 + channels-last where the hardware has native
+    bfloat16: AVX512-BF16/AMX CPUs, CUDA GPUs; float32 elsewhere), fp32 (bit-exact) or bf16."""
     tensorboard: bool = False
     threads: int | None = None
     """torch intra-op threads (default: torch's choice)."""
     channels_last: bool = False
-    """Run the network in channels-last memory format."""
+    """Run the network in channels-last memory format (also on with fast precision)."""
     bf16: bool = False
-    """bfloat16 autocast for the network on CPUs that support it."""
+    """bfloat16 autocast for the network (the same as precision bf16)."""
     compile: bool = False
     """torch.compile the network (a one-off warm-up of about a minute; then faster steps)."""
 
@@ -129,23 +143,44 @@ class TrainConfig:
     def validate(self) -> None:
         """Checks that need more than types (ranges, choices)."""
         checks = [
-            (self.pattern.init in ("support", "exact", "random"),
-             f"pattern.init must be support, exact or random, got {self.pattern.init!r}"),
-            (self.network.arch in ("paper", "packed"),
-             f"network.arch must be paper or packed, got {self.network.arch!r}"),
-            (self.network.features >= 1 and self.network.blocks >= 0,
-             "network.features must be >= 1 and network.blocks >= 0"),
+            (
+                self.pattern.init in ("support", "exact", "random"),
+                f"pattern.init must be support, exact or random, got {self.pattern.init!r}",
+            ),
+            (
+                self.network.arch in ("paper", "packed", "physics"),
+                f"network.arch must be physics, packed or paper, got {self.network.arch!r}",
+            ),
+            (
+                self.optim.schedule in ("constant", "cosine"),
+                f"optim.schedule must be constant or cosine, got {self.optim.schedule!r}",
+            ),
+            (self.optim.warmup_steps >= 0, "optim.warmup_steps must be >= 0"),
+            (
+                self.run.precision in ("auto", "fp32", "bf16"),
+                f"run.precision must be auto, fp32 or bf16, got {self.run.precision!r}",
+            ),
+            (
+                self.network.features >= 1 and self.network.blocks >= 0,
+                "network.features must be >= 1 and network.blocks >= 0",
+            ),
             (self.data.patch_size >= 1, "data.patch_size must be >= 1"),
             (self.data.batch_size >= 1, "data.batch_size must be >= 1"),
             (self.optim.steps >= 0, f"optim.steps must be >= 0, got {self.optim.steps}"),
             (self.optim.lr > 0, f"optim.lr must be > 0, got {self.optim.lr}"),
             (self.pattern.lr is None or self.pattern.lr > 0, "pattern.lr must be > 0"),
-            (0 <= self.optim.sigma_min <= self.optim.sigma_max,
-             "expected 0 <= optim.sigma_min <= optim.sigma_max"),
-            (len(self.optim.betas) == 2 and all(0 <= b < 1 for b in self.optim.betas),
-             f"optim.betas must be two numbers in [0, 1), got {self.optim.betas}"),
-            (min(self.run.log_every, self.run.val_every, self.run.checkpoint_every) >= 1,
-             "run.log_every, run.val_every and run.checkpoint_every must be >= 1"),
+            (
+                0 <= self.optim.sigma_min <= self.optim.sigma_max,
+                "expected 0 <= optim.sigma_min <= optim.sigma_max",
+            ),
+            (
+                len(self.optim.betas) == 2 and all(0 <= b < 1 for b in self.optim.betas),
+                f"optim.betas must be two numbers in [0, 1), got {self.optim.betas}",
+            ),
+            (
+                min(self.run.log_every, self.run.val_every, self.run.checkpoint_every) >= 1,
+                "run.log_every, run.val_every and run.checkpoint_every must be >= 1",
+            ),
             (self.data.val_split >= 0, "data.val_split must be >= 0"),
         ]
         for ok, message in checks:

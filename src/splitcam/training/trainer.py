@@ -23,10 +23,12 @@ from ..evaluation.protocol import mean_psnr
 from ..physics.noise import GaussianNoise
 from ..physics.sensor import LearnableSplitterSensor, SplitterSensor
 from ..physics.system import ImagingSystem
-from ..recon.base import NetworkReconstructor
+from ..recon.base import NetworkReconstructor, fast_precision
 from ..recon.networks import build_network
 from . import checkpoint as ckpt_io
 from .config import ConfigError, TrainConfig
+from .schedule import learning_rate
+from .schedule import progress as progress_of
 
 METRICS_NAME = "metrics.jsonl"
 
@@ -83,12 +85,14 @@ def build_system(config: TrainConfig, pattern: patterns.Pattern | None = None) -
         )
     else:
         sensor = SplitterSensor(pattern)
-    net = build_network({
-        "arch": config.network.arch,
-        "period": list(pattern.period),
-        "features": config.network.features,
-        "blocks": config.network.blocks,
-    })
+    net = build_network(
+        {
+            "arch": config.network.arch,
+            "period": list(pattern.period),
+            "features": config.network.features,
+            "blocks": config.network.blocks,
+        }
+    )
     return ImagingSystem(sensor, net)
 
 
@@ -98,7 +102,7 @@ def _val_images(config: TrainConfig) -> list[tuple[str, torch.Tensor]]:
     if data.val:
         source: Any = data.val
     elif data.val_split and data.train:
-        source = list_images(data.train)[-data.val_split:]
+        source = list_images(data.train)[-data.val_split :]
     else:
         return []
     cache = ImageCache(source, min_size=1, max_images=data.val_max_images, progress=False)
@@ -109,7 +113,7 @@ def _val_images(config: TrainConfig) -> list[tuple[str, torch.Tensor]]:
             h, w = img.shape[-2:]
             c = data.val_crop
             top, left = max(0, (h - c) // 2), max(0, (w - c) // 2)
-            img = img[:, top:top + c, left:left + c]
+            img = img[:, top : top + c, left : left + c]
         images.append((name, img.contiguous()))
     return images
 
@@ -129,7 +133,9 @@ def _train_source(config: TrainConfig) -> Any:
 
 
 def validate(
-    system: ImagingSystem, images: list[tuple[str, torch.Tensor]], sigmas: list[float],
+    system: ImagingSystem,
+    images: list[tuple[str, torch.Tensor]],
+    sigmas: list[float],
 ) -> dict[str, float]:
     """Mean PSNR per sigma on the validation images, by the evaluation protocol itself
     (:func:`splitcam.evaluation.protocol.mean_psnr`): the pattern as a run's checkpoint records
@@ -224,33 +230,52 @@ def train(config: TrainConfig, *, resume: bool = False, progress: bool = True) -
     pattern = patterns.Pattern.from_dict(loaded.meta["start_pattern"]) if loaded else None
     system = build_system(config, pattern).to(device)
     start_pattern = system.sensor._meta.to_dict()
-    if config.run.channels_last:
+    fast = config.run.bf16 or fast_precision(config.run.precision, device)
+    if config.run.channels_last or fast:
         system.channels_last = True
         system.network.to(memory_format=torch.channels_last)
     if config.run.compile:
         system.compile_network()
     net_params = list(system.network.parameters())
-    groups = [{"params": net_params, "lr": config.optim.lr}]
+    # "peak_lr": what the schedule scales, per group (network, pattern).
+    groups = [{"params": net_params, "lr": config.optim.lr, "peak_lr": config.optim.lr}]
     sensor_params = list(system.sensor.parameters())
     if sensor_params:
-        groups.append({"params": sensor_params, "lr": config.pattern.lr or config.optim.lr})
+        pattern_lr = config.pattern.lr or config.optim.lr
+        groups.append({"params": sensor_params, "lr": pattern_lr, "peak_lr": pattern_lr})
     optimizer = torch.optim.Adam(groups, lr=config.optim.lr, betas=tuple(config.optim.betas))
 
-    cache = ImageCache(_train_source(config), min_size=config.data.patch_size,
-                       max_images=config.data.max_images, progress=progress and dist_info.is_main)
-    sampler = PatchSampler(cache, patch_size=config.data.patch_size, seed=config.run.seed,
-                           rank=dist_info.rank, world_size=dist_info.world_size)
-    noise = GaussianNoise((config.optim.sigma_min, config.optim.sigma_max),
-                          per_sample=config.optim.per_sample_sigma,
-                          seed=config.run.seed * 7919 + 1 + 104729 * dist_info.rank)
+    cache = ImageCache(
+        _train_source(config),
+        min_size=config.data.patch_size,
+        max_images=config.data.max_images,
+        progress=progress and dist_info.is_main,
+    )
+    sampler = PatchSampler(
+        cache,
+        patch_size=config.data.patch_size,
+        seed=config.run.seed,
+        rank=dist_info.rank,
+        world_size=dist_info.world_size,
+    )
+    noise = GaussianNoise(
+        (config.optim.sigma_min, config.optim.sigma_max),
+        per_sample=config.optim.per_sample_sigma,
+        seed=config.run.seed * 7919 + 1 + 104729 * dist_info.rank,
+    )
     val_images = _val_images(config) if dist_info.is_main else []
 
     step = 0
+    train_seconds = 0.0  # training time of the run so far, all processes (not validation)
     if loaded is not None:
         ckpt_io.load_module(system, loaded)
         ckpt_io.load_optimizer(optimizer, loaded)
         step = int(loaded.meta["step"])
+        train_seconds = float(loaded.meta.get("train_seconds", 0.0))
         _restore_rng(loaded, sampler, noise, dist_info)
+        # The peaks are settings, not state: those of this config apply (a changed --lr too).
+        for group, peak in zip(optimizer.param_groups, (g["peak_lr"] for g in groups), strict=True):
+            group["peak_lr"] = peak
 
     model: torch.nn.Module = system
     if dist_info.world_size > 1:
@@ -287,30 +312,37 @@ def train(config: TrainConfig, *, resume: bool = False, progress: bool = True) -
             "start_pattern": start_pattern,
             "optimizer": opt_meta,
             "world_size": dist_info.world_size,
+            "train_seconds": train_seconds,
             "replicas": replicas,
             "time": time.strftime("%Y-%m-%dT%H:%M:%S"),
         }
         ckpt_io.save(ckpt_path, meta, tensors)
         if config.pattern.learn:
-            patterns.save(system.sensor.to_pattern(f"{start_pattern['name']}-learned"),
-                          run_dir / "pattern.toml")
+            patterns.save(
+                system.sensor.to_pattern(f"{start_pattern['name']}-learned"),
+                run_dir / "pattern.toml",
+            )
 
     bar = None
     if progress and dist_info.is_main:
         from tqdm import tqdm
 
-        bar = tqdm(total=config.optim.steps, initial=step, unit="step", dynamic_ncols=True,
-                   desc=f"train {Path(config.run.out).name}")
+        bar = tqdm(
+            total=config.optim.steps,
+            initial=step,
+            unit="step",
+            dynamic_ncols=True,
+            desc=f"train {Path(config.run.out).name}",
+        )
     autocast = (
-        torch.autocast(device.type, dtype=torch.bfloat16) if config.run.bf16
-        else contextlib.nullcontext()
+        torch.autocast(device.type, dtype=torch.bfloat16) if fast else contextlib.nullcontext()
     )
+    time_limit_s = 60 * config.run.time_limit if config.run.time_limit else None
     last: dict[str, float] = {}
     last_batch: torch.Tensor | None = None
     window_loss, window_n, data_time = 0.0, 0, 0.0
     t_window = time.perf_counter()
     interrupted = False
-    deadline = (time.monotonic() + 60 * config.run.time_limit) if config.run.time_limit else None
     timed_out = False
     with _StopFlag() as stop:
         if step == 0 and val_images and dist_info.is_main:
@@ -319,6 +351,15 @@ def train(config: TrainConfig, *, resume: bool = False, progress: bool = True) -
                 fh.write(json.dumps({"step": 0, **start, "time": time.time()}) + "\n")
         while step < config.optim.steps:
             t0 = time.perf_counter()
+            run_progress = progress_of(step, config.optim.steps, train_seconds, time_limit_s)
+            for group in optimizer.param_groups:
+                group["lr"] = learning_rate(
+                    config.optim.schedule,
+                    group["peak_lr"],
+                    step,
+                    config.optim.warmup_steps,
+                    run_progress,
+                )
             batch = sampler.sample(config.data.batch_size).to(device, non_blocking=True)
             last_batch = batch
             data_time += time.perf_counter() - t0
@@ -329,11 +370,15 @@ def train(config: TrainConfig, *, resume: bool = False, progress: bool = True) -
             loss.backward()
             optimizer.step()
             step += 1
+            train_seconds += time.perf_counter() - t0
+            if dist_info.world_size > 1:
+                # Every rank must use the same learning rate, which depends on the time.
+                train_seconds = _max_over_ranks(train_seconds)
             window_loss += loss.item()
             window_n += 1
             if bar is not None:
                 bar.update(1)
-            if deadline is not None and time.monotonic() > deadline:
+            if time_limit_s is not None and train_seconds >= time_limit_s:
                 timed_out = True
             final = step == config.optim.steps or timed_out
             log_now = step % config.run.log_every == 0 or final
@@ -346,8 +391,10 @@ def train(config: TrainConfig, *, resume: bool = False, progress: bool = True) -
                     "loss": mean,
                     "train_psnr": 10 * math.log10(1 / max(mean, 1e-12)),
                     "steps_per_s": window_n / elapsed,
-                    "patches_per_s": window_n * config.data.batch_size
-                    * dist_info.world_size / elapsed,
+                    "patches_per_s": window_n
+                    * config.data.batch_size
+                    * dist_info.world_size
+                    / elapsed,
                     "data_frac": data_time / elapsed,
                     "lr": optimizer.param_groups[0]["lr"],
                 }
@@ -388,6 +435,14 @@ def train(config: TrainConfig, *, resume: bool = False, progress: bool = True) -
     return TrainResult(run_dir, step, interrupted, last)
 
 
+def _max_over_ranks(value: float) -> float:
+    import torch.distributed as dist
+
+    t = torch.tensor([value], dtype=torch.float64)
+    dist.all_reduce(t, op=dist.ReduceOp.MAX)
+    return float(t.item())
+
+
 def _agree(flag: bool, dist_info: DistInfo) -> bool:
     """All ranks stop on the same step (else the others would wait forever in all-reduce)."""
     if dist_info.world_size == 1:
@@ -399,8 +454,9 @@ def _agree(flag: bool, dist_info: DistInfo) -> bool:
     return bool(t.item() > 0)
 
 
-def _replica_report(system: ImagingSystem, batch: torch.Tensor | None,
-                    dist_info: DistInfo) -> dict[str, Any]:
+def _replica_report(
+    system: ImagingSystem, batch: torch.Tensor | None, dist_info: DistInfo
+) -> dict[str, Any]:
     """Per rank: a fingerprint of the model (network + sensor) and of the last batch drawn.
 
     Under DistributedDataParallel the models must be identical on every rank and the batches
@@ -442,16 +498,18 @@ def _gather_rng(sampler: PatchSampler, noise: GaussianNoise, dist_info: DistInfo
     return out
 
 
-def _restore_rng(loaded: ckpt_io.Checkpoint, sampler: PatchSampler, noise: GaussianNoise,
-                 dist_info: DistInfo) -> None:
+def _restore_rng(
+    loaded: ckpt_io.Checkpoint, sampler: PatchSampler, noise: GaussianNoise, dist_info: DistInfo
+) -> None:
     key = f"rng/sampler/{dist_info.rank}"
     if key in loaded.tensors:
         sampler.generator.set_state(loaded.tensors[key])
         noise.generator.set_state(loaded.tensors[f"rng/noise/{dist_info.rank}"])
     else:
         # Resumed with more processes than the run had: reseed this rank from the step.
-        warnings.warn(f"checkpoint has no RNG state for rank {dist_info.rank}; reseeding",
-                      stacklevel=2)
+        warnings.warn(
+            f"checkpoint has no RNG state for rank {dist_info.rank}; reseeding", stacklevel=2
+        )
         step = int(loaded.meta["step"])
         sampler.generator.manual_seed(sampler.seed + 1_000_003 * dist_info.rank + 7919 * step)
         noise.generator.manual_seed(sampler.seed + 2_000_003 * dist_info.rank + 7919 * step)
@@ -478,7 +536,6 @@ def _tensorboard(run_dir: Path):
     try:
         from torch.utils.tensorboard import SummaryWriter
     except ImportError:
-        warnings.warn("TensorBoard is not installed; logging to metrics.jsonl only",
-                      stacklevel=2)
+        warnings.warn("TensorBoard is not installed; logging to metrics.jsonl only", stacklevel=2)
         return None
     return SummaryWriter(str(run_dir / "tensorboard"))
