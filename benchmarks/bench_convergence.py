@@ -35,8 +35,7 @@ from common import ROOT, SHARED_DATA, machine
 COMMON = {
     "data.batch_size": 16,
     "data.patch_size": 64,
-    "run.bf16": True,
-    "run.channels_last": True,
+    "run.precision": "auto",  # bfloat16 where the CPU has it natively, float32 elsewhere
     "run.log_every": 20,
     "run.checkpoint_every": 200,
     "optim.steps": 10**7,  # the time limit ends the run
@@ -75,7 +74,7 @@ def _nest(dotted: dict[str, object]) -> dict[str, dict[str, object]]:
 
 
 def train(name: str, args: argparse.Namespace) -> tuple[Path, float]:
-    run = Path(args.out) / name
+    run = Path(args.out) / (name + args.tag)
     overrides = {
         **COMMON,
         **RECIPES[name],
@@ -139,6 +138,7 @@ def main() -> None:
     parser.add_argument("--held-out", type=int, default=32)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--out", default="runs/convergence")
+    parser.add_argument("--tag", default="", help="suffix of the run folders (e.g. 5min)")
     parser.add_argument("--doc", help="also write the table to this Markdown file")
     parser.add_argument("--restart", action="store_true", help="retrain runs that exist")
     parser.add_argument("--score-only", action="store_true", help="score existing runs")
@@ -151,7 +151,7 @@ def main() -> None:
     runs = {}
     for name in args.recipes:
         if args.score_only:
-            runs[name] = Path(args.out) / name
+            runs[name] = Path(args.out) / (name + args.tag)
         else:
             runs[name], _ = train(name, args)
     images = held_out_images(args.train, args.held_out)
