@@ -284,3 +284,114 @@ def test_compiled_training_keeps_the_checkpoint_format(image_folder, tmp_path):
     assert compiled.keys() == eager.keys()
     for key in eager:
         torch.testing.assert_close(compiled[key], eager[key], rtol=1e-4, atol=1e-5)
+
+
+# --- defects found by trying it as a new user (issue 8) ------------------------------------------
+
+
+def test_a_second_run_on_the_same_folder_is_refused_and_a_killed_one_leaves_no_lock(
+    image_folder, tmp_path
+):
+    out = tmp_path / "busy"
+    proc = _spawn(image_folder, out, steps=100000, every=2)
+    _wait_for_step(out, 2, proc)
+    with pytest.raises(ConfigError, match="another training run is using"):
+        train(tiny(image_folder, out), resume=True, progress=False)
+    code = main(["train", "--data", str(image_folder), "--out", str(out), "--resume",
+                 "--steps", "1", "--threads", "1", "--quiet"])
+    assert code == 1  # a one-line error (checked by the message above), not a traceback
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    saved = ckpt_io.load(out).meta["step"]
+    result = train(tiny(image_folder, out, **{"optim.steps": saved + 1}), resume=True,
+                   progress=False)
+    assert result.step == saved + 1
+
+
+def test_settings_changed_on_resume_apply_and_are_recorded(image_folder, tmp_path):
+    out = tmp_path / "changed"
+    constant = {"optim.schedule": "constant", "optim.warmup_steps": 0}
+    train(tiny(image_folder, out, **{**constant, "optim.steps": 2}), progress=False)
+    train(tiny(image_folder, out, **{**constant, "optim.steps": 4, "optim.lr": 3e-4}),
+          resume=True, progress=False)
+    rows = [json.loads(x) for x in (out / "metrics.jsonl").read_text().splitlines()]
+    lr = {r["step"]: r["lr"] for r in rows if "lr" in r}
+    assert lr[2] == pytest.approx(1e-3) and lr[3] == pytest.approx(3e-4)
+    assert lr[4] == pytest.approx(3e-4)
+    ckpt = ckpt_io.load(out)
+    assert ckpt.meta["optimizer"]["param_groups"][0]["lr"] == pytest.approx(3e-4)
+    record = [json.loads(x) for x in (out / "changes.jsonl").read_text().splitlines()]
+    assert record[-1]["step"] == 2
+    assert record[-1]["changes"]["optim.lr"] == [1e-3, 3e-4]
+    assert record[-1]["changes"]["optim.steps"] == [2, 4]
+    with pytest.raises(CheckpointError, match="run.seed=0, got 5; this setting defines"):
+        train(tiny(image_folder, out, **{**constant, "run.seed": 5}), resume=True,
+              progress=False)
+
+
+def test_resume_of_a_run_killed_before_its_first_checkpoint(image_folder, tmp_path, capsys):
+    out = tmp_path / "early"
+    out.mkdir()
+    tiny(image_folder, out).write(out / "config.json")
+    (out / "metrics.jsonl").write_text('{"step": 0, "val_psnr": 10.0}\n')
+    assert main(["train", "--out", str(out), "--resume", "--quiet"]) == 0
+    assert "no checkpoint yet: starting it again from step 0" in capsys.readouterr().out
+    steps = [json.loads(x)["step"] for x in (out / "metrics.jsonl").read_text().splitlines()]
+    assert steps.count(0) == 1 and steps[-1] == 6
+    with pytest.raises(ConfigError, match="no run to resume in .*drop --resume"):
+        train(tiny(image_folder, tmp_path / "empty"), resume=True, progress=False)
+
+
+def test_validation_is_on_by_default_on_a_held_out_split(image_folder, tmp_path):
+    from splitcam.training.trainer import _train_source, val_split
+
+    config = tiny(image_folder, tmp_path / "v", **{"data.val_split": None})
+    assert val_split(config) == 1  # 8 images: max(1, 8 // 10)
+    held_out = {p.name for p in _train_source(config)}
+    assert "im7.png" not in held_out and len(held_out) == 7
+    train(config, progress=False)
+    rows = [json.loads(x) for x in (tmp_path / "v/metrics.jsonl").read_text().splitlines()]
+    assert any("val_psnr" in r for r in rows)
+    assert val_split(tiny(image_folder, tmp_path / "w", **{"data.val_split": 0})) == 0
+
+
+def test_every_setting_has_a_flag_with_its_default_in_the_help():
+    import dataclasses
+
+    from splitcam.cli import build_parser
+    from splitcam.training.config import TrainConfig as Config
+    from splitcam.training.config import train_flags
+
+    flags = {f.key: f for f in train_flags()}
+    keys = {
+        f"{s.name}.{f.name}"
+        for s in dataclasses.fields(Config)
+        for f in dataclasses.fields(getattr(Config(), s.name))
+    }
+    assert set(flags) == keys
+    assert "(default: 5e-05)" not in flags["optim.lr"].help
+    assert "(default: 0.0005)" in flags["optim.lr"].help
+    args = build_parser().parse_args(["train", "--lr", "0.002", "--betas", "0.8", "0.9",
+                                      "--learn-pattern", "--val-split", "3"])
+    assert args.lr == 0.002 and args.betas == [0.8, 0.9] and args.learn_pattern is True
+    assert args.val_split == 3
+
+
+def test_checkpoint_headers_without_network_and_nan_weights_are_named(image_folder, tmp_path):
+    from safetensors.torch import save_file
+
+    train(tiny(image_folder, tmp_path / "r", **{"optim.steps": 1}), progress=False)
+    ckpt = ckpt_io.load(tmp_path / "r")
+    header = {k: v for k, v in ckpt.meta.items() if k != "network"}
+    bad = tmp_path / "no_network.safetensors"
+    save_file(ckpt.tensors, str(bad), metadata={"splitcam": json.dumps(header)})
+    with pytest.raises(CheckpointError, match="no_network.safetensors.*no 'network'"):
+        load_system(bad)
+    tensors = dict(ckpt.tensors)
+    key = next(k for k in tensors if k.startswith("model/network") and k.endswith("weight"))
+    tensors[key] = tensors[key].clone()
+    tensors[key].view(-1)[0] = float("nan")
+    nan = tmp_path / "nan.safetensors"
+    save_file(tensors, str(nan), metadata={"splitcam": json.dumps(ckpt.meta)})
+    with pytest.raises(CheckpointError, match=f"nan.safetensors.*NaN.*{key}"):
+        load_system(nan)

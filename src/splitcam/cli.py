@@ -87,40 +87,6 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 
 # Command-line flag -> configuration key. Flags left out keep the config file's (or the
 # default) value, so a config file and the command line combine predictably.
-TRAIN_FLAGS: dict[str, tuple[str, type | None, str]] = {
-    "pattern": ("pattern.name", str, "pattern name or file (default D)"),
-    "learn_pattern": ("pattern.learn", None, "optimise the pattern jointly with the network"),
-    "init": ("pattern.init", str, "learned-pattern initialisation: support, exact, random"),
-    "pattern_lr": ("pattern.lr", float, "learning rate of the pattern (default: --lr)"),
-    "data": ("data.train", str, "folder of training images"),
-    "val": ("data.val", str, "folder of validation images"),
-    "val_split": ("data.val_split", int, "hold out the last N training images for validation"),
-    "val_images": ("data.val_max_images", int, "at most this many validation images"),
-    "val_sigmas": ("data.val_sigmas", float, "validation noise levels (default 0 15)"),
-    "patch_size": ("data.patch_size", int, "patch size (default 64)"),
-    "batch_size": ("data.batch_size", int, "batch size (default 80)"),
-    "arch": ("network.arch", str, "network: physics (default), packed, or paper (the paper's)"),
-    "features": ("network.features", int, "network width (default 64)"),
-    "blocks": ("network.blocks", int, "residual blocks (default 10)"),
-    "steps": ("optim.steps", int, "training steps (default 10^6)"),
-    "lr": ("optim.lr", float, "peak Adam learning rate (default 5e-4; the paper: 1e-4)"),
-    "schedule": ("optim.schedule", str, "cosine (default) or constant (the paper's)"),
-    "warmup_steps": ("optim.warmup_steps", int, "linear learning-rate warm-up steps (default 100)"),
-    "per_sample_sigma": ("optim.per_sample_sigma", None, "one noise sigma per patch"),
-    "out": ("run.out", str, "run folder (default runs/default)"),
-    "device": ("run.device", str, "auto, cpu, cuda, cuda:N or mps"),
-    "seed": ("run.seed", int, "random seed (default 0)"),
-    "log_every": ("run.log_every", int, "log every N steps"),
-    "val_every": ("run.val_every", int, "validate every N steps"),
-    "checkpoint_every": ("run.checkpoint_every", int, "checkpoint every N steps"),
-    "threads": ("run.threads", int, "torch CPU threads"),
-    "time_limit": ("run.time_limit", float, "stop and save after this many minutes in total"),
-    "precision": ("run.precision", str, "auto (default: bfloat16 where native), fp32 or bf16"),
-    "tensorboard": ("run.tensorboard", None, "also log to TensorBoard (if installed)"),
-    "channels_last": ("run.channels_last", None, "channels-last memory format"),
-    "bf16": ("run.bf16", None, "bfloat16 autocast for the network"),
-    "compile": ("run.compile", None, "torch.compile the network (slow start, faster steps)"),
-}
 
 
 def _end_distributed() -> None:
@@ -136,19 +102,25 @@ def _end_distributed() -> None:
 
 def cmd_train(args: argparse.Namespace) -> int:
     from .training import TrainConfig, train
+    from .training.checkpoint import CHECKPOINT_NAME
     from .training.checkpoint import load as load_checkpoint
+    from .training.config import train_flags
 
     if args.resume and not args.config:
-        # Continue with the run's own settings; flags given now override them.
-        out = args.out or "runs/default"
-        config = TrainConfig.from_dict(load_checkpoint(out).meta["config"])
+        # Continue with the run's own settings; flags given now override them. A run killed
+        # before its first checkpoint has only its config.json.
+        out = Path(args.out or "runs/default")
+        if (out / "config.json").is_file() and not (out / CHECKPOINT_NAME).is_file():
+            config = TrainConfig.from_file(out / "config.json")
+        else:
+            config = TrainConfig.from_dict(load_checkpoint(out).meta["config"])
     else:
         config = TrainConfig.from_file(args.config) if args.config else TrainConfig()
     overrides = {}
-    for flag, (key, _, _) in TRAIN_FLAGS.items():
-        value = getattr(args, flag, None)
+    for flag in train_flags():
+        value = getattr(args, flag.name, None)
         if value is not None:
-            overrides[key] = value
+            overrides[flag.key] = value
     config = config.override(overrides)
     result = train(config, resume=args.resume, progress=not args.quiet)
     _end_distributed()
@@ -291,14 +263,16 @@ def _add_train_parser(sub) -> None:
     p.add_argument("--config", help="TOML, YAML or JSON configuration file")
     p.add_argument("--resume", action="store_true", help="continue the run in --out")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
-    for flag, (_, kind, help_text) in TRAIN_FLAGS.items():
-        name = "--" + flag.replace("_", "-")
-        if kind is None:
-            p.add_argument(name, action="store_const", const=True, default=None, help=help_text)
-        elif flag == "val_sigmas":
-            p.add_argument(name, type=kind, nargs="+", default=None, help=help_text)
+    from .training.config import train_flags
+
+    # One flag per setting of the typed config, with its help and default from there.
+    for flag in train_flags():
+        name = "--" + flag.name.replace("_", "-")
+        if flag.kind is bool:
+            p.add_argument(name, action="store_const", const=True, default=None, help=flag.help)
         else:
-            p.add_argument(name, type=kind, default=None, help=help_text)
+            nargs = "+" if flag.many else None
+            p.add_argument(name, type=flag.kind, nargs=nargs, default=None, help=flag.help)
     p.set_defaults(handler=cmd_train)
 
 

@@ -39,6 +39,8 @@ class Checkpoint:
 
     meta: dict[str, Any]
     tensors: dict[str, torch.Tensor]
+    path: str = ""
+    """The file it was read from (for messages)."""
 
     def section(self, prefix: str) -> dict[str, torch.Tensor]:
         """Tensors under ``prefix/`` with the prefix removed."""
@@ -120,12 +122,20 @@ def load(path: str | os.PathLike) -> Checkpoint:
         meta = json.loads(header["splitcam"])
     except (KeyError, json.JSONDecodeError):
         raise CheckpointError(f"{str(path)!r} is not a splitcam checkpoint") from None
+    if not isinstance(meta, dict):
+        raise CheckpointError(f"{str(path)!r} is not a splitcam checkpoint")
     if meta.get("format") != FORMAT or meta.get("version") != VERSION:
         raise CheckpointError(
             f"{str(path)!r}: expected {FORMAT} version {VERSION}, got "
             f"{meta.get('format')} version {meta.get('version')}"
         )
-    return Checkpoint(meta=meta, tensors=tensors)
+    for key, tensor in tensors.items():
+        if tensor.is_floating_point() and not bool(torch.isfinite(tensor).all()):
+            raise CheckpointError(
+                f"checkpoint {str(path)!r} holds NaN or infinite values in {key!r} (the run "
+                f"diverged, or the file is damaged); use an earlier checkpoint"
+            )
+    return Checkpoint(meta=meta, tensors=tensors, path=str(path))
 
 
 def load_module(
@@ -163,8 +173,18 @@ def load_system(path: str | os.PathLike, device: str | torch.device = "cpu") -> 
     """The trained system of a run folder or checkpoint, with the sensor fixed to the pattern
     it had at that step (a learned pattern is loaded as a fixed one), in eval mode."""
     loaded = load(path)
-    pattern = Pattern.from_dict(loaded.meta["pattern"])
-    network = build_network(loaded.meta["network"])
+    where = loaded.path or str(path)
+    missing = [k for k in ("pattern", "network") if k not in loaded.meta]
+    if missing:
+        raise CheckpointError(
+            f"checkpoint {where!r} has no {' or '.join(repr(k) for k in missing)} in its "
+            f"header, so it cannot be loaded as a trained system"
+        )
+    try:
+        pattern = Pattern.from_dict(loaded.meta["pattern"], source=where)
+        network = build_network(loaded.meta["network"])
+    except ValueError as exc:  # PatternError is a ValueError too
+        raise CheckpointError(f"checkpoint {where!r}: {exc}") from None
     load_module(network, loaded, child="network")
     system = ImagingSystem(SplitterSensor(pattern), network)
     return system.to(device).eval()

@@ -29,86 +29,104 @@ class ConfigError(ValueError):
     """A configuration file or override is invalid; the message names the key."""
 
 
+def _opt(default: Any, help: str, *, flag: str | None = None) -> Any:
+    """A setting: its default, its help text and (if not the field name) its command-line flag.
+
+    The one place each setting is described: ``splitcam train``'s flags are generated from these
+    (:func:`train_flags`), with the default shown in their help.
+    """
+    metadata = {"help": help, "flag": flag}
+    if isinstance(default, list):
+        return field(default_factory=lambda: list(default), metadata=metadata)
+    return field(default=default, metadata=metadata)
+
+
 @dataclass
 class PatternConfig:
-    name: str = "D"
-    """Pattern name (A-E, bayer) or a pattern file."""
-    learn: bool = False
-    """Optimise the splitter kernels jointly with the network (paper Eq. 5-6)."""
-    init: str = "support"
-    """Initialisation of learned kernels: support, exact or random."""
-    lr: float | None = None
-    """Learning rate of the pattern logits (default: the network's)."""
+    name: str = _opt("D", "pattern name (A-E, bayer) or pattern file", flag="pattern")
+    learn: bool = _opt(
+        False,
+        "optimise the splitter kernels jointly with the network (paper Eq. 5-6)",
+        flag="learn_pattern",
+    )
+    init: str = _opt("support", "initialisation of learned kernels: support, exact or random")
+    lr: float | None = _opt(
+        None, "learning rate of the pattern logits (default: the network's)", flag="pattern_lr"
+    )
 
 
 @dataclass
 class NetworkConfig:
-    arch: str = "physics"
-    """physics (corrects the closed-form LMMSE estimate for the sensor's kernels and noise
-    level; the default because it wins at equal CPU time, see docs/results/convergence.md),
-    packed (blind, runs at 1/(Ph*Pw) of the positions) or paper (full resolution, SPEC
-    section 5)."""
-    features: int = 64
-    blocks: int = 10
+    arch: str = _opt(
+        "physics",
+        "physics (corrects the closed-form LMMSE estimate for the sensor's kernels and noise "
+        "level; the default because it wins at equal CPU time, see docs/results), packed "
+        "(blind, at 1/(Ph*Pw) of the positions) or paper (full resolution, SPEC section 5)",
+    )
+    features: int = _opt(64, "channels of the hidden layers")
+    blocks: int = _opt(10, "residual blocks")
 
 
 @dataclass
 class DataConfig:
-    train: str | None = None
-    """Folder of training images."""
-    val: str | None = None
-    """Folder of validation images (default: the held-out split of the training folder)."""
-    val_split: int = 0
-    """Hold out the last N images (sorted by name) of the training folder for validation."""
-    val_max_images: int | None = 8
-    val_crop: int | None = 256
-    """Centre-crop validation images to this size (bounds validation time on a CPU)."""
-    val_sigmas: list[float] = field(default_factory=lambda: [0.0, 15.0])
-    patch_size: int = 64
-    batch_size: int = 80
-    max_images: int | None = None
+    train: str | None = _opt(None, "folder of training images", flag="data")
+    val: str | None = _opt(
+        None, "folder of validation images (default: a held-out split of the training folder)"
+    )
+    val_split: int | None = _opt(
+        None,
+        "hold out the last N training images (sorted by name) for validation; default: "
+        "min(32, max(1, n // 10)) of n >= 2 images; 0: no validation",
+    )
+    val_max_images: int | None = _opt(8, "validate on at most this many images", flag="val_images")
+    val_crop: int | None = _opt(
+        256, "centre-crop validation images to this size (bounds validation time)"
+    )
+    val_sigmas: list[float] = _opt([0.0, 15.0], "validation noise levels")
+    patch_size: int = _opt(64, "training patch size")
+    batch_size: int = _opt(80, "patches per step")
+    max_images: int | None = _opt(None, "use at most this many training images")
 
 
 @dataclass
 class OptimConfig:
-    steps: int = 1_000_000
-    lr: float = 5e-4
-    """Peak learning rate (the paper: 1e-4, constant)."""
-    schedule: str = "cosine"
-    """constant (the paper's) or cosine: decay to 0 over the run's steps or time limit."""
-    warmup_steps: int = 100
-    """Linear warm-up from lr/warmup_steps to lr over the first steps (0: none)."""
-    betas: list[float] = field(default_factory=lambda: [0.9, 0.999])
-    sigma_min: float = 0.0
-    sigma_max: float = 30.0
-    per_sample_sigma: bool = False
-    """Draw one sigma per patch instead of one per batch (the paper: per batch)."""
+    steps: int = _opt(1_000_000, "training steps")
+    lr: float = _opt(5e-4, "peak Adam learning rate (the paper: 1e-4, constant)")
+    schedule: str = _opt(
+        "cosine", "constant (the paper's) or cosine: decay to 0 over the steps or time limit"
+    )
+    warmup_steps: int = _opt(100, "linear learning-rate warm-up steps (0: none)")
+    betas: list[float] = _opt([0.9, 0.999], "Adam betas")
+    sigma_min: float = _opt(0.0, "smallest training noise sigma (8-bit units)")
+    sigma_max: float = _opt(30.0, "largest training noise sigma (8-bit units)")
+    per_sample_sigma: bool = _opt(
+        False, "one noise sigma per patch instead of one per batch (the paper: per batch)"
+    )
 
 
 @dataclass
 class RunConfig:
-    out: str = "runs/default"
-    seed: int = 0
-    device: str = "auto"
-    """auto, cpu, cuda, cuda:N or mps."""
-    log_every: int = 10
-    val_every: int = 500
-    checkpoint_every: int = 200
-    time_limit: float | None = None
-    """Stop (and save) after this many minutes of training in total (a resumed run continues
-    the count; validation and checkpoints not counted). The cosine schedule decays over it."""
-    precision: str = "auto"
-    """Network precision: auto (bfloat16 + channels-last where the hardware has native
-    bfloat16: AVX512-BF16/AMX CPUs, CUDA GPUs; float32 elsewhere), fp32 (bit-exact) or bf16."""
-    tensorboard: bool = False
-    threads: int | None = None
-    """torch intra-op threads (default: torch's choice)."""
-    channels_last: bool = False
-    """Run the network in channels-last memory format (also on with fast precision)."""
-    bf16: bool = False
-    """bfloat16 autocast for the network (the same as precision bf16)."""
-    compile: bool = False
-    """torch.compile the network (a one-off warm-up of about a minute; then faster steps)."""
+    out: str = _opt("runs/default", "run folder")
+    seed: int = _opt(0, "random seed")
+    device: str = _opt("auto", "auto, cpu, cuda, cuda:N or mps")
+    log_every: int = _opt(10, "log every N steps")
+    val_every: int = _opt(500, "validate every N steps")
+    checkpoint_every: int = _opt(200, "checkpoint every N steps")
+    time_limit: float | None = _opt(
+        None,
+        "stop (and save) after this many minutes of training in total (a resumed run "
+        "continues the count; validation not counted); the cosine decays over it",
+    )
+    precision: str = _opt(
+        "auto",
+        "network precision: auto (bfloat16 + channels-last where the hardware has native "
+        "bfloat16: AVX512-BF16/AMX CPUs, CUDA GPUs; float32 elsewhere), fp32 or bf16",
+    )
+    tensorboard: bool = _opt(False, "also log to TensorBoard (if installed)")
+    threads: int | None = _opt(None, "torch CPU threads (default: torch's choice)")
+    channels_last: bool = _opt(False, "channels-last memory format (on with fast precision)")
+    bf16: bool = _opt(False, "bfloat16 autocast for the network (= --precision bf16)")
+    compile: bool = _opt(False, "torch.compile the network (slow start, faster steps)")
 
 
 @dataclass
@@ -181,7 +199,10 @@ class TrainConfig:
                 min(self.run.log_every, self.run.val_every, self.run.checkpoint_every) >= 1,
                 "run.log_every, run.val_every and run.checkpoint_every must be >= 1",
             ),
-            (self.data.val_split >= 0, "data.val_split must be >= 0"),
+            (
+                self.data.val_split is None or self.data.val_split >= 0,
+                "data.val_split must be >= 0",
+            ),
         ]
         for ok, message in checks:
             if not ok:
@@ -278,3 +299,41 @@ def _build(cls: type, data: Any, source: str, prefix: str = "") -> Any:
             except ConfigError as exc:
                 raise ConfigError(f"{source}: {exc}") from None
     return cls(**kwargs)
+
+
+@dataclass(frozen=True)
+class Flag:
+    """A command-line flag of ``splitcam train``, generated from a config field."""
+
+    name: str
+    """``--name`` (underscores become dashes)."""
+    key: str
+    """The dotted setting, e.g. ``optim.lr``."""
+    kind: Any
+    """The value type (``bool`` flags take no value; ``list`` ones take several)."""
+    many: bool
+    help: str
+
+
+def train_flags() -> list[Flag]:
+    """Every setting of :class:`TrainConfig` as a flag, help and default from its field."""
+    out = []
+    hints = typing.get_type_hints(TrainConfig)
+    for section in dataclasses.fields(TrainConfig):
+        cls = hints[section.name]
+        sub = typing.get_type_hints(cls)
+        defaults = cls()
+        for f in dataclasses.fields(cls):
+            hint = sub[f.name]
+            args = [a for a in typing.get_args(hint) if a is not type(None)]
+            many = typing.get_origin(hint) is list
+            kind = args[0] if args else hint
+            default = getattr(defaults, f.name)
+            text = f.metadata.get("help", "")
+            if default is not None and kind is not bool:
+                shown = " ".join(map(str, default)) if many else default
+                text = f"{text} (default: {shown})"
+            out.append(
+                Flag(f.metadata.get("flag") or f.name, f"{section.name}.{f.name}", kind, many, text)
+            )
+    return out

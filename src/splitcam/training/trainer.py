@@ -96,13 +96,27 @@ def build_system(config: TrainConfig, pattern: patterns.Pattern | None = None) -
     return ImagingSystem(sensor, net)
 
 
+def val_split(config: TrainConfig) -> int:
+    """How many images (the last, sorted by name) the training folder holds out: the set
+    ``data.val_split``, none with a ``data.val`` folder, else ``min(32, max(1, n // 10))`` of
+    ``n >= 2`` images (so validation curves come by default)."""
+    data = config.data
+    if data.val or not data.train:
+        return 0
+    if data.val_split is not None:
+        return data.val_split
+    n = len(list_images(data.train))
+    return min(32, max(1, n // 10)) if n >= 2 else 0
+
+
 def _val_images(config: TrainConfig) -> list[tuple[str, torch.Tensor]]:
     """Validation images: the held-out split or the --val folder, centre-cropped."""
     data = config.data
+    split = val_split(config)
     if data.val:
         source: Any = data.val
-    elif data.val_split and data.train:
-        source = list_images(data.train)[-data.val_split :]
+    elif split and data.train:
+        source = list_images(data.train)[-split:]
     else:
         return []
     cache = ImageCache(source, min_size=1, max_images=data.val_max_images, progress=False)
@@ -121,14 +135,14 @@ def _val_images(config: TrainConfig) -> list[tuple[str, torch.Tensor]]:
 def _train_source(config: TrainConfig) -> Any:
     if not config.data.train:
         raise ConfigError("no training data: give --data DIR (or data.train in the config)")
-    if config.data.val_split and not config.data.val:
+    split = val_split(config)
+    if split:
         files = list_images(config.data.train)
-        if config.data.val_split >= len(files):
+        if split >= len(files):
             raise ConfigError(
-                f"data.val_split {config.data.val_split} leaves no training images "
-                f"(the folder has {len(files)})"
+                f"data.val_split {split} leaves no training images (the folder has {len(files)})"
             )
-        return files[: -config.data.val_split]
+        return files[:-split]
     return config.data.train
 
 
@@ -174,6 +188,10 @@ class _StopFlag:
             signal.signal(sig, previous)
 
 
+LOCK_NAME = ".lock"
+CHANGES_NAME = "changes.jsonl"
+
+
 def _truncate_metrics(path: Path, step: int) -> None:
     """Drop log lines after ``step`` (steps a killed run did after its last checkpoint)."""
     if not path.is_file():
@@ -200,14 +218,63 @@ def train(config: TrainConfig, *, resume: bool = False, progress: bool = True) -
     """Train (or resume) a run; see :class:`~splitcam.training.config.TrainConfig`.
 
     The run folder gets ``config.json`` (the resolved configuration), ``metrics.jsonl`` (one
-    JSON object per logged step), ``checkpoint.safetensors`` (+ ``.json``), and, for a learned
-    pattern, ``pattern.toml``.
+    JSON object per logged step), ``checkpoint.safetensors`` (+ ``.json``), for a learned
+    pattern ``pattern.toml``, and, when a resume changed settings, ``changes.jsonl`` (step, old
+    and new values; changed settings apply from there, those that define the model are
+    refused). The folder is locked while the run trains: a second run on it is refused.
+
+    Raises:
+        ConfigError: Invalid settings, another run holds the folder, or nothing to resume.
+        CheckpointError: The checkpoint to resume is damaged or of another model.
     """
     config.validate()
     run_dir = Path(config.run.out)
     ckpt_path = run_dir / ckpt_io.CHECKPOINT_NAME
+    is_main = int(os.environ.get("RANK", "0")) == 0
+    lock = _lock_run(run_dir) if is_main else None
+    try:
+        return _train(config, run_dir, ckpt_path, resume, progress)
+    finally:
+        if lock is not None:
+            lock.close()
+
+
+def _lock_run(run_dir: Path) -> Any:
+    """Hold an exclusive OS lock on the run folder for the whole run: a second run on the same
+    folder is refused at once. The OS drops the lock when the process ends, however it ends, so
+    a killed run never leaves the folder locked. Without ``fcntl`` (Windows) there is no lock."""
+    try:
+        import fcntl
+    except ImportError:  # pragma: no cover
+        return None
+    run_dir.mkdir(parents=True, exist_ok=True)
+    handle = open(run_dir / LOCK_NAME, "a+")  # noqa: SIM115 (held until the run ends)
+    try:
+        fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        handle.close()
+        raise ConfigError(
+            f"another training run is using {str(run_dir)!r} (its lock is held); wait for it "
+            f"to end or choose another --out"
+        ) from None
+    return handle
+
+
+def _train(
+    config: TrainConfig, run_dir: Path, ckpt_path: Path, resume: bool, progress: bool
+) -> TrainResult:
     loaded = None
-    if resume:
+    changes: dict[str, list[Any]] = {}
+    if resume and not ckpt_path.exists():
+        if not (run_dir / "config.json").is_file():
+            raise ConfigError(
+                f"no run to resume in {str(run_dir)!r}; drop --resume to start one there"
+            )
+        # Killed before its first checkpoint: nothing to continue but its settings.
+        print(f"{run_dir} has no checkpoint yet: starting it again from step 0")
+        (run_dir / METRICS_NAME).unlink(missing_ok=True)
+        resume = False
+    elif resume:
         # A process killed while writing leaves a partial temporary file beside the intact
         # checkpoint; it is rewritten by the next save, but clear it now so nothing stale lingers.
         for stale in run_dir.glob("*.tmp"):
@@ -215,6 +282,7 @@ def train(config: TrainConfig, *, resume: bool = False, progress: bool = True) -
         loaded = ckpt_io.load(ckpt_path)
         saved = TrainConfig.from_dict(loaded.meta["config"], source=str(ckpt_path))
         _check_resume_compatible(saved, config)
+        changes = _changed_settings(saved, config)
     elif ckpt_path.exists():
         raise ConfigError(
             f"{str(run_dir)!r} already holds a checkpoint; use --resume to continue it or "
@@ -276,6 +344,7 @@ def train(config: TrainConfig, *, resume: bool = False, progress: bool = True) -
         # The peaks are settings, not state: those of this config apply (a changed --lr too).
         for group, peak in zip(optimizer.param_groups, (g["peak_lr"] for g in groups), strict=True):
             group["peak_lr"] = peak
+            group["betas"] = tuple(config.optim.betas)
 
     model: torch.nn.Module = system
     if dist_info.world_size > 1:
@@ -294,6 +363,13 @@ def train(config: TrainConfig, *, resume: bool = False, progress: bool = True) -
             _truncate_metrics(metrics_path, step)
         if config.run.tensorboard:
             writer = _tensorboard(run_dir)
+
+    if changes and dist_info.is_main:
+        # Settings changed on resume apply from here on; the record says when and what.
+        for key, (old, new) in changes.items():
+            print(f"resume at step {step}: {key} {old!r} -> {new!r}")
+        with open(run_dir / CHANGES_NAME, "a", encoding="utf-8") as fh:
+            fh.write(json.dumps({"step": step, "time": time.time(), "changes": changes}) + "\n")
 
     def save() -> None:
         rng = _gather_rng(sampler, noise, dist_info)
@@ -516,20 +592,40 @@ def _restore_rng(
     torch.set_rng_state(loaded.tensors["rng/torch"])
 
 
+#: Settings that define the model or the random streams: a resumed run must keep them.
+FIXED_ON_RESUME = (
+    "pattern.name",
+    "pattern.learn",
+    "pattern.init",
+    "network.arch",
+    "network.features",
+    "network.blocks",
+    "run.seed",
+    "run.out",
+)
+
+
+def _flat(config: TrainConfig) -> dict[str, Any]:
+    return {f"{s}.{k}": v for s, sec in config.to_dict().items() for k, v in sec.items()}
+
+
 def _check_resume_compatible(saved: TrainConfig, new: TrainConfig) -> None:
     """Settings that define the model must not change on resume."""
-    fixed = {
-        "pattern.name": (saved.pattern.name, new.pattern.name),
-        "pattern.learn": (saved.pattern.learn, new.pattern.learn),
-        "network.arch": (saved.network.arch, new.network.arch),
-        "network.features": (saved.network.features, new.network.features),
-        "network.blocks": (saved.network.blocks, new.network.blocks),
-    }
-    for key, (a, b) in fixed.items():
-        if a != b:
+    a, b = _flat(saved), _flat(new)
+    for key in FIXED_ON_RESUME:
+        if key == "run.out":
+            continue  # the folder may have been moved
+        if a[key] != b[key]:
             raise ckpt_io.CheckpointError(
-                f"cannot resume: the checkpoint was trained with {key}={a!r}, got {b!r}"
+                f"cannot resume: the checkpoint was trained with {key}={a[key]!r}, got "
+                f"{b[key]!r}; this setting defines the model, so start a new run instead"
             )
+
+
+def _changed_settings(saved: TrainConfig, new: TrainConfig) -> dict[str, list[Any]]:
+    """``{key: [old, new]}`` of every other setting changed on resume (they all apply)."""
+    a, b = _flat(saved), _flat(new)
+    return {k: [a[k], b[k]] for k in a if a[k] != b[k] and k not in FIXED_ON_RESUME}
 
 
 def _tensorboard(run_dir: Path):
