@@ -1,0 +1,275 @@
+"""Pattern design in seconds: gradient descent on the closed-form LMMSE error.
+
+The closed-form LMMSE (:mod:`splitcam.recon.closed_form`) gives the expected error of the best
+linear reconstruction of any kernels, differentiably and without images. Designing a pattern is
+then a small optimisation: the logits of a learnable pattern (same layout and kernel size as the
+start, a softmax over each kernel's taps as in the paper's Eq. 5, so it stays non-negative and
+light-conserving) are moved by Adam to lower the closed-form LMMSE error averaged over a range of
+noise levels, all noise levels in one batched solve.
+
+The objective ranks patterns by what a linear reconstruction recovers from them; a trained
+network recovers more. How the designed patterns score with the LMMSE on held-out images is in
+``docs/results/design.md``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import math
+import time
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass, field
+
+import torch
+
+from ..patterns import Pattern, get
+from ..physics.sensor import LearnableSplitterSensor
+from .closed_form import ImageStatistics, closed_form_mse, shipped_image_statistics
+from .lmmse import DEFAULT_RADIUS
+
+__all__ = [
+    "DEFAULT_LR",
+    "DEFAULT_SIGMAS",
+    "DEFAULT_STEPS",
+    "OBJECTIVES",
+    "DesignResult",
+    "closed_form_psnr",
+    "design_pattern",
+]
+
+#: Noise levels (8-bit units) the design averages over by default: the paper's test levels.
+DEFAULT_SIGMAS = (0.0, 5.0, 10.0, 15.0, 20.0)
+#: Adam steps and learning rate (on the logits) of :func:`design_pattern` by default.
+DEFAULT_STEPS = 300
+DEFAULT_LR = 0.1
+#: ``mse``: minimise the closed-form MSE averaged over the sigmas (the high-noise levels weigh
+#: most, their errors are largest); ``psnr``: maximise the closed-form PSNR averaged over the
+#: sigmas (every level weighs the same in dB).
+OBJECTIVES = ("mse", "psnr")
+
+
+def _objective_db(mse: torch.Tensor, objective: str) -> torch.Tensor:
+    """The objective in dB, to maximise: ``-10 log10(mean MSE)`` or ``mean(-10 log10 MSE)``.
+
+    ``mse`` is optimised as the PSNR of the mean MSE: the same minimiser as the mean MSE, but a
+    gradient whose scale does not depend on the error level. On the mean MSE itself (~1e-4) the
+    gradients reaching near-zero taps fall below Adam's epsilon, and the ``exact`` start of D
+    stayed at D for 400 steps.
+    """
+    return _psnr(mse.mean()) if objective == "mse" else _psnr(mse).mean()
+
+
+def _psnr(mse: torch.Tensor) -> torch.Tensor:
+    return -10.0 * torch.log10(mse)
+
+
+@dataclass
+class DesignResult:
+    """What :func:`design_pattern` found.
+
+    Attributes:
+        pattern: The designed pattern (same layout and kernel size as ``start``).
+        start: The pattern the design started from.
+        init: How the logits were initialised (``support``, ``exact`` or ``random``).
+        sigmas: The noise levels (8-bit units) of the objective.
+        objective: ``mse`` or ``psnr`` (see :data:`OBJECTIVES`).
+        mse_before: Closed-form LMMSE MSE per colour (``[0, 1]`` units) of ``start``, per sigma.
+        mse_after: The same of ``pattern``.
+        history: The objective (dB, higher is better) at every step, before that step's update:
+            ``-10 log10`` of the mean MSE over the sigmas for ``mse``, the mean PSNR for ``psnr``.
+        seconds: Wall time of the optimisation.
+    """
+
+    pattern: Pattern
+    start: Pattern
+    init: str
+    sigmas: list[float]
+    objective: str
+    mse_before: dict[float, float]
+    mse_after: dict[float, float]
+    history: list[float] = field(default_factory=list)
+    seconds: float = 0.0
+
+    @property
+    def psnr_before(self) -> dict[float, float]:
+        """Closed-form LMMSE PSNR (dB) of ``start`` per sigma."""
+        return {s: -10.0 * math.log10(v) for s, v in self.mse_before.items()}
+
+    @property
+    def psnr_after(self) -> dict[float, float]:
+        """Closed-form LMMSE PSNR (dB) of ``pattern`` per sigma."""
+        return {s: -10.0 * math.log10(v) for s, v in self.mse_after.items()}
+
+
+def closed_form_psnr(
+    kernels: Pattern | str | torch.Tensor,
+    sigmas: Iterable[float],
+    *,
+    statistics: ImageStatistics | None = None,
+    radius: int = DEFAULT_RADIUS,
+) -> torch.Tensor:
+    """``10 log10(1 / MSE)`` of the closed-form LMMSE at each sigma (float64, differentiable)."""
+    sig = torch.tensor([float(s) for s in sigmas], dtype=torch.float64)
+    return _psnr(closed_form_mse(kernels, sig, statistics=statistics, radius=radius))
+
+
+@contextlib.contextmanager
+def _intra_op_threads(threads: int | None) -> Iterator[None]:
+    """Run with ``threads`` intra-op threads (``None``: leave as is), restored afterwards."""
+    before = torch.get_num_threads()
+    if threads is not None and threads != before:
+        torch.set_num_threads(threads)
+    try:
+        yield
+    finally:
+        if torch.get_num_threads() != before:
+            torch.set_num_threads(before)
+
+
+def _check_sigmas(sigmas: Iterable[float] | torch.Tensor) -> list[float]:
+    try:
+        values = [float(s) for s in sigmas]
+    except (TypeError, ValueError):
+        raise ValueError(f"expected sigmas as numbers (8-bit units), got {sigmas!r}") from None
+    if not values or any(not (math.isfinite(s) and s >= 0) for s in values):
+        raise ValueError(f"expected one or more finite sigmas >= 0 (8-bit units), got {values}")
+    return values
+
+
+def design_pattern(
+    start: Pattern | str,
+    *,
+    init: str = "support",
+    sigmas: Iterable[float] | torch.Tensor = DEFAULT_SIGMAS,
+    steps: int = DEFAULT_STEPS,
+    lr: float = DEFAULT_LR,
+    seed: int = 0,
+    radius: int = DEFAULT_RADIUS,
+    statistics: ImageStatistics | None = None,
+    objective: str = "mse",
+    name: str | None = None,
+    threads: int | None = 1,
+    progress: bool = False,
+) -> DesignResult:
+    """Optimise a pattern's kernels for the closed-form LMMSE, averaged over ``sigmas``.
+
+    Adam on the softmax logits of a :class:`~splitcam.physics.sensor.LearnableSplitterSensor`
+    (float64); the loss of all sigmas comes from one batched closed-form solve per step. The
+    designed pattern is the one of the last step.
+
+    Budget: the defaults (300 steps at lr 0.1) took 4.7-5.6 s for A and D (2x2 period,
+    radius 4, 5 sigmas; 16-19 ms a step) on one core of this project's 2-core CPU while a
+    training run kept both cores busy. By then the objective is within 0.02 dB of where 600
+    steps take it from the support and exact starts of A and D, within 0.06 dB from random
+    ones; at lr 0.02 and 0.05 it ended lower at step 300 from every start
+    (``docs/results/design.md``).
+
+    Args:
+        start: Starting pattern (name, file or :class:`Pattern`); its layout and kernel size are
+            kept. Colour filters (kernels summing below 1, e.g. ``bayer``) are refused.
+        init: ``support``, ``exact`` or ``random`` (see
+            :class:`~splitcam.physics.sensor.LearnableSplitterSensor`).
+        sigmas: Noise levels (8-bit units) of the objective, each >= 0: a sequence, a range or
+            a 1-D tensor.
+        steps: Adam steps, >= 1.
+        lr: Adam learning rate on the logits, > 0.
+        seed: Seed of the ``random`` initialisation.
+        radius: LMMSE filter radius (filters are ``2r+1`` square).
+        statistics: Image statistics (default: the shipped ones).
+        objective: ``mse`` (the mean closed-form MSE over the sigmas) or ``psnr`` (the mean
+            closed-form PSNR); see :data:`OBJECTIVES`.
+        name: Name of the designed pattern (default ``<start>-designed``).
+        threads: Intra-op threads during the optimisation (restored afterwards; ``None`` leaves
+            them). The problem is small: on this 2-core machine, busy with a training run, a step
+            took 11 ms with 1 thread and 800 ms with 2 (threads waiting for each other).
+        progress: Show a progress bar (tqdm).
+
+    Raises:
+        ValueError: Bad ``init``, ``sigmas``, ``steps``, ``lr``, ``radius`` or ``objective``;
+            a start that cannot be learned (:class:`~splitcam.patterns.PatternError`).
+    """
+    start = get(start)
+    sigma_list = _check_sigmas(sigmas)
+    if isinstance(steps, bool) or not isinstance(steps, int) or steps < 1:
+        raise ValueError(f"expected steps as an integer >= 1, got {steps!r}")
+    if (
+        isinstance(lr, bool)
+        or not isinstance(lr, (int, float))
+        or not (math.isfinite(lr) and lr > 0)
+    ):
+        raise ValueError(f"expected lr as a finite number > 0, got {lr!r}")
+    if isinstance(radius, bool) or not isinstance(radius, int) or radius < 0:
+        raise ValueError(f"expected radius as an integer >= 0, got {radius!r}")
+    if objective not in OBJECTIVES:
+        raise ValueError(
+            f"expected objective to be one of {', '.join(OBJECTIVES)}, got {objective!r}"
+        )
+    if threads is not None and (
+        isinstance(threads, bool) or not isinstance(threads, int) or threads < 1
+    ):
+        raise ValueError(f"expected threads as an integer >= 1 or None, got {threads!r}")
+    stats = statistics if statistics is not None else shipped_image_statistics()
+    sig = torch.tensor(sigma_list, dtype=torch.float64)
+    generator = torch.Generator().manual_seed(seed)
+    sensor = LearnableSplitterSensor(start, init=init, generator=generator).double()
+
+    def mse_of(kernels: Pattern | torch.Tensor) -> torch.Tensor:
+        return closed_form_mse(kernels, sig, statistics=stats, radius=radius)
+
+    bar = None
+    if progress:
+        from tqdm.auto import tqdm
+
+        bar = tqdm(total=steps, desc=f"design from {start.name} ({init})", unit="step")
+    history: list[float] = []
+    began = time.perf_counter()
+    with _intra_op_threads(threads):
+        with torch.no_grad():
+            before = mse_of(start)
+        optimizer = torch.optim.Adam([sensor.logits], lr=lr)
+        for _ in range(steps):
+            value = _objective_db(mse_of(sensor.pixel_kernels()), objective)
+            optimizer.zero_grad(set_to_none=True)
+            (-value).backward()
+            optimizer.step()
+            history.append(value.item())
+            if bar is not None:
+                bar.set_postfix(dB=f"{history[-1]:.3f}", refresh=False)
+                bar.update(1)
+        designed = sensor.to_pattern(name or f"{start.name}-designed")
+        with torch.no_grad():
+            after = mse_of(designed)
+    seconds = time.perf_counter() - began
+    if bar is not None:
+        bar.close()
+    designed = dataclasses.replace(
+        designed,
+        provenance="designed",
+        description=(
+            f"designed from pattern {start.name} ({init} start) for the closed-form LMMSE "
+            f"({objective}) at sigma {', '.join(f'{s:g}' for s in sigma_list)}"
+        ),
+        reference="splitcam design (closed-form LMMSE of the kernels)",
+        metadata={
+            "start": start.name,
+            "init": init,
+            "seed": seed,
+            "sigmas": sigma_list,
+            "objective": objective,
+            "steps": steps,
+            "lr": float(lr),
+            "radius": radius,
+        },
+    )
+    return DesignResult(
+        pattern=designed,
+        start=start,
+        init=init,
+        sigmas=sigma_list,
+        objective=objective,
+        mse_before=dict(zip(sigma_list, before.tolist(), strict=True)),
+        mse_after=dict(zip(sigma_list, after.tolist(), strict=True)),
+        history=history,
+        seconds=seconds,
+    )
