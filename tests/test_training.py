@@ -37,12 +37,22 @@ def image_folder(tmp_path_factory):
 
 def tiny(folder, out, **changes) -> TrainConfig:
     settings = {
-        "data.train": str(folder), "data.val_split": 2, "data.val_max_images": 2,
-        "data.val_crop": 32, "data.patch_size": 16, "data.batch_size": 4,
-        "network.features": 8, "network.blocks": 1, "optim.steps": 6, "optim.lr": 1e-3,
+        "data.train": str(folder),
+        "data.val_split": 2,
+        "data.val_max_images": 2,
+        "data.val_crop": 32,
+        "data.patch_size": 16,
+        "data.batch_size": 4,
+        "network.features": 8,
+        "network.blocks": 1,
+        "optim.steps": 6,
+        "optim.lr": 1e-3,
         "optim.warmup_steps": 5,
-        "run.out": str(out), "run.log_every": 1, "run.val_every": 3,
-        "run.checkpoint_every": 3, "run.threads": 1,
+        "run.out": str(out),
+        "run.log_every": 1,
+        "run.val_every": 3,
+        "run.checkpoint_every": 3,
+        "run.threads": 1,
     }
     settings.update(changes)
     return TrainConfig().override(settings)
@@ -66,9 +76,7 @@ def test_a_few_steps_lower_the_loss(image_folder, tmp_path, arch):
     assert val[0]["step"] == 0 and val[-1]["step"] == 40
     assert val[-1]["val_psnr"] > val[0]["val_psnr"] + 0.5
     if arch == "physics":  # it starts at the LMMSE estimate: its correction is zero
-        lmmse = mean_psnr(
-            closed_form_lmmse("D"), _val_images(config), config.data.val_sigmas
-        )
+        lmmse = mean_psnr(closed_form_lmmse("D"), _val_images(config), config.data.val_sigmas)
         assert val[0]["val_psnr"] == pytest.approx(np.mean(list(lmmse.values())), abs=1e-3)
     assert json.loads((tmp_path / "r/config.json").read_text())["optim"]["steps"] == 40
 
@@ -144,8 +152,11 @@ def test_damaged_and_foreign_checkpoints_are_refused(image_folder, tmp_path):
         load_system(tmp_path / "r")
     path.write_bytes(data)
     with pytest.raises(CheckpointError, match="network.features=8, got 16"):
-        train(tiny(image_folder, tmp_path / "r", **{"network.features": 16}), resume=True,
-              progress=False)
+        train(
+            tiny(image_folder, tmp_path / "r", **{"network.features": 16}),
+            resume=True,
+            progress=False,
+        )
     ckpt = ckpt_io.load(path)
     bigger = torch.nn.Conv2d(1, 1, 3)
     with pytest.raises(CheckpointError, match="another architecture"):
@@ -158,10 +169,35 @@ def test_damaged_and_foreign_checkpoints_are_refused(image_folder, tmp_path):
 
 def _spawn(image_folder, out, steps, every):
     argv = [
-        sys.executable, "-m", "splitcam", "train", "--data", str(image_folder),
-        "--val-split", "2", "--patch-size", "16", "--batch-size", "4", "--features", "8",
-        "--blocks", "1", "--steps", str(steps), "--checkpoint-every", str(every),
-        "--log-every", "1", "--val-every", "1000", "--threads", "1", "--out", str(out), "--quiet",
+        sys.executable,
+        "-m",
+        "splitcam",
+        "train",
+        "--data",
+        str(image_folder),
+        "--val-split",
+        "2",
+        "--patch-size",
+        "16",
+        "--batch-size",
+        "4",
+        "--features",
+        "8",
+        "--blocks",
+        "1",
+        "--steps",
+        str(steps),
+        "--checkpoint-every",
+        str(every),
+        "--log-every",
+        "1",
+        "--val-every",
+        "1000",
+        "--threads",
+        "1",
+        "--out",
+        str(out),
+        "--quiet",
     ]
     env = {**os.environ, "PYTHONUNBUFFERED": "1"}
     return subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env)
@@ -210,8 +246,10 @@ def test_ctrl_c_saves_and_exits_cleanly(image_folder, tmp_path):
     assert b"Traceback" not in stderr
     assert b"--resume" in stdout
     step = ckpt_io.load(out).meta["step"]
-    assert step >= 1 and step == json.loads(
-        (out / "metrics.jsonl").read_text().splitlines()[-1])["step"]
+    assert (
+        step >= 1
+        and step == json.loads((out / "metrics.jsonl").read_text().splitlines()[-1])["step"]
+    )
 
 
 def test_config_files_and_overrides(tmp_path, image_folder):
@@ -242,12 +280,29 @@ def test_config_files_and_overrides(tmp_path, image_folder):
 
 def test_cli_train_plot_reconstruct(image_folder, tmp_path, capsys):
     cfg = tmp_path / "c.toml"
-    cfg.write_text(f'[data]\ntrain = "{image_folder}"\nval_split = 2\npatch_size = 16\n'
-                   'batch_size = 4\nval_crop = 32\n[network]\nfeatures = 8\nblocks = 1\n'
-                   '[run]\nthreads = 1\nval_every = 2\n')
+    cfg.write_text(
+        f'[data]\ntrain = "{image_folder}"\nval_split = 2\npatch_size = 16\n'
+        "batch_size = 4\nval_crop = 32\n[network]\nfeatures = 8\nblocks = 1\n"
+        "[run]\nthreads = 1\nval_every = 2\n"
+    )
     out = tmp_path / "run"
-    assert main(["train", "--config", str(cfg), "--steps", "4", "--out", str(out),
-                 "--quiet", "--lr", "1e-3"]) == 0
+    assert (
+        main(
+            [
+                "train",
+                "--config",
+                str(cfg),
+                "--steps",
+                "4",
+                "--out",
+                str(out),
+                "--quiet",
+                "--lr",
+                "1e-3",
+            ]
+        )
+        == 0
+    )
     saved = json.loads((out / "config.json").read_text())
     assert saved["optim"]["lr"] == 1e-3 and saved["data"]["batch_size"] == 4
     assert main(["train", "--out", str(out), "--resume", "--steps", "6", "--quiet"]) == 0
@@ -258,17 +313,57 @@ def test_cli_train_plot_reconstruct(image_folder, tmp_path, capsys):
     assert (tmp_path / "both.png").stat().st_size > 1000
     photo = image_folder / "im0.png"
     rec = tmp_path / "rec.png"
-    assert main(["reconstruct", "--checkpoint", str(out), "--image", str(photo),
-                 "--sigma", "5", "--out", str(rec), "--quiet"]) == 0
+    assert (
+        main(
+            [
+                "reconstruct",
+                "--checkpoint",
+                str(out),
+                "--image",
+                str(photo),
+                "--sigma",
+                "5",
+                "--out",
+                str(rec),
+                "--quiet",
+            ]
+        )
+        == 0
+    )
     with Image.open(rec) as im:
         assert im.size == (48, 48) and im.mode == "RGB"
     raw = tmp_path / "raw.npy"
     assert main(["simulate", str(photo), "--pattern", "D", "--out", str(raw)]) == 0
-    assert main(["reconstruct", "--checkpoint", str(out), "--raw", str(raw),
-                 "--out", str(tmp_path / "rec2.png"), "--quiet"]) == 0
+    assert (
+        main(
+            [
+                "reconstruct",
+                "--checkpoint",
+                str(out),
+                "--raw",
+                str(raw),
+                "--out",
+                str(tmp_path / "rec2.png"),
+                "--quiet",
+            ]
+        )
+        == 0
+    )
     capsys.readouterr()
-    assert main(["reconstruct", "--checkpoint", str(tmp_path / "none"), "--raw", str(raw),
-                 "--out", str(rec)]) == 1
+    assert (
+        main(
+            [
+                "reconstruct",
+                "--checkpoint",
+                str(tmp_path / "none"),
+                "--raw",
+                str(raw),
+                "--out",
+                str(rec),
+            ]
+        )
+        == 1
+    )
     assert "no checkpoint" in capsys.readouterr().err
     assert main(["train", "--out", str(tmp_path / "new"), "--quiet"]) == 1
     assert "no training data" in capsys.readouterr().err
@@ -276,8 +371,10 @@ def test_cli_train_plot_reconstruct(image_folder, tmp_path, capsys):
 
 @pytest.mark.slow
 def test_compiled_training_keeps_the_checkpoint_format(image_folder, tmp_path):
-    train(tiny(image_folder, tmp_path / "c", **{"run.compile": True, "optim.steps": 2}),
-          progress=False)
+    train(
+        tiny(image_folder, tmp_path / "c", **{"run.compile": True, "optim.steps": 2}),
+        progress=False,
+    )
     train(tiny(image_folder, tmp_path / "e", **{"optim.steps": 2}), progress=False)
     compiled = ckpt_io.load(tmp_path / "c").section("model")
     eager = ckpt_io.load(tmp_path / "e").section("model")
@@ -297,14 +394,28 @@ def test_a_second_run_on_the_same_folder_is_refused_and_a_killed_one_leaves_no_l
     _wait_for_step(out, 2, proc)
     with pytest.raises(ConfigError, match="another training run is using"):
         train(tiny(image_folder, out), resume=True, progress=False)
-    code = main(["train", "--data", str(image_folder), "--out", str(out), "--resume",
-                 "--steps", "1", "--threads", "1", "--quiet"])
+    code = main(
+        [
+            "train",
+            "--data",
+            str(image_folder),
+            "--out",
+            str(out),
+            "--resume",
+            "--steps",
+            "1",
+            "--threads",
+            "1",
+            "--quiet",
+        ]
+    )
     assert code == 1  # a one-line error (checked by the message above), not a traceback
     proc.send_signal(signal.SIGKILL)
     proc.wait()
     saved = ckpt_io.load(out).meta["step"]
-    result = train(tiny(image_folder, out, **{"optim.steps": saved + 1}), resume=True,
-                   progress=False)
+    result = train(
+        tiny(image_folder, out, **{"optim.steps": saved + 1}), resume=True, progress=False
+    )
     assert result.step == saved + 1
 
 
@@ -312,8 +423,11 @@ def test_settings_changed_on_resume_apply_and_are_recorded(image_folder, tmp_pat
     out = tmp_path / "changed"
     constant = {"optim.schedule": "constant", "optim.warmup_steps": 0}
     train(tiny(image_folder, out, **{**constant, "optim.steps": 2}), progress=False)
-    train(tiny(image_folder, out, **{**constant, "optim.steps": 4, "optim.lr": 3e-4}),
-          resume=True, progress=False)
+    train(
+        tiny(image_folder, out, **{**constant, "optim.steps": 4, "optim.lr": 3e-4}),
+        resume=True,
+        progress=False,
+    )
     rows = [json.loads(x) for x in (out / "metrics.jsonl").read_text().splitlines()]
     lr = {r["step"]: r["lr"] for r in rows if "lr" in r}
     assert lr[2] == pytest.approx(1e-3) and lr[3] == pytest.approx(3e-4)
@@ -325,8 +439,7 @@ def test_settings_changed_on_resume_apply_and_are_recorded(image_folder, tmp_pat
     assert record[-1]["changes"]["optim.lr"] == [1e-3, 3e-4]
     assert record[-1]["changes"]["optim.steps"] == [2, 4]
     with pytest.raises(CheckpointError, match="run.seed=0, got 5; this setting defines"):
-        train(tiny(image_folder, out, **{**constant, "run.seed": 5}), resume=True,
-              progress=False)
+        train(tiny(image_folder, out, **{**constant, "run.seed": 5}), resume=True, progress=False)
 
 
 def test_resume_of_a_run_killed_before_its_first_checkpoint(image_folder, tmp_path, capsys):
@@ -371,8 +484,9 @@ def test_every_setting_has_a_flag_with_its_default_in_the_help():
     assert set(flags) == keys
     assert "(default: 5e-05)" not in flags["optim.lr"].help
     assert "(default: 0.0005)" in flags["optim.lr"].help
-    args = build_parser().parse_args(["train", "--lr", "0.002", "--betas", "0.8", "0.9",
-                                      "--learn-pattern", "--val-split", "3"])
+    args = build_parser().parse_args(
+        ["train", "--lr", "0.002", "--betas", "0.8", "0.9", "--learn-pattern", "--val-split", "3"]
+    )
     assert args.lr == 0.002 and args.betas == [0.8, 0.9] and args.learn_pattern is True
     assert args.val_split == 3
 
