@@ -501,6 +501,22 @@ def test_checkpoint_headers_without_network_and_nan_weights_are_named(image_fold
     save_file(ckpt.tensors, str(bad), metadata={"splitcam": json.dumps(header)})
     with pytest.raises(CheckpointError, match="no_network.safetensors.*no 'network'"):
         load_system(bad)
+    header = {k: v for k, v in ckpt.meta.items() if k != "pattern"}
+    save_file(ckpt.tensors, str(bad), metadata={"splitcam": json.dumps(header)})
+    with pytest.raises(CheckpointError, match="no_network.safetensors.*no 'pattern'"):
+        load_system(bad)
+    # Resuming needs more of the header: each missing key is named, with the file.
+    for missing in ("config", "step", "optimizer"):
+        run = tmp_path / f"lacks_{missing}"
+        run.mkdir()
+        header = {k: v for k, v in ckpt.meta.items() if k != missing}
+        save_file(
+            ckpt.tensors,
+            str(run / ckpt_io.CHECKPOINT_NAME),
+            metadata={"splitcam": json.dumps(header)},
+        )
+        with pytest.raises(CheckpointError, match=f"lacks_{missing}.*no '{missing}' in its header"):
+            train(tiny(image_folder, run, **{"optim.steps": 2}), resume=True, progress=False)
     tensors = dict(ckpt.tensors)
     key = next(k for k in tensors if k.startswith("model/network") and k.endswith("weight"))
     tensors[key] = tensors[key].clone()

@@ -70,11 +70,14 @@ def load_optimizer(optimizer: torch.optim.Optimizer, ckpt: Checkpoint) -> None:
     for key, value in ckpt.section("optim").items():
         index, name = key.split("/", 1)
         state.setdefault(int(index), {})[name] = value
-    groups = ckpt.meta["optimizer"]["param_groups"]
+    require(ckpt, "optimizer", purpose="its optimiser state cannot be restored")
     try:
+        groups = ckpt.meta["optimizer"]["param_groups"]
         optimizer.load_state_dict({"state": state, "param_groups": groups})
-    except (ValueError, KeyError) as exc:
-        raise CheckpointError(f"optimiser state does not fit this run: {exc}") from None
+    except (ValueError, KeyError, TypeError) as exc:
+        raise CheckpointError(
+            f"checkpoint {ckpt.path!r}: optimiser state does not fit this run: {exc}"
+        ) from None
 
 
 def save(path: str | os.PathLike, meta: dict[str, Any], tensors: dict[str, torch.Tensor]) -> Path:
@@ -138,6 +141,17 @@ def load(path: str | os.PathLike) -> Checkpoint:
     return Checkpoint(meta=meta, tensors=tensors, path=str(path))
 
 
+def require(ckpt: Checkpoint, *keys: str, purpose: str = "") -> None:
+    """Refuse a checkpoint whose header lacks any of ``keys``, naming the file and the keys
+    (instead of a ``KeyError`` later on)."""
+    missing = [k for k in keys if k not in ckpt.meta]
+    if missing:
+        raise CheckpointError(
+            f"checkpoint {ckpt.path!r} has no {' or '.join(repr(k) for k in missing)} in its "
+            f"header{', so ' + purpose if purpose else ''}"
+        )
+
+
 def load_module(
     module: torch.nn.Module, ckpt: Checkpoint, prefix: str = "model", child: str = ""
 ) -> None:
@@ -173,18 +187,14 @@ def load_system(path: str | os.PathLike, device: str | torch.device = "cpu") -> 
     """The trained system of a run folder or checkpoint, with the sensor fixed to the pattern
     it had at that step (a learned pattern is loaded as a fixed one), in eval mode."""
     loaded = load(path)
-    where = loaded.path or str(path)
-    missing = [k for k in ("pattern", "network") if k not in loaded.meta]
-    if missing:
-        raise CheckpointError(
-            f"checkpoint {where!r} has no {' or '.join(repr(k) for k in missing)} in its "
-            f"header, so it cannot be loaded as a trained system"
-        )
+    where = loaded.path
+    require(loaded, "pattern", "network", purpose="it cannot be loaded as a trained system")
     try:
         pattern = Pattern.from_dict(loaded.meta["pattern"], source=where)
         network = build_network(loaded.meta["network"])
-    except ValueError as exc:  # PatternError is a ValueError too
-        raise CheckpointError(f"checkpoint {where!r}: {exc}") from None
+    except (ValueError, KeyError, TypeError) as exc:  # PatternError is a ValueError too
+        what = f"its header lacks {exc}" if isinstance(exc, KeyError) else str(exc)
+        raise CheckpointError(f"checkpoint {where!r}: {what}") from None
     load_module(network, loaded, child="network")
     system = ImagingSystem(SplitterSensor(pattern), network)
     return system.to(device).eval()

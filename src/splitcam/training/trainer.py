@@ -230,6 +230,7 @@ def train(config: TrainConfig, *, resume: bool = False, progress: bool = True) -
     config.validate()
     run_dir = Path(config.run.out)
     ckpt_path = run_dir / ckpt_io.CHECKPOINT_NAME
+    # Under torchrun only rank 0 locks; the others wait for it in init_process_group.
     is_main = int(os.environ.get("RANK", "0")) == 0
     lock = _lock_run(run_dir) if is_main else None
     try:
@@ -280,6 +281,9 @@ def _train(
         for stale in run_dir.glob("*.tmp"):
             stale.unlink(missing_ok=True)
         loaded = ckpt_io.load(ckpt_path)
+        ckpt_io.require(
+            loaded, "config", "step", "start_pattern", "optimizer", purpose="it cannot be resumed"
+        )
         saved = TrainConfig.from_dict(loaded.meta["config"], source=str(ckpt_path))
         _check_resume_compatible(saved, config)
         changes = _changed_settings(saved, config)
