@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -419,6 +420,28 @@ def test_a_second_run_on_the_same_folder_is_refused_and_a_killed_one_leaves_no_l
     assert result.step == saved + 1
 
 
+def test_the_run_lock_is_an_os_lock_and_a_refusal_is_one_line(image_folder, tmp_path, capsys):
+    fcntl = pytest.importorskip("fcntl")
+    out = tmp_path / "held"
+    out.mkdir()
+    with open(out / ".lock", "a+") as holder:  # another holder of the folder's lock
+        fcntl.flock(holder, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        with pytest.raises(
+            ConfigError, match=f"another training run is using {re.escape(repr(str(out)))}"
+        ):
+            train(tiny(image_folder, out, **{"optim.steps": 1}), progress=False)
+        capsys.readouterr()
+        argv = ["train", "--data", str(image_folder), "--out", str(out), "--steps", "1"]
+        tiny_flags = ["--features", "4", "--blocks", "1", "--patch-size", "16", "--batch-size", "2"]
+        assert main([*argv, *tiny_flags, "--threads", "1", "--quiet"]) == 1
+        err = capsys.readouterr().err
+        assert err.startswith("splitcam train: error: another training run is using")
+        assert err.count("\n") == 1 and "Traceback" not in err
+        assert not (out / "config.json").exists()  # the refused run wrote nothing
+    # Released (as the OS does when its holder dies, however it dies): the folder is free.
+    assert train(tiny(image_folder, out, **{"optim.steps": 1}), progress=False).step == 1
+
+
 def test_settings_changed_on_resume_apply_and_are_recorded(image_folder, tmp_path):
     out = tmp_path / "changed"
     constant = {"optim.schedule": "constant", "optim.warmup_steps": 0}
@@ -453,6 +476,18 @@ def test_resume_of_a_run_killed_before_its_first_checkpoint(image_folder, tmp_pa
     assert steps.count(0) == 1 and steps[-1] == 6
     with pytest.raises(ConfigError, match="no run to resume in .*drop --resume"):
         train(tiny(image_folder, tmp_path / "empty"), resume=True, progress=False)
+    assert main(["train", "--out", str(tmp_path / "nothing"), "--resume", "--quiet"]) == 1
+    err = capsys.readouterr().err
+    assert err.startswith("splitcam train: error: no run to resume in ")
+    assert "drop --resume to start one there" in err
+    assert not (tmp_path / "empty").exists() and not (tmp_path / "nothing").exists()
+    # Started anew without --resume: no second step 0 from the earlier attempt either.
+    again = tmp_path / "again"
+    again.mkdir()
+    (again / "metrics.jsonl").write_text('{"step": 0, "val_psnr": 10.0}\n')
+    train(tiny(image_folder, again, **{"optim.steps": 2}), progress=False)
+    steps = [json.loads(x)["step"] for x in (again / "metrics.jsonl").read_text().splitlines()]
+    assert steps == [0, 1, 2]
 
 
 def test_validation_is_on_by_default_on_a_held_out_split(image_folder, tmp_path):
@@ -517,6 +552,7 @@ def test_checkpoint_headers_without_network_and_nan_weights_are_named(image_fold
         )
         with pytest.raises(CheckpointError, match=f"lacks_{missing}.*no '{missing}' in its header"):
             train(tiny(image_folder, run, **{"optim.steps": 2}), resume=True, progress=False)
+    assert main(["train", "--out", str(tmp_path / "lacks_config"), "--resume", "--quiet"]) == 1
     tensors = dict(ckpt.tensors)
     key = next(k for k in tensors if k.startswith("model/network") and k.endswith("weight"))
     tensors[key] = tensors[key].clone()

@@ -102,20 +102,16 @@ def _end_distributed() -> None:
 
 def cmd_train(args: argparse.Namespace) -> int:
     from .training import TrainConfig, train
-    from .training.checkpoint import CHECKPOINT_NAME
-    from .training.checkpoint import load as load_checkpoint
     from .training.config import train_flags
+    from .training.trainer import resume_config
 
     if args.resume and not args.config:
-        # Continue with the run's own settings; flags given now override them. A run killed
-        # before its first checkpoint has only its config.json.
-        out = Path(args.out or "runs/default")
-        if (out / "config.json").is_file() and not (out / CHECKPOINT_NAME).is_file():
-            config = TrainConfig.from_file(out / "config.json")
-        else:
-            config = TrainConfig.from_dict(load_checkpoint(out).meta["config"])
+        # Continue with the run's own settings (those of its checkpoint, or the config.json of a
+        # run killed before its first one); flags given now override them.
+        config = resume_config(args.out or TrainConfig().run.out)
     else:
         config = TrainConfig.from_file(args.config) if args.config else TrainConfig()
+    # Flags left out keep the config file's (or the default) value.
     overrides = {}
     for flag in train_flags():
         value = getattr(args, flag.name, None)

@@ -230,6 +230,8 @@ def train(config: TrainConfig, *, resume: bool = False, progress: bool = True) -
     config.validate()
     run_dir = Path(config.run.out)
     ckpt_path = run_dir / ckpt_io.CHECKPOINT_NAME
+    if resume:
+        _resumable(run_dir)  # before the lock, so that a refused resume creates no folder
     # Under torchrun only rank 0 locks; the others wait for it in init_process_group.
     is_main = int(os.environ.get("RANK", "0")) == 0
     lock = _lock_run(run_dir) if is_main else None
@@ -238,6 +240,30 @@ def train(config: TrainConfig, *, resume: bool = False, progress: bool = True) -
     finally:
         if lock is not None:
             lock.close()
+
+
+def _resumable(run_dir: Path) -> None:
+    """Refuse ``--resume`` of a folder with neither a checkpoint nor a ``config.json``."""
+    if not (run_dir / ckpt_io.CHECKPOINT_NAME).exists() and not (run_dir / "config.json").is_file():
+        raise ConfigError(f"no run to resume in {str(run_dir)!r}; drop --resume to start one there")
+
+
+def resume_config(run_dir: str | Path) -> TrainConfig:
+    """The settings of the run in ``run_dir`` (what ``--resume`` continues with): its
+    checkpoint's, or, for a run that ended before its first checkpoint, its ``config.json``.
+
+    Raises:
+        ConfigError: Nothing to resume there.
+        CheckpointError: The checkpoint is damaged or records no configuration.
+    """
+    run_dir = Path(run_dir)
+    _resumable(run_dir)
+    ckpt_path = run_dir / ckpt_io.CHECKPOINT_NAME
+    if ckpt_path.exists():
+        loaded = ckpt_io.load(ckpt_path)
+        ckpt_io.require(loaded, "config", purpose="its run cannot be resumed")
+        return TrainConfig.from_dict(loaded.meta["config"], source=str(ckpt_path))
+    return TrainConfig.from_file(run_dir / "config.json")
 
 
 def _lock_run(run_dir: Path) -> Any:
@@ -266,15 +292,11 @@ def _train(
 ) -> TrainResult:
     loaded = None
     changes: dict[str, list[Any]] = {}
+    restarted = False
     if resume and not ckpt_path.exists():
-        if not (run_dir / "config.json").is_file():
-            raise ConfigError(
-                f"no run to resume in {str(run_dir)!r}; drop --resume to start one there"
-            )
+        _resumable(run_dir)
         # Killed before its first checkpoint: nothing to continue but its settings.
-        print(f"{run_dir} has no checkpoint yet: starting it again from step 0")
-        (run_dir / METRICS_NAME).unlink(missing_ok=True)
-        resume = False
+        restarted, resume = True, False
     elif resume:
         # A process killed while writing leaves a partial temporary file beside the intact
         # checkpoint; it is rewritten by the next save, but clear it now so nothing stale lingers.
@@ -362,9 +384,19 @@ def _train(
     writer = None
     if dist_info.is_main:
         run_dir.mkdir(parents=True, exist_ok=True)
-        config.write(run_dir / "config.json")
         if resume:
             _truncate_metrics(metrics_path, step)
+        else:
+            # A new run in this folder (which holds no checkpoint): the logs of an earlier one
+            # that ended before its first checkpoint describe nothing that survives.
+            stale = [n for n in (METRICS_NAME, CHANGES_NAME) if (run_dir / n).exists()]
+            for name in stale:
+                (run_dir / name).unlink()
+            if restarted:
+                print(f"{run_dir} has no checkpoint yet: starting it again from step 0")
+            elif stale:
+                print(f"{run_dir}: cleared {' and '.join(stale)} of a run with no checkpoint")
+        config.write(run_dir / "config.json")
         if config.run.tensorboard:
             writer = _tensorboard(run_dir)
 
