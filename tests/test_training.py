@@ -504,6 +504,7 @@ def test_validation_is_on_by_default_on_a_held_out_split(image_folder, tmp_path)
 
 
 def test_every_setting_has_a_flag_with_its_default_in_the_help():
+    import argparse
     import dataclasses
 
     from splitcam.cli import build_parser
@@ -516,14 +517,48 @@ def test_every_setting_has_a_flag_with_its_default_in_the_help():
         for s in dataclasses.fields(Config)
         for f in dataclasses.fields(getattr(Config(), s.name))
     }
-    assert set(flags) == keys
-    assert "(default: 5e-05)" not in flags["optim.lr"].help
-    assert "(default: 0.0005)" in flags["optim.lr"].help
-    args = build_parser().parse_args(
+    assert set(flags) == keys  # none left out
+    # The flags `splitcam train` has, each showing the dataclass's default in its help.
+    parser = build_parser()
+    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    options = {o: a for a in sub.choices["train"]._actions for o in a.option_strings}
+    defaults = Config()
+    for key, flag in flags.items():
+        section, name = key.split(".")
+        action = options["--" + flag.name.replace("_", "-")]
+        assert action.dest == flag.name and action.help == flag.help
+        default = getattr(getattr(defaults, section), name)
+        if isinstance(default, bool):
+            assert action.help.endswith(f"(default: {'on' if default else 'off'})"), key
+        elif isinstance(default, list):
+            assert action.help.endswith(f"(default: {' '.join(map(str, default))})"), key
+        elif default is not None:
+            assert action.help.endswith(f"(default: {default})"), key
+        assert action.default is None  # "not given": the config file's value stays
+    assert flags["optim.lr"].help.endswith("(default: 0.0005)")
+    # The flag names of the hand-written table this replaced keep their meaning.
+    old = {
+        "pattern": "pattern.name", "learn_pattern": "pattern.learn", "init": "pattern.init",
+        "pattern_lr": "pattern.lr", "data": "data.train", "val": "data.val",
+        "val_split": "data.val_split", "val_images": "data.val_max_images",
+        "val_sigmas": "data.val_sigmas", "patch_size": "data.patch_size",
+        "batch_size": "data.batch_size", "arch": "network.arch", "features": "network.features",
+        "blocks": "network.blocks", "steps": "optim.steps", "lr": "optim.lr",
+        "schedule": "optim.schedule", "warmup_steps": "optim.warmup_steps",
+        "per_sample_sigma": "optim.per_sample_sigma", "out": "run.out", "device": "run.device",
+        "seed": "run.seed", "log_every": "run.log_every", "val_every": "run.val_every",
+        "checkpoint_every": "run.checkpoint_every", "threads": "run.threads",
+        "time_limit": "run.time_limit", "precision": "run.precision",
+        "tensorboard": "run.tensorboard", "channels_last": "run.channels_last",
+        "bf16": "run.bf16", "compile": "run.compile",
+    }  # fmt: skip
+    assert {f.name: f.key for f in flags.values() if f.name in old} == old
+    args = parser.parse_args(
         ["train", "--lr", "0.002", "--betas", "0.8", "0.9", "--learn-pattern", "--val-split", "3"]
     )
     assert args.lr == 0.002 and args.betas == [0.8, 0.9] and args.learn_pattern is True
-    assert args.val_split == 3
+    assert args.val_split == 3 and args.tensorboard is None
+    assert parser.parse_args(["train", "--no-learn-pattern"]).learn_pattern is False
 
 
 def test_checkpoint_headers_without_network_and_nan_weights_are_named(image_folder, tmp_path):

@@ -326,14 +326,16 @@ def _add_train_parser(sub) -> None:
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     from .training.config import train_flags
 
-    # One flag per setting of the typed config, with its help and default from there.
+    # One flag per setting of the typed config, with its help and default from there. Every
+    # default here is None, "not given": the config file's (or the dataclass's) value stays.
     for flag in train_flags():
         name = "--" + flag.name.replace("_", "-")
-        if flag.kind is bool:
-            p.add_argument(name, action="store_const", const=True, default=None, help=flag.help)
+        text = flag.help.replace("%", "%%")
+        if flag.kind is bool:  # --learn-pattern / --no-learn-pattern
+            p.add_argument(name, action=argparse.BooleanOptionalAction, default=None, help=text)
         else:
             nargs = "+" if flag.many else None
-            p.add_argument(name, type=flag.kind, nargs=nargs, default=None, help=flag.help)
+            p.add_argument(name, type=flag.kind, nargs=nargs, default=None, help=text)
     p.set_defaults(handler=cmd_train)
 
 

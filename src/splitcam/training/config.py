@@ -310,7 +310,8 @@ class Flag:
     key: str
     """The dotted setting, e.g. ``optim.lr``."""
     kind: Any
-    """The value type (``bool`` flags take no value; ``list`` ones take several)."""
+    """The value type (``bool`` flags take no value and come with a ``--no-`` form; ``list``
+    ones take several)."""
     many: bool
     help: str
 
@@ -330,7 +331,9 @@ def train_flags() -> list[Flag]:
             kind = args[0] if args else hint
             default = getattr(defaults, f.name)
             text = f.metadata.get("help", "")
-            if default is not None and kind is not bool:
+            if kind is bool:
+                text = f"{text} (default: {'on' if default else 'off'})"
+            elif default is not None:
                 shown = " ".join(map(str, default)) if many else default
                 text = f"{text} (default: {shown})"
             out.append(
