@@ -85,21 +85,6 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     return 0
 
 
-# Command-line flag -> configuration key. Flags left out keep the config file's (or the
-# default) value, so a config file and the command line combine predictably.
-
-
-def _end_distributed() -> None:
-    """Under torchrun: wait for every rank, then take the process group down cleanly. Left to
-    interpreter shutdown, gloo's threads can outlive it and abort the process ("terminate
-    called without an active exception") after the work is done."""
-    import torch.distributed as dist
-
-    if dist.is_available() and dist.is_initialized():
-        dist.barrier()
-        dist.destroy_process_group()
-
-
 def cmd_train(args: argparse.Namespace) -> int:
     from .training import TrainConfig, train
     from .training.config import train_flags
@@ -118,8 +103,8 @@ def cmd_train(args: argparse.Namespace) -> int:
         if value is not None:
             overrides[flag.key] = value
     config = config.override(overrides)
+    # Under torchrun, train() also ends the process group, the same way on every rank.
     result = train(config, resume=args.resume, progress=not args.quiet)
-    _end_distributed()
     if int(os.environ.get("RANK", "0")) != 0:
         return 0  # under torchrun only rank 0 reports
     summary = ", ".join(

@@ -234,12 +234,36 @@ def train(config: TrainConfig, *, resume: bool = False, progress: bool = True) -
         _resumable(run_dir)  # before the lock, so that a refused resume creates no folder
     # Under torchrun only rank 0 locks; the others wait for it in init_process_group.
     is_main = int(os.environ.get("RANK", "0")) == 0
+    started_group = not _distributed_initialized()
     lock = _lock_run(run_dir) if is_main else None
     try:
-        return _train(config, run_dir, ckpt_path, resume, progress)
+        result = _train(config, run_dir, ckpt_path, resume, progress)
+        _end_distributed(destroy=started_group)
+        return result
     finally:
         if lock is not None:
             lock.close()
+
+
+def _distributed_initialized() -> bool:
+    import torch.distributed as dist
+
+    return dist.is_available() and dist.is_initialized()
+
+
+def _end_distributed(destroy: bool) -> None:
+    """The one end of a distributed run, the same on every rank: a barrier after the last
+    collective (the final checkpoint's gathers), so that no rank leaves while another still
+    communicates, then the process group's teardown, if this run started it. Left to
+    interpreter shutdown, gloo's worker threads can outlive Python and abort the process
+    ("terminate called without an active exception") after the work is done."""
+    if not _distributed_initialized():
+        return
+    import torch.distributed as dist
+
+    dist.barrier()
+    if destroy:
+        dist.destroy_process_group()
 
 
 def _resumable(run_dir: Path) -> None:
@@ -314,6 +338,7 @@ def _train(
             f"{str(run_dir)!r} already holds a checkpoint; use --resume to continue it or "
             f"choose another --out"
         )
+    train_source = _train_source(config)  # its errors before the process group exists
     if config.run.threads:
         torch.set_num_threads(config.run.threads)
     # torchrun sets LOCAL_RANK: the device comes first, it decides the backend (nccl or gloo).
@@ -340,7 +365,7 @@ def _train(
     optimizer = torch.optim.Adam(groups, lr=config.optim.lr, betas=tuple(config.optim.betas))
 
     cache = ImageCache(
-        _train_source(config),
+        train_source,
         min_size=config.data.patch_size,
         max_images=config.data.max_images,
         progress=progress and dist_info.is_main,
