@@ -442,7 +442,7 @@ def test_the_run_lock_is_an_os_lock_and_a_refusal_is_one_line(image_folder, tmp_
     assert train(tiny(image_folder, out, **{"optim.steps": 1}), progress=False).step == 1
 
 
-def test_settings_changed_on_resume_apply_and_are_recorded(image_folder, tmp_path):
+def test_settings_changed_on_resume_apply_and_are_recorded(image_folder, tmp_path, capsys):
     out = tmp_path / "changed"
     constant = {"optim.schedule": "constant", "optim.warmup_steps": 0}
     train(tiny(image_folder, out, **{**constant, "optim.steps": 2}), progress=False)
@@ -451,6 +451,8 @@ def test_settings_changed_on_resume_apply_and_are_recorded(image_folder, tmp_pat
         resume=True,
         progress=False,
     )
+    assert "resume at step 2: optim.lr 0.001 -> 0.0003" in capsys.readouterr().out
+    assert json.loads((out / "config.json").read_text())["optim"]["lr"] == 3e-4
     rows = [json.loads(x) for x in (out / "metrics.jsonl").read_text().splitlines()]
     lr = {r["step"]: r["lr"] for r in rows if "lr" in r}
     assert lr[2] == pytest.approx(1e-3) and lr[3] == pytest.approx(3e-4)
@@ -463,6 +465,17 @@ def test_settings_changed_on_resume_apply_and_are_recorded(image_folder, tmp_pat
     assert record[-1]["changes"]["optim.steps"] == [2, 4]
     with pytest.raises(CheckpointError, match="run.seed=0, got 5; this setting defines"):
         train(tiny(image_folder, out, **{**constant, "run.seed": 5}), resume=True, progress=False)
+    model_defining = {
+        "pattern.name": "A",
+        "pattern.learn": True,
+        "pattern.init": "exact",
+        "network.arch": "packed",
+        "network.blocks": 2,
+    }
+    for key, value in model_defining.items():
+        with pytest.raises(CheckpointError, match=f"{key}=.*this setting defines the model"):
+            train(tiny(image_folder, out, **{key: value}), resume=True, progress=False)
+    assert ckpt_io.load(out).meta["step"] == 4  # the refusals changed nothing
 
 
 def test_resume_of_a_run_killed_before_its_first_checkpoint(image_folder, tmp_path, capsys):
