@@ -23,8 +23,6 @@ a learned pattern through it (:func:`closed_form_filters`).
 from __future__ import annotations
 
 import functools
-import hashlib
-import json
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -34,6 +32,7 @@ import numpy as np
 import torch
 
 from ..data.patches import ImageCache
+from ..data.tensorfiles import load_pair, save_pair
 from ..patterns import Pattern, get
 from ..physics.sensor import pattern_pixel_kernels
 from .base import check_sigma
@@ -108,26 +107,9 @@ class ImageStatistics:
         Returns:
             The path of the ``.json`` file.
         """
-        from safetensors.torch import save_file
-
-        tensors_path, meta_path = _paired_paths(path)
-        tensors_path.parent.mkdir(parents=True, exist_ok=True)
-        save_file(
-            {"mean": self.mean.contiguous(), "second": self.second.contiguous()},
-            str(tensors_path),
-            metadata={"format": _FORMAT, "version": str(_VERSION)},
-        )
-        meta = {
-            "format": _FORMAT,
-            "version": _VERSION,
-            "max_offset": self.max_offset,
-            "count": int(self.count),
-            "tensors": tensors_path.name,
-            "sha256": hashlib.sha256(tensors_path.read_bytes()).hexdigest(),
-            "info": self.info,
-        }
-        meta_path.write_text(json.dumps(meta, indent=1) + "\n")
-        return meta_path
+        tensors = {"mean": self.mean, "second": self.second}
+        meta = {"max_offset": self.max_offset, "count": int(self.count), "info": self.info}
+        return save_pair(path, tensors, _FORMAT, _VERSION, meta)
 
     @classmethod
     def load(cls, path: str | os.PathLike[str]) -> ImageStatistics:
@@ -136,37 +118,15 @@ class ImageStatistics:
         Raises:
             LMMSEFileError: A file is missing, damaged, or does not match its checksum.
         """
-        from safetensors import SafetensorError
-        from safetensors.torch import load
-
-        tensors_path, meta_path = _paired_paths(path)
+        tensors, meta, meta_path = load_pair(
+            path, _FORMAT, _VERSION, "image statistics", LMMSEFileError
+        )
         try:
-            meta = json.loads(meta_path.read_text())
-            blob = tensors_path.read_bytes()
-        except OSError as exc:
-            raise LMMSEFileError(f"cannot read image statistics '{meta_path}': {exc}") from None
-        except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-            raise LMMSEFileError(f"'{meta_path}' is not valid JSON (damaged?): {exc}") from None
-        if not isinstance(meta, dict) or meta.get("format") != _FORMAT:
-            raise LMMSEFileError(f"'{meta_path}' is not an image statistics file ({_FORMAT})")
-        if hashlib.sha256(blob).hexdigest() != meta.get("sha256"):
-            raise LMMSEFileError(
-                f"'{tensors_path}' does not match the checksum recorded in '{meta_path}'"
-            )
-        try:
-            tensors = load(blob)
             return cls(
                 tensors["mean"], tensors["second"], int(meta["count"]), dict(meta.get("info", {}))
             )
-        except (SafetensorError, KeyError, TypeError, ValueError) as exc:
+        except (KeyError, TypeError, ValueError) as exc:
             raise LMMSEFileError(f"damaged image statistics '{meta_path}': {exc}") from None
-
-
-def _paired_paths(path: str | os.PathLike[str]) -> tuple[Path, Path]:
-    path = Path(path)
-    if path.suffix.lower() in (".safetensors", ".json"):
-        path = path.with_suffix("")
-    return path.with_name(path.name + ".safetensors"), path.with_name(path.name + ".json")
 
 
 @functools.lru_cache(maxsize=1)

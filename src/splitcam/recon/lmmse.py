@@ -11,8 +11,6 @@ the exact LMMSE filters for every sigma. Fits of the built-in patterns ship with
 
 from __future__ import annotations
 
-import hashlib
-import json
 import os
 from collections.abc import Iterable
 from dataclasses import dataclass, field
@@ -22,6 +20,7 @@ from typing import Any
 import torch
 
 from ..data.patches import ImageCache, PatchSampler
+from ..data.tensorfiles import load_pair, save_pair
 from ..patterns import Pattern, PatternError, get
 from ..physics.periodic import phase_conv, phase_map
 from ..physics.sensor import SplitterSensor
@@ -214,32 +213,14 @@ class LMMSEStatistics:
         Returns:
             The path of the ``.json`` file (what :meth:`load` takes, as does either file name).
         """
-        from safetensors.torch import save_file
-
-        tensors_path, meta_path = _paired_paths(path)
-        tensors_path.parent.mkdir(parents=True, exist_ok=True)
-        save_file(
-            {
-                "xx": self.xx.contiguous(),
-                "xy": self.xy.contiguous(),
-                "yy": self.yy.contiguous(),
-                "counts": self.counts.contiguous(),
-            },
-            str(tensors_path),
-            metadata={"format": _FORMAT, "version": str(_VERSION)},
-        )
+        tensors = {"xx": self.xx, "xy": self.xy, "yy": self.yy, "counts": self.counts}
         meta = {
-            "format": _FORMAT,
-            "version": _VERSION,
             "pattern": self.pattern.to_dict(),
             "radius": self.radius,
             "counts": [int(c) for c in self.counts],
-            "tensors": tensors_path.name,
-            "sha256": hashlib.sha256(tensors_path.read_bytes()).hexdigest(),
             "info": self.info,
         }
-        meta_path.write_text(json.dumps(meta, indent=1) + "\n")
-        return meta_path
+        return save_pair(path, tensors, _FORMAT, _VERSION, meta)
 
     @classmethod
     def load(cls, path: str | os.PathLike[str]) -> LMMSEStatistics:
@@ -249,33 +230,10 @@ class LMMSEStatistics:
             LMMSEFileError: A file is missing, unreadable or damaged, the tensor file's checksum
                 differs from the one recorded, or the contents are inconsistent.
         """
-        from safetensors import SafetensorError
-        from safetensors.torch import load
-
-        tensors_path, meta_path = _paired_paths(path)
+        tensors, meta, meta_path = load_pair(
+            path, _FORMAT, _VERSION, "LMMSE statistics", LMMSEFileError
+        )
         try:
-            meta = json.loads(meta_path.read_text())
-        except OSError as exc:
-            raise LMMSEFileError(f"cannot read LMMSE statistics '{meta_path}': {exc}") from None
-        except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-            raise LMMSEFileError(f"'{meta_path}' is not valid JSON (damaged?): {exc}") from None
-        if not isinstance(meta, dict) or meta.get("format") != _FORMAT:
-            raise LMMSEFileError(f"'{meta_path}' is not an LMMSE statistics file ({_FORMAT})")
-        if meta.get("version") != _VERSION:
-            raise LMMSEFileError(
-                f"'{meta_path}': expected format version {_VERSION}, got {meta.get('version')!r}"
-            )
-        try:
-            blob = tensors_path.read_bytes()
-        except OSError as exc:
-            raise LMMSEFileError(f"cannot read LMMSE tensors '{tensors_path}': {exc}") from None
-        if hashlib.sha256(blob).hexdigest() != meta.get("sha256"):
-            raise LMMSEFileError(
-                f"'{tensors_path}' does not match the checksum recorded in '{meta_path}' "
-                f"(damaged, or from another fit)"
-            )
-        try:
-            tensors = load(blob)
             pattern = Pattern.from_dict(meta["pattern"], source=str(meta_path))
             stats = cls(
                 pattern,
@@ -286,18 +244,11 @@ class LMMSEStatistics:
                 tensors["counts"],
                 dict(meta.get("info", {})),
             )
-        except (SafetensorError, PatternError, KeyError, TypeError, ValueError) as exc:
+        except (PatternError, KeyError, TypeError, ValueError) as exc:
             raise LMMSEFileError(f"damaged LMMSE statistics '{meta_path}': {exc}") from None
         if [int(c) for c in stats.counts] != meta.get("counts"):
-            raise LMMSEFileError(f"'{meta_path}': counts differ from those in '{tensors_path}'")
+            raise LMMSEFileError(f"'{meta_path}': counts differ from those in its tensor file")
         return stats
-
-
-def _paired_paths(path: str | os.PathLike[str]) -> tuple[Path, Path]:
-    path = Path(path)
-    if path.suffix.lower() in (".safetensors", ".json"):
-        path = path.with_suffix("")
-    return path.with_name(path.name + ".safetensors"), path.with_name(path.name + ".json")
 
 
 def _accumulate(

@@ -1,0 +1,100 @@
+"""A pair of files for tensors and what they mean: ``NAME.safetensors`` plus ``NAME.json``.
+
+The tensor file is plain safetensors (never a pickle); the JSON file says what the tensors are
+(``format``, ``version`` and any fields of the caller) and records the SHA-256 of the tensor file,
+so a damaged or mismatched pair is found on loading. Used for the LMMSE statistics (fitted and
+pattern-free) and the shipped models.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+from pathlib import Path
+from typing import Any
+
+import torch
+
+
+class TensorFileError(ValueError):
+    """A tensor-file pair is missing, unreadable, damaged or of another kind; the message says
+    which file and why."""
+
+
+def paired_paths(path: str | os.PathLike[str]) -> tuple[Path, Path]:
+    """``(NAME.safetensors, NAME.json)`` for ``NAME``, ``NAME.safetensors`` or ``NAME.json``."""
+    path = Path(path)
+    if path.suffix.lower() in (".safetensors", ".json"):
+        path = path.with_suffix("")
+    return path.with_name(path.name + ".safetensors"), path.with_name(path.name + ".json")
+
+
+def save_pair(
+    path: str | os.PathLike[str],
+    tensors: dict[str, torch.Tensor],
+    fmt: str,
+    version: int,
+    meta: dict[str, Any],
+) -> Path:
+    """Write ``tensors`` and ``meta`` (JSON-serialisable) as a pair; returns the JSON path."""
+    from safetensors.torch import save_file
+
+    tensors_path, meta_path = paired_paths(path)
+    tensors_path.parent.mkdir(parents=True, exist_ok=True)
+    save_file(
+        {k: v.detach().cpu().contiguous() for k, v in tensors.items()},
+        str(tensors_path),
+        metadata={"format": fmt, "version": str(version)},
+    )
+    header = {"format": fmt, "version": version, **meta, "tensors": tensors_path.name,
+              "sha256": hashlib.sha256(tensors_path.read_bytes()).hexdigest()}
+    meta_path.write_text(json.dumps(header, indent=1) + "\n")
+    return meta_path
+
+
+def load_pair(
+    path: str | os.PathLike[str],
+    fmt: str,
+    version: int,
+    what: str,
+    error: type[ValueError] = TensorFileError,
+) -> tuple[dict[str, torch.Tensor], dict[str, Any], Path]:
+    """Read a pair written by :func:`save_pair`: ``(tensors, meta, json path)``.
+
+    Args:
+        fmt, version: What the JSON file must declare.
+        what: Words for the kind of file in messages ("LMMSE statistics").
+        error: The exception class raised (a subclass of ``ValueError``).
+
+    Raises:
+        error: A file is missing or unreadable, the JSON is damaged or of another format or
+            version, or the tensor file does not match the recorded checksum or is damaged.
+    """
+    from safetensors import SafetensorError
+    from safetensors.torch import load
+
+    tensors_path, meta_path = paired_paths(path)
+    try:
+        meta = json.loads(meta_path.read_text())
+    except OSError as exc:
+        raise error(f"cannot read {what} '{meta_path}': {exc}") from None
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise error(f"'{meta_path}' is not valid JSON (damaged?): {exc}") from None
+    if not isinstance(meta, dict) or meta.get("format") != fmt:
+        raise error(f"'{meta_path}' is not a {what} file ({fmt})")
+    if meta.get("version") != version:
+        raise error(f"'{meta_path}': expected format version {version}, got "
+                    f"{meta.get('version')!r}")
+    try:
+        blob = tensors_path.read_bytes()
+    except OSError as exc:
+        raise error(f"cannot read {what} tensors '{tensors_path}': {exc}") from None
+    if hashlib.sha256(blob).hexdigest() != meta.get("sha256"):
+        raise error(f"'{tensors_path}' does not match the checksum recorded in '{meta_path}' "
+                    f"(damaged, or from another file)")
+    try:
+        tensors = load(blob)
+    except SafetensorError as exc:
+        raise error(f"damaged {what} '{tensors_path}': {exc}") from None
+    return tensors, meta, meta_path
