@@ -96,3 +96,30 @@ def test_precision_switch(monkeypatch: pytest.MonkeyPatch) -> None:
     assert base.fast_precision("auto", "cpu") is False
     with pytest.raises(ValueError, match="unknown precision"):
         base.fast_precision("fp16", "cpu")
+
+
+def test_batched_estimate_equals_per_image_estimates_and_their_gradients() -> None:
+    """One solve and one grouped convolution for a batch of noise levels give the values and the
+    kernel gradients of one call per image (float64)."""
+    from splitcam.recon.closed_form import lmmse_estimate, shipped_image_statistics
+
+    stats = shipped_image_statistics()
+    raw = SplitterSensor("D")(_scene(3, 20).double())
+    sig = torch.tensor([0.0, 7.0, 25.0], dtype=torch.float64)
+    target = torch.rand(
+        3, 3, 20, 20, generator=torch.Generator().manual_seed(5), dtype=torch.float64
+    )
+    grads, values = [], []
+    for batched in (True, False):
+        k = pattern_pixel_kernels("D").clone().requires_grad_(True)
+        if batched:
+            out = lmmse_estimate(raw, k, sig, stats)
+        else:
+            out = torch.cat(
+                [lmmse_estimate(raw[i : i + 1], k, float(sig[i]), stats) for i in range(3)]
+            )
+        (out * target).sum().backward()
+        values.append(out.detach())
+        grads.append(k.grad)
+    torch.testing.assert_close(values[0], values[1], rtol=0, atol=1e-12)
+    torch.testing.assert_close(grads[0], grads[1], rtol=1e-10, atol=1e-10)

@@ -609,3 +609,57 @@ def test_checkpoint_headers_without_network_and_nan_weights_are_named(image_fold
     save_file(tensors, str(nan), metadata={"splitcam": json.dumps(ckpt.meta)})
     with pytest.raises(CheckpointError, match=f"nan.safetensors.*NaN.*{key}"):
         load_system(nan)
+
+
+def test_joint_run_with_design_steps_starts_from_the_designed_kernels(
+    image_folder, tmp_path, monkeypatch
+):
+    """pattern.design_steps: the learned kernels start where `design` takes the initialisation
+    (lower closed-form error than the support start), and a resume keeps the trained kernels
+    instead of designing again."""
+    from splitcam.recon.closed_form import closed_form_mse
+    from splitcam.recon.design import design_pattern
+    from splitcam.training import trainer
+    from splitcam.training.trainer import build_system
+
+    learn = {"pattern.learn": True, "pattern.design_steps": 30, "optim.steps": 3}
+    config = tiny(image_folder, tmp_path / "j", **learn)
+    expected = design_pattern("D", init="support", steps=30, seed=config.run.seed + 17)
+    start = build_system(config).sensor.pixel_kernels().detach()
+    support = (
+        build_system(tiny(image_folder, tmp_path / "s", **{**learn, "pattern.design_steps": 0}))
+        .sensor.pixel_kernels()
+        .detach()
+    )
+    torch.testing.assert_close(
+        start.double(), patterns_kernels(expected.pattern), atol=1e-6, rtol=0
+    )
+    assert float(closed_form_mse(start, 10.0)) < 0.95 * float(closed_form_mse(support, 10.0))
+    train(config, progress=False)
+
+    def no_design(*args, **kwargs):
+        raise AssertionError("a resumed run must not design its kernels again")
+
+    monkeypatch.setattr(trainer, "design_pattern", no_design)
+    train(
+        tiny(image_folder, tmp_path / "j", **{**learn, "optim.steps": 4}),
+        resume=True,
+        progress=False,
+    )
+    assert ckpt_io.load(tmp_path / "j").meta["step"] == 4
+    with pytest.raises(CheckpointError, match="design_steps"):
+        train(
+            tiny(
+                image_folder,
+                tmp_path / "j",
+                **{**learn, "pattern.design_steps": 5, "optim.steps": 5},
+            ),
+            resume=True,
+            progress=False,
+        )
+
+
+def patterns_kernels(pattern: patterns.Pattern) -> torch.Tensor:
+    from splitcam.physics.sensor import pattern_pixel_kernels
+
+    return pattern_pixel_kernels(pattern)

@@ -440,22 +440,17 @@ def lmmse_estimate(
         - raw: ``(N, 1, H, W)``; output ``(N, 3, H, W)``.
     """
     ph, pw = kernels.shape[:2]
-    if isinstance(sigma, torch.Tensor) and sigma.ndim == 1 and sigma.numel() > 1:
-        if bool((sigma == sigma[0]).all()):
-            sigma = sigma[:1]
-        else:
-            return torch.cat(
-                [
-                    lmmse_estimate(raw[i : i + 1], kernels, sigma[i : i + 1], statistics, radius)
-                    for i in range(raw.shape[0])
-                ]
-            )
     if isinstance(sigma, torch.Tensor):
-        sigma = sigma.reshape(-1)[:1].detach().to("cpu", torch.float64)
+        sigma = sigma.detach().reshape(-1).to("cpu", torch.float64)
+        if sigma.numel() > 1 and bool((sigma == sigma[0]).all()):
+            sigma = sigma[:1]
+        if sigma.numel() not in (1, raw.shape[0]):
+            raise ValueError(f"expected 1 or {raw.shape[0]} noise levels, got {sigma.numel()}")
     with torch.autocast(raw.device.type, enabled=False):
+        # One solve for every noise level of the batch, then one grouped convolution.
         weights, bias = closed_form_filters(
             kernels.to(torch.float64), sigma, statistics=statistics, radius=radius
         )
-        if weights.ndim == 5:
+        if weights.ndim == 5 and weights.shape[0] == 1:
             weights, bias = weights[0], bias[0]
         return apply_filters(raw, weights, bias, (ph, pw))

@@ -79,6 +79,7 @@ class DesignResult:
         history: The objective (dB, higher is better) at every step, before that step's update:
             ``-10 log10`` of the mean MSE over the sigmas for ``mse``, the mean PSNR for ``psnr``.
         seconds: Wall time of the optimisation.
+        logits: The optimised logits (float64), what a learnable sensor continues from.
     """
 
     pattern: Pattern
@@ -90,6 +91,7 @@ class DesignResult:
     mse_after: dict[float, float]
     history: list[float] = field(default_factory=list)
     seconds: float = 0.0
+    logits: torch.Tensor | None = None
 
     @property
     def psnr_before(self) -> dict[float, float]:
@@ -272,4 +274,5 @@ def design_pattern(
         mse_after=dict(zip(sigma_list, after.tolist(), strict=True)),
         history=history,
         seconds=seconds,
+        logits=sensor.logits.detach().clone(),
     )

@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Any
 
 import torch
+import torch.nn.functional as F
 
 from ..data.patches import ImageCache, PatchSampler
 from ..data.tensorfiles import load_pair, save_pair
@@ -390,17 +391,34 @@ def apply_filters(
     """Per-phase linear filters plus bias: one convolution, then a per-pixel phase pick.
 
     The filters are cast to the dtype and device of ``raw``; the raw image is taken as 0 outside
-    the image, and its top-left pixel has phase ``(0, 0)``.
+    the image, and its top-left pixel has phase ``(0, 0)``. With a leading batch axis on the
+    filters, image ``n`` gets filters ``n`` (one grouped convolution for the whole batch, e.g.
+    a different noise level per image).
 
     Shape:
-        - raw: ``(N, 1, H, W)``; weights ``(Ph * Pw, 3, k, k)``; bias ``(Ph * Pw, 3)``.
+        - raw: ``(N, 1, H, W)``; weights ``(Ph * Pw, 3, k, k)`` or ``(N, Ph * Pw, 3, k, k)``;
+          bias ``(Ph * Pw, 3)`` or ``(N, Ph * Pw, 3)``.
         - output: ``(N, 3, H, W)``.
     """
-    weights = weights.to(device=raw.device, dtype=raw.dtype).unsqueeze(2)
+    weights = weights.to(device=raw.device, dtype=raw.dtype)
     bias = bias.to(device=raw.device, dtype=raw.dtype)
-    out = phase_conv(raw, weights, period)
     phase = phase_map(*raw.shape[-2:], period, raw.device)
-    return out + bias[phase].permute(2, 0, 1).unsqueeze(0)
+    if weights.ndim == 4:
+        out = phase_conv(raw, weights.unsqueeze(2), period)
+        return out + bias[phase].permute(2, 0, 1).unsqueeze(0)
+    n, p, o, kh, kw = weights.shape
+    if n != raw.shape[0] or bias.shape != (n, p, o):
+        raise ValueError(
+            f"expected per-image filters for {raw.shape[0]} images, got weights "
+            f"{tuple(weights.shape)} and bias {tuple(bias.shape)}"
+        )
+    h, w = raw.shape[-2:]
+    out = F.conv2d(
+        raw.reshape(1, n, h, w), weights.reshape(n * p * o, 1, kh, kw), padding=(kh // 2, kw // 2),
+        groups=n,
+    ).view(n, p, o, h, w)
+    out = out.gather(1, phase.expand(n, 1, o, h, w)).squeeze(1)
+    return out + bias[:, phase].permute(0, 3, 1, 2)
 
 
 class LMMSE:

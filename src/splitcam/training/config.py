@@ -53,6 +53,11 @@ class PatternConfig:
     lr: float | None = _opt(
         None, "learning rate of the pattern logits (default: the network's)", flag="pattern_lr"
     )
+    design_steps: int = _opt(
+        0,
+        "with --learn-pattern: first design the kernels for the closed-form LMMSE for this many "
+        "steps (`splitcam design`, seconds), then train them jointly with the network",
+    )
 
 
 @dataclass

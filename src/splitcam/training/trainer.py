@@ -24,6 +24,7 @@ from ..physics.noise import GaussianNoise
 from ..physics.sensor import LearnableSplitterSensor, SplitterSensor
 from ..physics.system import ImagingSystem
 from ..recon.base import NetworkReconstructor, fast_precision
+from ..recon.design import design_pattern
 from ..recon.networks import build_network
 from . import checkpoint as ckpt_io
 from .config import ConfigError, TrainConfig
@@ -75,14 +76,30 @@ def resolve_device(name: str, local_rank: int = 0) -> torch.device:
     return device
 
 
-def build_system(config: TrainConfig, pattern: patterns.Pattern | None = None) -> ImagingSystem:
-    """Sensor + network from a configuration (network weights freshly initialised)."""
+def build_system(
+    config: TrainConfig, pattern: patterns.Pattern | None = None, *, design: bool = True
+) -> ImagingSystem:
+    """Sensor + network from a configuration (network weights freshly initialised).
+
+    A learned pattern with ``pattern.design_steps`` starts from the kernels that
+    :func:`~splitcam.recon.design.design_pattern` finds from its initialisation (unless
+    ``design`` is false: a resumed run loads its own kernels).
+    """
     pattern = pattern or patterns.get(config.pattern.name)
     if config.pattern.learn:
         gen = torch.Generator().manual_seed(config.run.seed + 17)
         sensor: SplitterSensor = LearnableSplitterSensor(
             pattern, init=config.pattern.init, generator=gen
         )
+        if design and config.pattern.design_steps:
+            designed = design_pattern(
+                pattern,
+                init=config.pattern.init,
+                steps=config.pattern.design_steps,
+                seed=config.run.seed + 17,
+            )
+            with torch.no_grad():
+                sensor.logits.copy_(designed.logits)
     else:
         sensor = SplitterSensor(pattern)
     net = build_network(
@@ -347,7 +364,7 @@ def _train(
     torch.manual_seed(config.run.seed)
 
     pattern = patterns.Pattern.from_dict(loaded.meta["start_pattern"]) if loaded else None
-    system = build_system(config, pattern).to(device)
+    system = build_system(config, pattern, design=loaded is None).to(device)
     start_pattern = system.sensor._meta.to_dict()
     fast = config.run.bf16 or fast_precision(config.run.precision, device)
     if config.run.channels_last or fast:
@@ -658,6 +675,7 @@ FIXED_ON_RESUME = (
     "pattern.name",
     "pattern.learn",
     "pattern.init",
+    "pattern.design_steps",
     "network.arch",
     "network.features",
     "network.blocks",
