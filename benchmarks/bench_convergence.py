@@ -75,11 +75,33 @@ def _nest(dotted: dict[str, object]) -> dict[str, dict[str, object]]:
     return out
 
 
+def recipe(name: str) -> dict[str, object]:
+    """A recipe by name; ``base+key=value,key=value`` is ``base`` with those settings changed
+    (e.g. ``physics+optim.lr=1e-3``)."""
+    from splitcam.training.config import read_config_value
+
+    base, _, changes = name.partition("+")
+    if base not in RECIPES:
+        raise SystemExit(f"unknown recipe {base!r}; known: {', '.join(RECIPES)}")
+    settings = dict(RECIPES[base])
+    for item in filter(None, changes.split(",")):
+        key, _, value = item.partition("=")
+        settings[key] = read_config_value(value)
+    return settings
+
+
+def run_name(name: str) -> str:
+    """A folder name for a recipe name (``physics+optim.lr=1e-3`` → ``physics_optim-lr-1e-3``)."""
+    for a, b in (("+", "_"), ("=", "-"), (",", "_"), (".", "-")):
+        name = name.replace(a, b)
+    return name
+
+
 def train(name: str, args: argparse.Namespace) -> tuple[Path, float]:
-    run = Path(args.out) / (name + args.tag)
+    run = Path(args.out) / (run_name(name) + args.tag)
     overrides = {
         **COMMON,
-        **RECIPES[name],
+        **recipe(name),
         "pattern.name": args.pattern,
         "data.train": str(args.train),
         "data.val_split": args.held_out,
@@ -134,7 +156,10 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--minutes", type=float, default=30.0)
     parser.add_argument("--threads", type=int, default=2)
-    parser.add_argument("--recipes", nargs="+", default=["packed", "physics"], choices=RECIPES)
+    parser.add_argument(
+        "--recipes", nargs="+", default=["packed", "physics"],
+        help=f"recipes: {', '.join(RECIPES)}, or BASE+key=value,... (default: packed physics)",
+    )
     parser.add_argument("--pattern", default="D")
     parser.add_argument("--train", type=Path, default=SHARED_DATA / "train")
     parser.add_argument("--held-out", type=int, default=32)
@@ -153,7 +178,7 @@ def main() -> None:
     runs = {}
     for name in args.recipes:
         if args.score_only:
-            runs[name] = Path(args.out) / (name + args.tag)
+            runs[name] = Path(args.out) / (run_name(name) + args.tag)
         else:
             runs[name], _ = train(name, args)
     images = held_out_images(args.train, args.held_out)

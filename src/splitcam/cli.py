@@ -198,22 +198,30 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
 
     from . import patterns
     from .data.imageio import read_image, read_raw, write_image
-    from .methods import build_method
+    from .methods import build_method, build_model
     from .physics.sensor import SplitterSensor
     from .physics.system import simulate
 
     if (args.image is None) == (args.raw is None):
         raise ValueError("give exactly one of --image (simulate, then reconstruct) or --raw")
-    spec = args.method or args.checkpoint
-    if spec is None:
-        raise ValueError("give --method (lmmse, malvar2004, ..., or a run folder) or --checkpoint")
-    method = build_method(
-        spec,
-        pattern=args.pattern,
-        lmmse_train=args.lmmse_train,
-        tile=args.tile,
-        fast=args.fast,
-        progress=not args.quiet,
+    given = [x for x in (args.method, args.checkpoint, args.model) if x]
+    if len(given) != 1:
+        raise ValueError(
+            "give one of --model (a shipped model, e.g. D), --method (lmmse, malvar2004, ...) "
+            "or --checkpoint (a run folder)"
+        )
+    spec = given[0]
+    method = (
+        build_model(spec, tile=args.tile, fast=args.fast)
+        if args.model
+        else build_method(
+            spec,
+            pattern=args.pattern,
+            lmmse_train=args.lmmse_train,
+            tile=args.tile,
+            fast=args.fast,
+            progress=not args.quiet,
+        )
     )
     if args.pattern is not None and not patterns.get(args.pattern).equals(method.pattern):
         raise ValueError(
@@ -248,14 +256,19 @@ def load_datasets(spec: str | None, max_images: int | None) -> list:
 def cmd_evaluate(args: argparse.Namespace) -> int:
     from .evaluation.protocol import evaluate, parse_zoom
     from .evaluation.tables import markdown_tables, summarise
-    from .methods import build_methods
+    from .methods import build_methods, build_model
+    from .training.models import model_names
 
     zooms = [parse_zoom(z) for z in args.zoom or ()]  # bad syntax fails before any work
+    chosen = args.checkpoint or args.method or args.model
+    # Built-in defaults (the main job): every shipped network, and the training-free baselines.
+    models = args.model if chosen else model_names()
     specs = [
         *args.checkpoint,
-        *(args.method or ([] if args.checkpoint else ["lmmse", "malvar2004"])),
+        *(args.method or ([] if chosen else ["lmmse", "malvar2004"])),
     ]
-    methods = build_methods(
+    methods = [build_model(m, tile=args.tile, fast=args.fast) for m in models]
+    methods += build_methods(
         specs,
         patterns_for_lmmse=args.patterns,
         lmmse_train=args.lmmse_train,
@@ -294,6 +307,148 @@ def cmd_report(args: argparse.Namespace) -> int:
     path = make_report(args.results, args.out)
     print(path.read_text(encoding="utf-8"))
     print(f"wrote {path} with pattern figures and {Path(args.out) / 'sigma_curves.png'}")
+    return 0
+
+
+def cmd_models(args: argparse.Namespace) -> int:
+    from .training.models import MODELS_DIR, export_model, load_model, model_names
+
+    if args.action == "export":
+        if not args.run or not args.name:
+            raise ValueError("models export needs a run folder and --name")
+        out = Path(args.out or MODELS_DIR) / args.name
+        path = export_model(
+            args.run, out, name=args.name, storage=args.storage, description=args.description or ""
+        )
+        size = path.with_suffix(".safetensors").stat().st_size
+        print(f"wrote {path} and {path.with_suffix('.safetensors').name} ({size / 2**20:.2f} MiB)")
+        return 0
+    rows = []
+    for name in model_names():
+        _, meta = load_model(name)
+        prov = meta.get("provenance", {})
+        segs = prov.get("segments", [])
+        rows.append(
+            {
+                "model": name,
+                "pattern": meta["pattern"]["name"],
+                "network": meta["network"]["arch"],
+                "steps": str(prov.get("total_steps", "?")),
+                "batch": str(segs[-1].get("batch_size") if segs else "?"),
+                "train time": f"{prov.get('train_seconds', 0) / 60:.0f} min",
+                "device": ", ".join(dict.fromkeys(str(g.get("device")) for g in segs)),
+            }
+        )
+    if not rows:
+        print(f"no models shipped in {MODELS_DIR}")
+        return 0
+    print(_table(rows))
+    return 0
+
+
+def cmd_sweep(args: argparse.Namespace) -> int:
+    from .training.config import read_config_value
+    from .training.sweep import load_experiments, run_sweep, status
+
+    overrides = {}
+    for item in args.set or ():
+        key, sep, value = item.partition("=")
+        if not sep:
+            raise ValueError(f"--set expects KEY=VALUE (e.g. optim.steps=2000), got {item!r}")
+        overrides[key.strip()] = read_config_value(value)
+    experiments = load_experiments(args.experiments, args.out, data=args.data, overrides=overrides)
+    if args.dry_run:
+        for e in experiments:
+            print(f"{e.name}: {status(e)} ({e.run_dir})")
+        return 0
+    slurm = {
+        "partition": args.partition,
+        "time": args.time,
+        "gpus": args.gpus,
+        "cpus": args.cpus,
+        "wait": not args.no_wait,
+    }
+    result = run_sweep(
+        experiments, executor=args.executor, jobs=args.jobs, threads=args.threads, slurm=slurm
+    )
+    print("; ".join(f"{k}: {v}" for k, v in result.items()))
+    return 0 if all(v in ("done", "partial") for v in result.values()) else 1
+
+
+def cmd_reproduce(args: argparse.Namespace) -> int:
+    from .evaluation.protocol import evaluate
+    from .evaluation.report import paper_tables
+    from .evaluation.tables import summarise
+    from .methods import build_method, build_model
+    from .training.models import load_model, model_names
+
+    rows = {
+        "A": "A",
+        "B": "B",
+        "C": "C",
+        "D": "D",
+        "E": "E",
+        "bayer": "bayer",
+        "A optimised": "A-opt",
+        "D optimised": "D-opt",
+        "D optimised (random init.)": "D-opt-random",
+    }
+    shipped = set(model_names())
+    rows = {r: m for r, m in rows.items() if m in shipped}
+    if not rows:
+        raise ValueError("no shipped models to reproduce the paper with")
+    methods = [build_model(m, tile=args.tile, fast=args.fast) for m in rows.values()]
+    if not args.no_baselines:
+        methods.append(build_method("malvar2004"))
+        methods += [build_method("lmmse", pattern=p) for p in ("D", "bayer")]
+    datasets = load_datasets(args.datasets, args.max_images)
+    names = {n for _, images in datasets for n, _ in images}
+    zoom_spec = [z for z in ("kodim05", "kodim24") if z in names]
+    out = Path(args.out)
+    evaluation = out / "evaluation"
+    result = evaluate(
+        methods,
+        datasets,
+        args.sigmas,
+        evaluation,
+        zoom_images=zoom_spec,
+        zoom_only=True,
+        zoom_sigmas=[10.0, 5.0],
+        progress=not args.quiet,
+    )
+    summary = summarise(result)
+    budgets, learned = {}, {}
+    for row, name in rows.items():
+        _, meta = load_model(name)
+        prov = meta.get("provenance", {})
+        segs = prov.get("segments", [])
+        batch = {g.get("batch_size") for g in segs}
+        devices = ", ".join(dict.fromkeys(str(g.get("device")) for g in segs))
+        budgets[row] = (
+            f"{prov.get('total_steps', '?')} steps of batch "
+            f"{'/'.join(map(str, batch))}, {prov.get('train_seconds', 0) / 60:.0f} "
+            f"min of training on {devices}"
+        )
+        if meta["pattern"].get("provenance") == "learned":
+            from .patterns import Pattern
+
+            learned[row] = Pattern.from_dict(meta["pattern"])
+    label = {m.name: m.name for m in methods}
+    zooms = (
+        sorted(str(p.relative_to(out)) for p in (evaluation / "zoom").glob("*.png"))
+        if (evaluation / "zoom").is_dir()
+        else []
+    )
+    report = paper_tables(
+        summary,
+        {r: f"net-{m}" for r, m in rows.items() if f"net-{m}" in label},
+        out,
+        budgets=budgets,
+        learned=learned,
+        zooms=zooms,
+    )
+    print(report.read_text(encoding="utf-8"))
+    print(f"wrote {report}")
     return 0
 
 
@@ -433,8 +588,9 @@ def build_parser() -> argparse.ArgumentParser:
         help="score trained runs and baselines with the paper's protocol",
         description="Simulates every test image with each method's pattern, adds the same "
         "deterministic noise for every method, reconstructs, and scores PSNR, SSIM and "
-        "CIEDE2000 on 8-bit images. With no --checkpoint and no --method: the training-free "
-        "baselines (LMMSE for every pattern, bayer + Malvar 2004).",
+        "CIEDE2000 on 8-bit images. With no --checkpoint, --model or --method (the main job): "
+        "the shipped network of every pattern and the training-free baselines (LMMSE for every "
+        "pattern, bayer + Malvar 2004).",
     )
     p.add_argument(
         "--checkpoint",
@@ -448,6 +604,14 @@ def build_parser() -> argparse.ArgumentParser:
         action="append",
         metavar="NAME",
         help="baseline: bilinear, malvar2004, menon2007 (bayer) or lmmse (repeatable)",
+    )
+    p.add_argument(
+        "--model",
+        action="append",
+        default=[],
+        metavar="NAME",
+        help="a shipped model (A-E, bayer, A-opt, D-opt, D-opt-random; `splitcam models`) or a "
+        "model file (repeatable)",
     )
     p.add_argument(
         "--patterns",
@@ -517,6 +681,69 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(handler=cmd_plot)
 
     p = sub.add_parser(
+        "models",
+        help="list the shipped trained models, or export a run as a model",
+        description="`splitcam models` lists the trained models shipped with splitcam and their "
+        "budget; `splitcam models export RUN --name NAME [--out DIR]` writes a run's network, "
+        "pattern and provenance as NAME.safetensors + NAME.json (16-bit weights by default; "
+        "into the package's weights/models/ unless --out).",
+    )
+    p.add_argument("action", nargs="?", choices=["list", "export"], default="list")
+    p.add_argument("run", nargs="?", help="run folder or checkpoint (export)")
+    p.add_argument("--name", help="model name (export)")
+    p.add_argument("--out", help="folder (default: the package's shipped models)")
+    p.add_argument("--storage", choices=["float16", "bfloat16", "float32"], default="float16")
+    p.add_argument("--description", help="one line about the model")
+    p.set_defaults(handler=cmd_models)
+
+    p = sub.add_parser(
+        "sweep",
+        help="train a list of experiments, here or on a SLURM cluster (resumable)",
+        description="Trains every experiment file (a `train` config; run folder OUT/<file "
+        "name>) that is not finished, resuming interrupted ones; finished ones are skipped, so "
+        "the same command continues a sweep. Locally --jobs trainings run side by side with the "
+        "threads split between them; --executor slurm submits a job array through submitit.",
+    )
+    p.add_argument("experiments", nargs="+", metavar="FILE", help="experiment config files")
+    p.add_argument("--out", default="runs", help="folder of the run folders (default: runs)")
+    p.add_argument("--data", help="training images for every experiment (replaces data.train)")
+    p.add_argument(
+        "--set",
+        action="append",
+        metavar="KEY=VALUE",
+        help="a setting for every experiment, e.g. optim.steps=2000 (repeatable)",
+    )
+    p.add_argument("--executor", choices=["local", "slurm"], default="local")
+    p.add_argument("--jobs", type=int, default=1, help="trainings at a time (default 1)")
+    p.add_argument("--threads", type=int, help="CPU threads shared by local jobs (default: all)")
+    p.add_argument("--partition", help="slurm partition")
+    p.add_argument("--time", type=int, help="slurm time limit per job, minutes (default 60)")
+    p.add_argument("--gpus", type=int, help="slurm GPUs per job")
+    p.add_argument("--cpus", type=int, help="slurm CPUs per job")
+    p.add_argument("--no-wait", action="store_true", help="slurm: submit and return")
+    p.add_argument("--dry-run", action="store_true", help="show what each experiment needs")
+    p.set_defaults(handler=cmd_sweep)
+
+    p = sub.add_parser(
+        "reproduce",
+        help="the paper's Tables 1-3 and Fig. 9 from the shipped models",
+        description="Evaluates the shipped models (and Malvar 2004, LMMSE of D and bayer) on "
+        "Kodak24 + McMaster at sigma 0-20 and writes OUT/reproduce.md: Table 1 with ranks, "
+        "Tables 2 and 3, Fig. 9, the paper's conclusions checked, the learned patterns and the "
+        "zoomed crops (kodim05 at sigma 10, kodim24 at sigma 5), beside the paper's numbers. "
+        "Resumable: run it again to continue.",
+    )
+    p.add_argument("--datasets", default="kodak24,mcmaster")
+    p.add_argument("--sigmas", type=float, nargs="+", default=[0.0, 5.0, 10.0, 15.0, 20.0])
+    p.add_argument("--out", default="reproduce")
+    p.add_argument("--max-images", type=int, help="at most this many images per dataset")
+    p.add_argument("--no-baselines", action="store_true")
+    p.add_argument("--tile", type=int, default=512)
+    p.add_argument("--fast", action="store_true", help="bfloat16 network inference")
+    p.add_argument("--quiet", action="store_true")
+    p.set_defaults(handler=cmd_reproduce)
+
+    p = sub.add_parser(
         "reconstruct",
         help="reconstruct a colour image with a trained run or a baseline",
         description="--image: simulate the sensor on a colour image (with --sigma noise), then "
@@ -527,6 +754,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--method", help="lmmse, bilinear, malvar2004, menon2007, or a run folder / checkpoint file"
     )
     p.add_argument("--checkpoint", help="run folder or checkpoint file (same as --method RUN)")
+    p.add_argument("--model", help="a shipped model (`splitcam models` lists them) or model file")
     p.add_argument("--pattern", help="pattern name or file (for --method lmmse)")
     p.add_argument("--image", help="colour image to simulate and reconstruct")
     p.add_argument("--raw", help="raw image to reconstruct")

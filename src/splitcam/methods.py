@@ -8,7 +8,10 @@ name means the same thing everywhere:
   filters from the shipped image statistics for any other kernels, or fitted on a folder of
   training images with ``lmmse_train``);
 - ``bilinear``, ``malvar2004``, ``menon2007``: classical demosaicking of the ``bayer`` pattern;
-- a run folder or checkpoint file: a trained network with the pattern it was trained for.
+- a run folder or checkpoint file: a trained network with the pattern it was trained for;
+- a shipped model's name (``A`` ... ``E``, ``bayer``, ``A-opt``, ``D-opt``, ``D-opt-random``; see
+  :func:`splitcam.training.models.model_names`) or a model file: a trained network shipped with
+  splitcam (``splitcam evaluate --model D``).
 
 >>> build_method("malvar2004").name
 'bayer+malvar2004'
@@ -28,8 +31,9 @@ from .recon.closed_form import closed_form_lmmse
 from .recon.demosaic import ClassicalDemosaic
 from .recon.lmmse import LMMSE, shipped_lmmse
 from .training.checkpoint import CHECKPOINT_NAME, load_system, resolve
+from .training.models import load_model, model_names
 
-__all__ = ["DEMOSAICKING", "build_method", "build_methods", "method_names"]
+__all__ = ["DEMOSAICKING", "build_method", "build_methods", "build_model", "method_names"]
 
 #: Classical demosaicking methods of the bayer pattern, by name.
 DEMOSAICKING = ClassicalDemosaic.METHODS
@@ -38,6 +42,24 @@ DEMOSAICKING = ClassicalDemosaic.METHODS
 def method_names() -> list[str]:
     """The method names :func:`build_method` knows (besides run folders and checkpoints)."""
     return ["lmmse", *DEMOSAICKING]
+
+
+def build_model(
+    spec: str | os.PathLike, *, tile: int | None = 512, fast: bool = False
+) -> NetworkReconstructor:
+    """A shipped model (by name) or a model file as a reconstruction method, labelled
+    ``net-<name>`` (the same for every command).
+
+    Raises:
+        ModelError: Unknown name (the message lists the shipped ones) or a damaged file.
+    """
+    system, meta = load_model(spec)
+    name = meta.get("name") or Path(str(spec)).stem
+    method = NetworkReconstructor(
+        system.network, system.sensor.to_pattern(), f"net-{name}", tile=tile, fast=fast
+    )
+    method.fingerprint = f"model:{name}:{meta.get('sha256', '')}"
+    return method
 
 
 def _is_path(spec: str | os.PathLike) -> bool:
@@ -76,8 +98,8 @@ def build_method(
     """One reconstruction method from its name or a run folder / checkpoint file.
 
     Args:
-        spec: ``lmmse``, ``bilinear``, ``malvar2004``, ``menon2007``, or the path of a run folder
-            or checkpoint.
+        spec: ``lmmse``, ``bilinear``, ``malvar2004``, ``menon2007``, a shipped model's name or
+            model file, or the path of a run folder or checkpoint.
         pattern: The pattern (name, file or :class:`~splitcam.patterns.Pattern`) for ``lmmse``.
         lmmse_train: Fit the LMMSE on this folder of training images instead of using the
             shipped fit (needed for patterns other than the built-in ones).
@@ -108,6 +130,10 @@ def build_method(
         lmmse.pattern = resolved
         lmmse.name = _lmmse_label(pattern, resolved)
         return lmmse
+    if isinstance(spec, str) and spec.strip() in model_names():
+        return build_model(spec.strip(), tile=tile, fast=fast)
+    if _is_path(spec) and str(spec).endswith(".json") and Path(spec).is_file():
+        return build_model(spec, tile=tile, fast=fast)
     if _is_path(spec):
         path = resolve(spec)
         system = load_system(path)
@@ -119,8 +145,8 @@ def build_method(
         method.fingerprint = f"{path.resolve()}:{stat.st_size}:{stat.st_mtime_ns}"
         return method
     raise ValueError(
-        f"unknown method {str(spec)!r}; valid: {', '.join(method_names())}, or a run folder / "
-        f"checkpoint file"
+        f"unknown method {str(spec)!r}; valid: {', '.join(method_names())}, a shipped model "
+        f"({', '.join(model_names()) or 'none shipped'}), or a run folder / checkpoint file"
     )
 
 

@@ -162,6 +162,8 @@ def evaluate(
     crop: int = 0,
     progress: bool = True,
     resume: bool = True,
+    zoom_only: bool = False,
+    zoom_sigmas: Sequence[float] | None = None,
 ) -> list[EvalRow]:
     """Score every method on every image at every sigma, writing results to ``out`` as it goes.
 
@@ -172,7 +174,8 @@ def evaluate(
     zoom of all methods (the paper's Figs. 4, 5, 7, 8) under ``zoom/``: ``"kodim05:200,300,96"``
     zooms on the 96-pixel square at row 200, column 300; a bare name on the image's most
     detailed region. ``crop`` removes that many border pixels before scoring (0, the paper's
-    convention, by default).
+    convention, by default). ``zoom_only`` draws the zoom figures without writing every
+    reconstruction; ``zoom_sigmas`` limits the zoom figures to those noise levels.
 
     With ``resume`` (default), results already in ``out/per_image.csv`` for the same method (same
     pattern kernels), image, sigma and crop are kept and not recomputed: an interrupted
@@ -232,7 +235,11 @@ def evaluate(
     rows: list[EvalRow] = []
     try:
         for dataset, image_name, rgb, sigma in jobs:
-            zoomed = save_images and image_name in zoom
+            zoomed = (
+                (save_images or zoom_only)
+                and image_name in zoom
+                and (zoom_sigmas is None or sigma in zoom_sigmas)
+            )
             outputs = {}
             for method in methods:
                 key = (method.name, dataset, image_name, sigma)
@@ -257,9 +264,16 @@ def evaluate(
                         f"{dataset}/{image_name} s{sigma:g} {method.name} {scores['psnr']:.2f} dB",
                         refresh=False,
                     )
-            if save_images and out_dir is not None and outputs:
+            if out_dir is not None and outputs and (save_images or zoomed):
                 _save_images(
-                    out_dir, dataset, image_name, sigma, rgb, outputs, zoom.get(image_name)
+                    out_dir,
+                    dataset,
+                    image_name,
+                    sigma,
+                    rgb,
+                    outputs if save_images else {},
+                    zoom.get(image_name) if zoomed else None,
+                    zoom_outputs=outputs,
                 )
     finally:
         if bar is not None:
@@ -293,7 +307,10 @@ def _save_images(
     rgb: torch.Tensor,
     outputs: dict,
     zoom: Zoom | None,
+    zoom_outputs: dict | None = None,
 ) -> None:
+    """Write each reconstruction in ``outputs`` and, with ``zoom``, the side-by-side zoom of
+    ``zoom_outputs`` (default: ``outputs``)."""
     safe = image.replace("/", "_")
     for name, (pred, _) in outputs.items():
         path = out_dir / "images" / name / dataset / f"{safe}_sigma{sigma:g}.png"
@@ -302,7 +319,7 @@ def _save_images(
     if zoom is not None:
         zoom_figure(
             rgb,
-            outputs,
+            zoom_outputs if zoom_outputs is not None else outputs,
             out_dir / "zoom" / f"{dataset}_{safe}_sigma{sigma:g}.png",
             region=zoom.region,
             title=f"{dataset}/{image}, sigma {sigma:g}",

@@ -113,6 +113,12 @@ class OptimConfig:
 class RunConfig:
     out: str = _opt("runs/default", "run folder")
     seed: int = _opt(0, "random seed")
+    init_from: str | None = _opt(
+        None,
+        "start from the weights of a shipped model (name, e.g. D), a model file, a run folder or "
+        "a checkpoint: the network's weights, and the learned kernels for --learn-pattern "
+        "(optimiser state starts afresh; its provenance carries over)",
+    )
     device: str = _opt("auto", "auto, cpu, cuda, cuda:N or mps")
     log_every: int = _opt(10, "log every N steps")
     val_every: int = _opt(500, "validate every N steps")
@@ -192,6 +198,10 @@ class TrainConfig:
             (self.optim.steps >= 0, f"optim.steps must be >= 0, got {self.optim.steps}"),
             (self.optim.lr > 0, f"optim.lr must be > 0, got {self.optim.lr}"),
             (self.pattern.lr is None or self.pattern.lr > 0, "pattern.lr must be > 0"),
+            (
+                self.pattern.design_steps >= 0,
+                f"pattern.design_steps must be >= 0, got {self.pattern.design_steps}",
+            ),
             (
                 0 <= self.optim.sigma_min <= self.optim.sigma_max,
                 "expected 0 <= optim.sigma_min <= optim.sigma_max",
@@ -345,3 +355,13 @@ def train_flags() -> list[Flag]:
                 Flag(f.metadata.get("flag") or f.name, f"{section.name}.{f.name}", kind, many, text)
             )
     return out
+
+
+def read_config_value(text: str) -> Any:
+    """A value given on the command line (``--set optim.steps=2000``), parsed as in a TOML file:
+    ``2000`` an integer, ``5e-4`` a number, ``true`` a boolean, ``[0, 15]`` a list; anything
+    else is a string."""
+    try:
+        return tomllib.loads(f"v = {text}")["v"]
+    except Exception:  # not a TOML value: a bare string such as a path
+        return text

@@ -113,6 +113,69 @@ def build_system(
     return ImagingSystem(sensor, net)
 
 
+def device_name(device: torch.device) -> str:
+    """What the run trained on, for provenance: ``cuda (NVIDIA H100 ...)`` or ``cpu (<model>,
+    N threads)``."""
+    if device.type == "cuda":
+        return f"cuda ({torch.cuda.get_device_name(device)})"
+    import platform
+
+    cpu = platform.processor() or platform.machine()
+    with contextlib.suppress(OSError):
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    return f"{device.type} ({cpu}, {torch.get_num_threads()} threads)"
+
+
+def _start_from(system: ImagingSystem, spec: str) -> dict[str, Any]:
+    """Load the weights of a model or run into a new run's system (``run.init_from``).
+
+    The network must have the same architecture; a learned pattern starts from the source's
+    kernels (logits ``log k``), a fixed one must be the source's pattern. Returns what the
+    checkpoints record: the source's name and accumulated provenance.
+    """
+    from .models import ModelError, load_model, provenance_of
+
+    path = Path(spec)
+    if path.is_dir() or path.name == ckpt_io.CHECKPOINT_NAME:
+        checkpoint = ckpt_io.resolve(path)
+        if not checkpoint.is_file():
+            raise ConfigError(f"--init-from {spec}: no checkpoint there")
+        source = ckpt_io.load_system(checkpoint)
+        record = {
+            "name": str(spec),
+            "provenance": provenance_of(ckpt_io.load(checkpoint), checkpoint.parent),
+        }
+    else:
+        try:
+            source, meta = load_model(spec)
+        except ModelError as exc:
+            raise ConfigError(f"--init-from: {exc}; or a run folder") from None
+        record = {"name": meta.get("name", str(spec)), "provenance": meta.get("provenance")}
+    if source.network.config() != system.network.config():
+        raise ConfigError(
+            f"--init-from {spec}: its network {source.network.config()} differs from this "
+            f"run's {system.network.config()}"
+        )
+    kernels = source.sensor.pixel_kernels().detach()
+    own = system.sensor
+    if isinstance(own, LearnableSplitterSensor):
+        if tuple(own.logits.shape) != tuple(source.sensor.kernels.shape):
+            raise ConfigError(f"--init-from {spec}: its pattern has another layout or kernel size")
+        with torch.no_grad():
+            own.logits.copy_(source.sensor.kernels.clamp_min(1e-6).log().to(own.logits))
+    elif not torch.allclose(own.pixel_kernels().detach().double(), kernels.double(), atol=1e-6):
+        raise ConfigError(
+            f"--init-from {spec}: it was trained for another pattern "
+            f"({source.sensor.to_pattern().name}); use its pattern or --learn-pattern"
+        )
+    own_device = next(system.network.parameters()).device
+    system.network.load_state_dict(source.network.to(own_device).state_dict())
+    return record
+
+
 def val_split(config: TrainConfig) -> int:
     """How many images (the last, sorted by name) the training folder holds out: the set
     ``data.val_split``, none with a ``data.val`` folder, else ``min(32, max(1, n // 10))`` of
@@ -403,6 +466,9 @@ def _train(
 
     step = 0
     train_seconds = 0.0  # training time of the run so far, all processes (not validation)
+    init_from = loaded.meta.get("init_from") if loaded is not None else None
+    if loaded is None and config.run.init_from:
+        init_from = _start_from(system, config.run.init_from)
     if loaded is not None:
         ckpt_io.load_module(system, loaded)
         ckpt_io.load_optimizer(optimizer, loaded)
@@ -467,6 +533,10 @@ def _train(
             "optimizer": opt_meta,
             "world_size": dist_info.world_size,
             "train_seconds": train_seconds,
+            "device": device_name(device),
+            "precision": "bf16" if fast else "fp32",
+            "train_images": len(cache),
+            "init_from": init_from,
             "replicas": replicas,
             "time": time.strftime("%Y-%m-%dT%H:%M:%S"),
         }

@@ -1,0 +1,220 @@
+"""Trained models as files: safetensors (16-bit weights) plus JSON (architecture, pattern,
+provenance), small enough to ship inside the package.
+
+A *model* is what a user reconstructs with: the network's weights, the architecture, the pattern it
+was trained for (learned kernels included) and where it came from. It is made from a run by
+:func:`export_model` and read by :func:`load_model`. The models shipped with splitcam live in
+``splitcam/weights/models/`` and are addressed by name (``A`` ... ``E``, ``bayer``, ``A-opt``,
+``D-opt``, ``D-opt-random``): ``splitcam evaluate --model D``, ``load_model("D")``.
+
+Provenance accumulates: a run started from a model (``train --init-from D``) records that
+model's provenance in its checkpoints, and exporting it adds the run as one more *segment*, so
+``provenance["total_steps"]`` and ``["train_seconds"]`` count every step the weights have seen.
+
+Weights are stored as float16 by default (half the size; the evaluated PSNR moves by far less than
+0.01 dB, see ``docs/results/reproduce``); buffers that are not trained parameters (the image
+statistics of the physics network) keep their dtype. Nothing is unpickled.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from pathlib import Path
+from typing import Any
+
+import torch
+
+from ..data.tensorfiles import load_pair, paired_paths, save_pair
+from ..patterns import Pattern
+from ..physics.sensor import SplitterSensor
+from ..physics.system import ImagingSystem
+from ..recon.networks import build_network
+from . import checkpoint as ckpt_io
+
+__all__ = [
+    "MODELS_DIR",
+    "ModelError",
+    "export_model",
+    "load_model",
+    "model_names",
+    "provenance_of",
+    "resolve_model",
+]
+
+FORMAT = "splitcam-model"
+VERSION = 1
+#: Where the shipped models live.
+MODELS_DIR = Path(__file__).resolve().parent.parent / "weights" / "models"
+STORAGE = {"float16": torch.float16, "bfloat16": torch.bfloat16, "float32": torch.float32}
+
+
+class ModelError(ValueError):
+    """A model name or file that cannot be used; the message says why (and the valid names)."""
+
+
+def model_names() -> list[str]:
+    """Names of the models shipped with splitcam (sorted)."""
+    if not MODELS_DIR.is_dir():
+        return []
+    return sorted(p.stem for p in MODELS_DIR.glob("*.json"))
+
+
+def resolve_model(spec: str | os.PathLike[str]) -> Path:
+    """A shipped model's name, or a model file (either file of the pair) → its JSON path.
+
+    Raises:
+        ModelError: Neither a shipped name nor an existing model file; the message lists the
+            shipped names.
+    """
+    text = str(spec)
+    if text in model_names():
+        return MODELS_DIR / f"{text}.json"
+    _, meta_path = paired_paths(text)
+    if meta_path.is_file():
+        return meta_path
+    shipped = ", ".join(model_names()) or "none shipped"
+    raise ModelError(f"unknown model {text!r}; shipped models: {shipped} (or a model .json file)")
+
+
+def _validation_curve(run_dir: Path, offset: int) -> list[dict[str, float]]:
+    """``[{"step": s, "val_psnr_0": ..., ...}]`` of a run's log, steps shifted by ``offset``."""
+    path = run_dir / "metrics.jsonl"
+    if not path.is_file():
+        return []
+    curve = []
+    for line in path.read_text(encoding="utf-8").splitlines():
+        try:
+            row = json.loads(line)
+        except json.JSONDecodeError:
+            continue
+        vals = {k: round(v, 4) for k, v in row.items() if k.startswith("val_psnr_")}
+        if vals:
+            curve.append({"step": int(row.get("step", 0)) + offset, **vals})
+    return curve
+
+
+def provenance_of(loaded: ckpt_io.Checkpoint, run_dir: Path | None = None) -> dict[str, Any]:
+    """The accumulated provenance of a checkpoint: what it was started from plus this run."""
+    meta = loaded.meta
+    previous = meta.get("init_from") or {}
+    before = previous.get("provenance") or {"segments": [], "validation": []}
+    config = meta.get("config", {})
+    optim, data, run = config.get("optim", {}), config.get("data", {}), config.get("run", {})
+    done = int(before.get("total_steps", 0))
+    segment = {
+        "run": run_dir.name if run_dir else Path(loaded.path).parent.name,
+        "init_from": previous.get("name"),
+        "steps": int(meta.get("step", 0)),
+        "batch_size": data.get("batch_size"),
+        "patch_size": data.get("patch_size"),
+        "train_seconds": round(float(meta.get("train_seconds", 0.0)), 1),
+        "device": meta.get("device", "unknown"),
+        "threads": run.get("threads"),
+        "precision": meta.get("precision", run.get("precision")),
+        "world_size": meta.get("world_size", 1),
+        "data": {
+            "train": Path(str(data.get("train", ""))).name,
+            "images": meta.get("train_images"),
+        },
+        "recipe": {
+            "arch": config.get("network", {}).get("arch"),
+            "lr": optim.get("lr"),
+            "schedule": optim.get("schedule"),
+            "warmup_steps": optim.get("warmup_steps"),
+            "sigma": [optim.get("sigma_min"), optim.get("sigma_max")],
+            "learn_pattern": config.get("pattern", {}).get("learn"),
+            "pattern_init": config.get("pattern", {}).get("init"),
+            "design_steps": config.get("pattern", {}).get("design_steps"),
+            "time_limit_min": run.get("time_limit"),
+        },
+        "finished": meta.get("time"),
+    }
+    segments = [*before.get("segments", []), segment]
+    curve = list(before.get("validation", []))
+    if run_dir is not None:
+        curve += _validation_curve(run_dir, done)
+    return {
+        "total_steps": done + segment["steps"],
+        "train_seconds": round(sum(float(s.get("train_seconds") or 0) for s in segments), 1),
+        "segments": segments,
+        "validation": curve,
+    }
+
+
+def export_model(
+    run: str | os.PathLike[str],
+    out: str | os.PathLike[str],
+    *,
+    name: str | None = None,
+    storage: str = "float16",
+    description: str = "",
+) -> Path:
+    """Write the model of a run folder or checkpoint as ``out.safetensors`` + ``out.json``.
+
+    Args:
+        run: Run folder or checkpoint file.
+        out: Target path (``NAME`` or ``NAME.json``).
+        name: The model's name (default: the file name).
+        storage: ``float16`` (default), ``bfloat16`` or ``float32`` for the trained weights.
+        description: One line for tables and ``splitcam models``.
+
+    Returns:
+        The JSON path.
+    """
+    if storage not in STORAGE:
+        raise ModelError(f"storage must be one of {', '.join(STORAGE)}, got {storage!r}")
+    path = ckpt_io.resolve(run)
+    loaded = ckpt_io.load(path)
+    ckpt_io.require(loaded, "pattern", "network", "config", purpose="it cannot be exported")
+    system = ckpt_io.load_system(path)  # validates the pattern and the network's tensors
+    params = {n for n, _ in system.network.named_parameters()}
+    tensors = {
+        k: (v.to(STORAGE[storage]) if k in params else v)
+        for k, v in system.network.state_dict().items()
+    }
+    _, meta_path = paired_paths(out)
+    name = name or meta_path.stem
+    run_dir = path.parent if path.name == ckpt_io.CHECKPOINT_NAME else None
+    meta = {
+        "name": name,
+        "description": description,
+        "network": loaded.meta["network"],
+        "pattern": loaded.meta["pattern"],
+        "start_pattern": loaded.meta.get("start_pattern"),
+        "config": loaded.meta["config"],
+        "storage": storage,
+        "exported": time.strftime("%Y-%m-%dT%H:%M:%S"),
+        "provenance": provenance_of(loaded, run_dir),
+    }
+    return save_pair(meta_path, tensors, FORMAT, VERSION, meta)
+
+
+def load_model(
+    spec: str | os.PathLike[str], device: str | torch.device = "cpu"
+) -> tuple[ImagingSystem, dict[str, Any]]:
+    """A shipped model (by name) or a model file → ``(system, meta)``.
+
+    The system's sensor is fixed to the model's pattern (learned kernels included); the network
+    is in float32 and in eval mode.
+
+    Raises:
+        ModelError: Unknown name, damaged or inconsistent files.
+    """
+    meta_path = resolve_model(spec)
+    tensors, meta, _ = load_pair(meta_path, FORMAT, VERSION, "splitcam model", ModelError)
+    try:
+        pattern = Pattern.from_dict(meta["pattern"], source=str(meta_path))
+        network = build_network(meta["network"])
+    except (KeyError, TypeError, ValueError) as exc:
+        raise ModelError(f"model {str(meta_path)!r} is damaged: {exc}") from None
+    own = network.state_dict()
+    if set(own) != set(tensors) or any(own[k].shape != tensors[k].shape for k in own):
+        raise ModelError(f"model {str(meta_path)!r}: its tensors do not fit its architecture")
+    network.load_state_dict({k: v.to(own[k].dtype) for k, v in tensors.items()})
+    for key, value in network.state_dict().items():
+        if value.is_floating_point() and not bool(torch.isfinite(value).all()):
+            raise ModelError(f"model {str(meta_path)!r} holds NaN or infinite values in {key!r}")
+    system = ImagingSystem(SplitterSensor(pattern), network)
+    return system.to(device).eval(), meta

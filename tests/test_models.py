@@ -1,0 +1,264 @@
+"""Trained models as files (export, 16-bit storage, load, names), starting a run from a model,
+and the sweep runner (skip finished experiments, resume interrupted ones)."""
+
+from __future__ import annotations
+
+import json
+import re
+
+import numpy as np
+import pytest
+import torch
+from PIL import Image
+
+from splitcam.cli import main
+from splitcam.evaluation.protocol import mean_psnr
+from splitcam.methods import build_method, build_model
+from splitcam.training import ConfigError, TrainConfig, load_system, train
+from splitcam.training import checkpoint as ckpt_io
+from splitcam.training import models as models_module
+from splitcam.training.models import ModelError, export_model, load_model, model_names
+from splitcam.training.sweep import load_experiments, run_sweep, status
+
+
+@pytest.fixture(scope="module")
+def image_folder(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("images")
+    rng = np.random.default_rng(3)
+    for i in range(6):
+        small = rng.random((6, 6, 3))
+        img = np.kron(small, np.ones((8, 8, 1)))
+        Image.fromarray((img * 255).astype(np.uint8)).save(folder / f"im{i}.png")
+    return folder
+
+
+SMALL = {
+    "data.val_split": 2,
+    "data.val_max_images": 2,
+    "data.val_crop": 32,
+    "data.patch_size": 16,
+    "data.batch_size": 4,
+    "network.features": 8,
+    "network.blocks": 1,
+    "optim.steps": 4,
+    "optim.lr": 1e-3,
+    "optim.warmup_steps": 2,
+    "run.log_every": 1,
+    "run.val_every": 2,
+    "run.checkpoint_every": 2,
+    "run.threads": 1,
+}
+
+
+def _config(folder, out, **changes) -> TrainConfig:
+    return TrainConfig().override({**SMALL, "data.train": str(folder), "run.out": str(out),
+                                   **changes})
+
+
+@pytest.fixture(scope="module")
+def trained_run(image_folder, tmp_path_factory):
+    out = tmp_path_factory.mktemp("runs") / "d"
+    train(_config(image_folder, out), progress=False)
+    return out
+
+
+def _images(n=2, size=24):
+    g = torch.Generator().manual_seed(9)
+    x = torch.rand(n, 3, size + 4, size + 4, generator=g)
+    x = torch.nn.functional.avg_pool2d(x, 5, stride=1)
+    return [(f"img{i}", x[i]) for i in range(n)]
+
+
+@pytest.mark.parametrize("storage", ["float16", "float32"])
+def test_export_round_trip_matches_the_run(trained_run, tmp_path, storage):
+    """A model reconstructs like its run: exactly in float32, within a hair in float16 (the
+    difference is measured on the PSNR, which must move by far less than 0.01 dB)."""
+    path = export_model(trained_run, tmp_path / "mine", storage=storage)
+    meta = json.loads(path.read_text())
+    assert meta["name"] == "mine" and meta["storage"] == storage
+    assert meta["provenance"]["total_steps"] == 4
+    assert meta["provenance"]["segments"][0]["batch_size"] == 4
+    assert [row["step"] for row in meta["provenance"]["validation"]] == [0, 2, 4]
+    system, loaded_meta = load_model(path)
+    run_system = load_system(trained_run)
+    for key, value in run_system.network.state_dict().items():
+        mine = system.network.state_dict()[key]
+        tol = 0 if storage == "float32" or not value.is_floating_point() else 1e-3
+        torch.testing.assert_close(mine, value, rtol=tol, atol=tol)
+    images = _images()
+    ours = mean_psnr(build_model(path), images, [0.0, 10.0])
+    theirs = mean_psnr(build_method(str(trained_run)), images, [0.0, 10.0])
+    for sigma in ours:
+        assert abs(ours[sigma] - theirs[sigma]) < (1e-9 if storage == "float32" else 0.01)
+    if storage == "float16":  # half the bytes of the weights (the statistics stay float64)
+        full = export_model(trained_run, tmp_path / "full", storage="float32")
+        assert (path.with_suffix(".safetensors").stat().st_size
+                < full.with_suffix(".safetensors").stat().st_size)
+
+
+def test_shipped_names_resolve_and_unknown_names_list_them(trained_run, tmp_path, monkeypatch):
+    monkeypatch.setattr(models_module, "MODELS_DIR", tmp_path)
+    export_model(trained_run, tmp_path / "D", name="D")
+    export_model(trained_run, tmp_path / "D-opt", name="D-opt")
+    assert model_names() == ["D", "D-opt"]
+    method = build_method("D-opt")
+    assert method.name == "net-D-opt"
+    with pytest.raises(ModelError, match="shipped models: D, D-opt"):
+        load_model("Q")
+    with pytest.raises(ValueError, match=r"shipped model \(D, D-opt\)"):
+        build_method("nonsense")
+    # Deterministic: the same reconstruction twice.
+    raw = torch.rand(1, 1, 20, 20, generator=torch.Generator().manual_seed(1))
+    with torch.no_grad():
+        assert torch.equal(method.reconstruct(raw, 5.0), build_method("D").reconstruct(raw, 5.0))
+
+
+def test_damaged_model_files_are_refused(trained_run, tmp_path):
+    path = export_model(trained_run, tmp_path / "m")
+    blob = bytearray(path.with_suffix(".safetensors").read_bytes())
+    blob[-3] ^= 0xFF
+    path.with_suffix(".safetensors").write_bytes(bytes(blob))
+    with pytest.raises(ModelError, match="checksum"):
+        load_model(path)
+    path.write_text("{not json")
+    with pytest.raises(ModelError, match="not valid JSON"):
+        load_model(path)
+
+
+def test_cli_models_export_list_and_evaluate(trained_run, tmp_path, monkeypatch, capsys):
+    monkeypatch.setattr(models_module, "MODELS_DIR", tmp_path / "shipped")
+    (tmp_path / "shipped").mkdir()
+    assert main(["models", "export", str(trained_run), "--name", "D"]) == 0
+    assert main(["models"]) == 0
+    out = capsys.readouterr().out
+    assert re.search(r"\| D +\| D +\| physics \| 4 +\| 4 +\|", out), out
+    assert main(["evaluate", "--model", "D", "--max-images", "1", "--sigmas", "5",
+                 "--out", str(tmp_path / "ev"), "--quiet"]) == 0
+    summary = json.loads((tmp_path / "ev" / "summary.json").read_text())
+    assert list(summary) == ["net-D"]
+    assert main(["reconstruct", "--model", "Q", "--image", "x.png", "--out", "y.png"]) == 1
+    assert "shipped models: D" in capsys.readouterr().err
+
+
+def test_training_from_a_model_continues_its_weights_and_provenance(
+    image_folder, trained_run, tmp_path
+):
+    model = export_model(trained_run, tmp_path / "m", storage="float32")
+    system, _ = load_model(model)
+    out = tmp_path / "more"
+    config = _config(image_folder, out, **{"run.init_from": str(model), "optim.steps": 2,
+                                           "optim.lr": 1e-12, "optim.warmup_steps": 0})
+    train(config, progress=False)
+    continued = load_system(out)
+    for key, value in system.network.state_dict().items():  # a tiny lr: the weights stay
+        torch.testing.assert_close(continued.network.state_dict()[key], value, rtol=0,
+                                   atol=1e-8)
+    meta = json.loads(export_model(out, tmp_path / "m2").read_text())
+    prov = meta["provenance"]
+    assert prov["total_steps"] == 6
+    assert [s["steps"] for s in prov["segments"]] == [4, 2]
+    assert prov["segments"][1]["init_from"] == "m"
+    assert [r["step"] for r in prov["validation"]] == [0, 2, 4, 4, 6]
+    # A fixed pattern must be the model's; another architecture is refused.
+    with pytest.raises(ConfigError, match="another pattern"):
+        train(_config(image_folder, tmp_path / "x", **{"run.init_from": str(model),
+                                                       "pattern.name": "A"}), progress=False)
+    with pytest.raises(ConfigError, match="differs"):
+        train(_config(image_folder, tmp_path / "y", **{"run.init_from": str(model),
+                                                       "network.features": 4}), progress=False)
+
+
+def test_learned_pattern_starts_from_the_model_kernels(image_folder, tmp_path):
+    out = tmp_path / "joint"
+    train(_config(image_folder, out, **{"pattern.learn": True, "optim.lr": 0.05}),
+          progress=False)
+    learned = load_system(out).sensor.pixel_kernels()
+    model = export_model(out, tmp_path / "jm")
+    out2 = tmp_path / "joint2"
+    train(_config(image_folder, out2, **{"pattern.learn": True, "run.init_from": str(model),
+                                         "optim.steps": 1, "optim.lr": 1e-12,
+                                         "optim.warmup_steps": 0}), progress=False)
+    torch.testing.assert_close(load_system(out2).sensor.pixel_kernels(), learned, rtol=0,
+                               atol=1e-5)
+
+
+def _experiment(folder, name, **settings):
+    lines = []
+    sections: dict[str, dict] = {}
+    for key, value in settings.items():
+        section, _, field = key.partition(".")
+        sections.setdefault(section, {})[field] = value
+    for section, fields in sections.items():
+        lines.append(f"[{section}]")
+        lines += [f"{k} = {json.dumps(v)}" for k, v in fields.items()]
+    path = folder / f"{name}.toml"
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def test_sweep_runs_skips_finished_and_resumes_interrupted(image_folder, tmp_path):
+    exps = tmp_path / "experiments"
+    exps.mkdir()
+    files = [_experiment(exps, "a", **{k: v for k, v in SMALL.items() if k != "run.threads"}),
+             _experiment(exps, "b", **{**{k: v for k, v in SMALL.items() if k != "run.threads"},
+                                       "pattern.name": "A"})]
+    runs = tmp_path / "runs"
+    # b was interrupted at step 2 of 4 (its own checkpoint, as a killed sweep leaves it).
+    train(_config(image_folder, runs / "b", **{"pattern.name": "A", "optim.steps": 2,
+                                                "run.threads": None}), progress=False)
+    experiments = load_experiments(files, runs, data=str(image_folder))
+    assert [status(e) for e in experiments] == ["new", "partial"]
+    said: list[str] = []
+    result = run_sweep(experiments, jobs=2, threads=2, say=said.append)
+    assert result == {"a": "done", "b": "done"}, (said, (runs / "b" / "sweep.log").read_text())
+    assert any("[b] resumed" in s for s in said) and any("[a] started" in s for s in said)
+    steps = [json.loads(x)["step"] for x in (runs / "b" / "metrics.jsonl").read_text().splitlines()]
+    assert steps == sorted(steps) and steps[-1] == 4 and steps.count(2) <= 2  # log + val rows
+    assert ckpt_io.load(runs / "b").meta["step"] == 4
+    said.clear()
+    assert run_sweep(experiments, jobs=2, threads=2, say=said.append) == result
+    assert all("done already" in s for s in said) and len(said) == 2
+
+
+def test_sweep_refuses_bad_input(image_folder, tmp_path):
+    exps = tmp_path / "e"
+    exps.mkdir()
+    f = _experiment(exps, "a", **{"optim.steps": 2})
+    with pytest.raises(ConfigError, match="no training images"):
+        load_experiments([f], tmp_path / "runs")
+    with pytest.raises(ConfigError, match="does not exist"):
+        load_experiments([tmp_path / "missing.toml"], tmp_path / "runs")
+    (exps / "sub").mkdir()
+    g = _experiment(exps / "sub", "a", **{"optim.steps": 2})
+    with pytest.raises(ConfigError, match="two experiments named 'a'"):
+        load_experiments([f, g], tmp_path / "runs", data=str(image_folder))
+    experiments = load_experiments([f], tmp_path / "runs", data=str(image_folder))
+    with pytest.raises(ConfigError, match="unknown executor"):
+        run_sweep(experiments, executor="pbs")
+    with pytest.raises(ConfigError, match="jobs"):
+        run_sweep(experiments, jobs=0)
+
+
+def test_sweep_slurm_path_through_submitit(image_folder, tmp_path):
+    """The cluster path, with submitit's in-process 'debug' cluster standing in for SLURM."""
+    pytest.importorskip("submitit")
+    exps = tmp_path / "e"
+    exps.mkdir()
+    f = _experiment(exps, "s", **{k: v for k, v in SMALL.items() if k != "run.threads"})
+    experiments = load_experiments([f], tmp_path / "runs", data=str(image_folder))
+    said: list[str] = []
+    result = run_sweep(experiments, executor="slurm", slurm={"time": 5, "partition": "cpu"},
+                       say=said.append, cluster="debug")
+    assert result == {"s": "done"}
+    assert any("submitted" in s for s in said)
+
+
+def test_cli_sweep_dry_run_and_set(image_folder, tmp_path, capsys):
+    exps = tmp_path / "e"
+    exps.mkdir()
+    f = _experiment(exps, "a", **{"optim.steps": 2})
+    assert main(["sweep", str(f), "--out", str(tmp_path / "runs"), "--data", str(image_folder),
+                 "--set", "optim.steps=7", "--dry-run"]) == 0
+    assert "a: new" in capsys.readouterr().out
+    assert main(["sweep", str(f), "--data", str(image_folder), "--set", "optim.stepz=7"]) == 1
+    assert "unknown setting 'optim.stepz'" in capsys.readouterr().err
