@@ -258,7 +258,7 @@ def test_config_files_and_overrides(tmp_path, image_folder):
     toml.write_text('[pattern]\nname = "A"\nlearn = true\n[optim]\nlr = 2e-4\n')
     cfg = TrainConfig.from_file(toml)
     assert cfg.pattern.name == "A" and cfg.pattern.learn and cfg.optim.lr == 2e-4
-    assert cfg.data.batch_size == 80 and cfg.optim.sigma_max == 30  # paper defaults kept
+    assert cfg.data.batch_size == 8 and cfg.optim.sigma_max == 30  # defaults kept
     yaml_file = tmp_path / "c.yaml"
     yaml_file.write_text("network:\n  features: 32\n")
     assert TrainConfig.from_file(yaml_file).network.features == 32

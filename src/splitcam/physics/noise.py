@@ -1,4 +1,6 @@
-"""Sensor noise (SPEC section 3): additive Gaussian noise in 8-bit units on the raw image's scale.
+"""Sensor noise. The paper's model (SPEC section 3): additive Gaussian noise in 8-bit units on the
+raw image's scale. The physical model at equal exposure (SPEC section 11): :class:`Exposure`
+(photo-electrons, shot and read noise, full well, ADC) and :class:`PhotonNoise` for training.
 
 Training noise comes from :class:`GaussianNoise`, which owns its seeded ``torch.Generator`` (so a
 resumed run draws the same noise as an uninterrupted one); evaluation noise comes from
@@ -10,13 +12,17 @@ from __future__ import annotations
 
 import hashlib
 import math
+from dataclasses import dataclass
 from numbers import Real
 from typing import Any
 
 import torch
 
 __all__ = [
+    "Exposure",
     "GaussianNoise",
+    "PhotonNoise",
+    "add_exposure_noise",
     "add_evaluation_noise",
     "check_sigma",
     "evaluation_noise",
@@ -114,3 +120,156 @@ def add_evaluation_noise(raw: torch.Tensor, image_name: str, sigma: float) -> to
     return raw + evaluation_noise(
         tuple(raw.shape), image_name, sigma, dtype=raw.dtype, device=raw.device
     )
+
+
+# --- photon-limited sensing (SPEC section 11) ---------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Exposure:
+    """The physical sensor at one exposure: photo-electrons, shot and read noise, full well, ADC.
+
+    Exposure is stated by ``photons`` (``N``): the mean photo-electrons that a lossless pixel
+    without filter or splitter collects from a white scene (``f = 1`` in every colour). Its raw
+    value in the units of SPEC section 1 is ``R + G + B = 3``, so a raw value ``g`` means
+    ``e = g N / 3`` photo-electrons: every pattern sees the same photon flux, and a filter's lost
+    light shows as lost signal. Noise, in order: shot noise ``Poisson(e)`` (``shot``), read noise
+    ``N(0, read_noise^2)`` electrons, saturation to ``[0, full_well]`` (``full_well`` not None),
+    an ADC ``DN = round(e / gain)`` clipped to ``[0, 2^bits - 1]`` (``gain`` not None); the raw
+    image handed on is ``DN * gain * 3 / N`` (or ``e * 3 / N`` without ADC), the same scale for
+    every pattern. With ``shot=False``, no full well, no ADC and ``read_noise = N sigma / (3 *
+    255)`` this is the Gaussian model of SPEC section 3.
+
+    Raises:
+        ValueError: Non-positive or non-finite ``photons``; negative ``read_noise``;
+            non-positive ``full_well`` or ``gain``; ``bits < 1``.
+    """
+
+    photons: float
+    read_noise: float = 2.0
+    full_well: float | None = None
+    gain: float | None = None
+    bits: int = 12
+    shot: bool = True
+
+    def __post_init__(self) -> None:
+        def positive(name: str, value: Any) -> None:
+            if (
+                isinstance(value, bool)
+                or not isinstance(value, Real)
+                or not (math.isfinite(value) and value > 0)
+            ):
+                raise ValueError(f"expected {name} as a finite number > 0, got {value!r}")
+
+        positive("photons (exposure)", self.photons)
+        if (
+            isinstance(self.read_noise, bool)
+            or not isinstance(self.read_noise, Real)
+            or not (math.isfinite(self.read_noise) and self.read_noise >= 0)
+        ):
+            raise ValueError(f"expected read_noise (electrons) >= 0, got {self.read_noise!r}")
+        if self.full_well is not None:
+            positive("full_well (electrons)", self.full_well)
+        if self.gain is not None:
+            positive("gain (electrons per DN)", self.gain)
+        if isinstance(self.bits, bool) or not isinstance(self.bits, int) or self.bits < 1:
+            raise ValueError(f"expected bits as an integer >= 1, got {self.bits!r}")
+
+    @property
+    def electrons_per_unit(self) -> float:
+        """Photo-electrons per unit of raw value: ``N / 3``."""
+        return self.photons / 3.0
+
+    def variance_coefficients(self) -> tuple[float, float]:
+        """``(a, b)`` with the noise variance of a raw pixel of expected value ``g`` being
+        ``a g + b`` in raw units (shot, read and, with an ADC, uniform quantisation noise;
+        saturation ignored): ``a = 3 / N`` (0 without shot noise),
+        ``b = (3 read / N)^2 + (3 gain / N)^2 / 12``."""
+        scale = 3.0 / self.photons
+        a = scale if self.shot else 0.0
+        b = (scale * self.read_noise) ** 2
+        if self.gain is not None:
+            b += (scale * self.gain) ** 2 / 12.0
+        return a, b
+
+    def apply(self, raw: torch.Tensor, generator: torch.Generator) -> torch.Tensor:
+        """The noisy raw image of a clean one (``raw``, values >= 0 in the units of SPEC 1)."""
+        e = raw.detach().to(torch.float64).clamp_min(0).cpu() * self.electrons_per_unit
+        if self.shot:
+            e = torch.poisson(e, generator=generator)
+        if self.read_noise > 0:
+            e = e + self.read_noise * torch.randn(e.shape, generator=generator, dtype=torch.float64)
+        if self.full_well is not None:
+            e = e.clamp(0, self.full_well)
+        if self.gain is not None:
+            dn = torch.round(e / self.gain).clamp(0, 2**self.bits - 1)
+            e = dn * self.gain
+        return (e / self.electrons_per_unit).to(device=raw.device, dtype=raw.dtype)
+
+    def key(self) -> str:
+        return (
+            f"N{self.photons:g}|r{self.read_noise:g}|fw{self.full_well}|g{self.gain}"
+            f"|b{self.bits}|s{int(self.shot)}"
+        )
+
+
+def add_exposure_noise(raw: torch.Tensor, image_name: str, exposure: Exposure) -> torch.Tensor:
+    """The deterministic photon-model noise of one image at one exposure (evaluation): the same
+    draw for every method of one pattern, seeded from the image name and the exposure."""
+    digest = hashlib.sha256(f"splitcam-photon|{image_name}|{exposure.key()}".encode()).digest()
+    gen = torch.Generator().manual_seed(int.from_bytes(digest[:8], "little") & ((1 << 63) - 1))
+    return exposure.apply(raw, gen)
+
+
+class PhotonNoise:
+    """Training noise of the photon model: exposure ``N`` drawn log-uniformly from a range.
+
+    Args:
+        photons: ``(lo, hi)`` full-light photo-electrons (or one value).
+        per_sample: One exposure per sample instead of one per batch.
+        seed: Seed of the generator.
+        **sensor: ``read_noise``, ``full_well``, ``gain``, ``bits``, ``shot`` of
+            :class:`Exposure`.
+
+    Returns (when called on ``(N, 1, H, W)`` raw images): the noisy images and the exposures
+    ``(N,)`` used.
+    """
+
+    def __init__(
+        self,
+        photons: float | tuple[float, float] = (10.0, 1e4),
+        *,
+        per_sample: bool = False,
+        seed: int = 0,
+        **sensor: Any,
+    ) -> None:
+        lo, hi = (photons, photons) if isinstance(photons, (int, float)) else tuple(photons)
+        Exposure(lo, **sensor)  # validates the sensor settings and the range ends
+        Exposure(hi, **sensor)
+        if lo > hi:
+            raise ValueError(f"expected photons lo <= hi, got {photons!r}")
+        self.range = (float(lo), float(hi))
+        self.sensor = sensor
+        self.per_sample = per_sample
+        self.generator = torch.Generator().manual_seed(seed)
+
+    def __call__(self, raw: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        lo, hi = (math.log(v) for v in self.range)
+        n = raw.shape[0] if self.per_sample else 1
+        photons = torch.exp(
+            lo + (hi - lo) * torch.rand(n, generator=self.generator, dtype=torch.float64)
+        )
+        photons = photons.expand(raw.shape[0]) if n == 1 else photons
+        out = torch.cat(
+            [
+                Exposure(float(p), **self.sensor).apply(raw[i : i + 1], self.generator)
+                for i, p in enumerate(photons)
+            ]
+        )
+        return out, photons.float()
+
+    def state_dict(self) -> dict[str, torch.Tensor]:
+        return {"generator": self.generator.get_state()}
+
+    def load_state_dict(self, state: dict[str, torch.Tensor]) -> None:
+        self.generator.set_state(state["generator"])

@@ -34,6 +34,7 @@ import torch
 from ..data.patches import ImageCache
 from ..data.tensorfiles import load_pair, save_pair
 from ..patterns import Pattern, get
+from ..physics.noise import Exposure
 from ..physics.sensor import pattern_pixel_kernels
 from .base import check_sigma
 from .lmmse import DEFAULT_RADIUS, LMMSE, LMMSEFileError, apply_filters
@@ -282,15 +283,20 @@ def _moments(
 
 
 def _solve(
-    kernels: torch.Tensor, stats: ImageStatistics, radius: int, sigma: torch.Tensor
+    kernels: torch.Tensor, stats: ImageStatistics, radius: int, levels: torch.Tensor
 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-    """Filters ``(S, P, 3, d)``, biases ``(S, P, 3)`` and per-phase MSE ``(S, P)`` per sigma."""
+    """Filters ``(S, P, 3, d)``, biases ``(S, P, 3)`` and per-phase MSE ``(S, P)`` per noise
+    level. ``levels`` ``(S, 2)`` holds ``(a, b)``: the noise variance of a raw pixel of expected
+    value ``g`` is ``a g + b`` (Gaussian: ``a = 0``, ``b = (sigma/255)^2``; photon model:
+    :meth:`~splitcam.physics.noise.Exposure.variance_coefficients`), evaluated at each window
+    pixel's expected signal ``A_p mu_M`` (SPEC section 10)."""
     cxx, cyx, mean_x, cyy = _moments(kernels, stats, radius)
     d = cxx.shape[-1]
     trace = torch.diagonal(cxx, dim1=-2, dim2=-1).sum(-1)
-    eye = torch.eye(d, dtype=cxx.dtype, device=cxx.device)
-    diag = (sigma.to(cxx) / 255.0)[:, None] ** 2 + _RIDGE * trace.detach()[None] / d  # (S, P)
-    system = cxx[None] + diag[..., None, None] * eye
+    levels = levels.to(cxx)
+    ridge = _RIDGE * trace.detach()[None, :, None] / d  # (1, P, 1)
+    var = levels[:, 0, None, None] * mean_x[None] + levels[:, 1, None, None]  # (S, P, d)
+    system = cxx[None] + torch.diag_embed(var + ridge)
     # W^T = (C_xx + s^2 I)^-1 C_xy
     wt = torch.linalg.solve(system, cyx.transpose(-1, -2).expand(system.shape[0], -1, -1, -1))
     weights = wt.transpose(-1, -2)  # (S, P, 3, d)
@@ -310,12 +316,20 @@ def _as_kernels(pattern_or_kernels: Pattern | str | torch.Tensor) -> torch.Tenso
     return pattern_pixel_kernels(pattern_or_kernels)
 
 
-def _as_sigmas(sigma: float | torch.Tensor) -> tuple[torch.Tensor, bool]:
+def _as_sigmas(sigma: Any) -> tuple[torch.Tensor, bool]:
+    """Noise level(s) → ``((S, 2) variance coefficients, several?)``: a sigma (8-bit units), a
+    1-D tensor of sigmas, an :class:`~splitcam.physics.noise.Exposure`, or a list of them."""
+    if isinstance(sigma, Exposure):
+        return torch.tensor([sigma.variance_coefficients()], dtype=torch.float64), False
+    if isinstance(sigma, (list, tuple)) and sigma and isinstance(sigma[0], Exposure):
+        return torch.tensor([e.variance_coefficients() for e in sigma], dtype=torch.float64), True
     if isinstance(sigma, torch.Tensor) and sigma.ndim == 1:
         if not torch.isfinite(sigma).all() or bool((sigma < 0).any()):
             raise ValueError("expected finite sigmas >= 0")
-        return sigma.to(torch.float64), True
-    return torch.tensor([check_sigma(float(sigma))], dtype=torch.float64), False
+        s = sigma.detach().to(torch.float64)
+        return torch.stack([torch.zeros_like(s), (s / 255.0) ** 2], 1), True
+    s = check_sigma(float(sigma))
+    return torch.tensor([[0.0, (s / 255.0) ** 2]], dtype=torch.float64), False
 
 
 def closed_form_filters(
@@ -331,7 +345,9 @@ def closed_form_filters(
         kernels: A pattern (name, file or :class:`Pattern`), or pixel kernels
             ``(Ph, Pw, 3, kh, kw)`` (:func:`splitcam.physics.sensor.pixel_kernels`; gradients
             flow back to them).
-        sigma: Noise standard deviation in 8-bit units, a number or a 1-D tensor of several.
+        sigma: Noise standard deviation in 8-bit units, a number or a 1-D tensor of several; or
+            a photon-model :class:`~splitcam.physics.noise.Exposure` (signal-dependent noise,
+            SPEC section 10), or a list of them.
         statistics: Image statistics (default: the shipped ones).
         radius: Neighbourhood radius ``r``; filters are ``(2r+1) x (2r+1)``.
 
@@ -390,15 +406,16 @@ class ClosedFormFilters:
         self._kernels = _as_kernels(self.pattern)
         self._cache: dict[float, tuple[torch.Tensor, torch.Tensor]] = {}
 
-    def filters(self, sigma: float) -> tuple[torch.Tensor, torch.Tensor]:
-        sigma = check_sigma(sigma)
+    def filters(self, sigma: float | Exposure) -> tuple[torch.Tensor, torch.Tensor]:
+        """Filters for a Gaussian sigma (8-bit units) or a photon-model :class:`Exposure`."""
+        sigma = sigma if isinstance(sigma, Exposure) else check_sigma(sigma)
         if sigma not in self._cache:
             self._cache[sigma] = closed_form_filters(
                 self._kernels, sigma, statistics=self.statistics, radius=self.radius
             )
         return self._cache[sigma]
 
-    def expected_mse(self, sigma: float) -> float:
+    def expected_mse(self, sigma: float | Exposure) -> float:
         return float(
             closed_form_mse(self._kernels, sigma, statistics=self.statistics, radius=self.radius)
         )

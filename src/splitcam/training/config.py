@@ -89,14 +89,22 @@ class DataConfig:
     )
     val_sigmas: list[float] = _opt([0.0, 15.0], "validation noise levels")
     patch_size: int = _opt(64, "training patch size")
-    batch_size: int = _opt(80, "patches per step")
+    batch_size: int = _opt(
+        8,
+        "patches per step (the paper: 80; 8 learns most per CPU-hour, "
+        "docs/results/convergence_5min_lr.md)",
+    )
     max_images: int | None = _opt(None, "use at most this many training images")
 
 
 @dataclass
 class OptimConfig:
     steps: int = _opt(1_000_000, "training steps")
-    lr: float = _opt(5e-4, "peak Adam learning rate (the paper: 1e-4, constant)")
+    lr: float = _opt(
+        1e-3,
+        "peak Adam learning rate (the paper: 1e-4, constant; 1e-3 with warm-up and cosine "
+        "decay measured best per CPU-hour, docs/results/convergence_5min_lr.md)",
+    )
     schedule: str = _opt(
         "cosine", "constant (the paper's) or cosine: decay to 0 over the steps or time limit"
     )
