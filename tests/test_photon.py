@@ -19,6 +19,7 @@ from splitcam.recon.closed_form import (
     shipped_image_statistics,
 )
 
+
 def _flat(value: float, size: int = 400) -> torch.Tensor:
     return torch.full((1, 1, size, size), value, dtype=torch.float64)
 

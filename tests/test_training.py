@@ -263,7 +263,7 @@ def test_config_files_and_overrides(tmp_path, image_folder):
     yaml_file.write_text("network:\n  features: 32\n")
     assert TrainConfig.from_file(yaml_file).network.features == 32
     bad = [
-        ('[pattern]\nnmae = "A"\n', "unknown setting.*'nmae'.*valid: design_steps, init, learn, lr, name"),
+        ('[pattern]\nnmae = "A"\n', "unknown setting.*'nmae'.*valid: design_steps, init, learn"),
         ("[optim]\nsteps = 1.5\n", "optim.steps: expected an integer, got 1.5"),
         ('[pattern]\nlearn = "False"\n', "pattern.learn: expected true or false"),
         ("[nope]\nx = 1\n", "unknown setting"),
