@@ -140,10 +140,76 @@ def test_closed_form_filters_under_signal_dependent_noise() -> None:
         noise = np.diag(a * mean_x[p] + b)
         ridge = _RIDGE * np.trace(cxx[p]) / cxx.shape[-1]  # what the solver adds for stability
         expected = np.linalg.solve(cxx[p] + noise + ridge * np.eye(cxx.shape[-1]), cyx[p].T).T
-        np.testing.assert_allclose(weights[p].reshape(3, -1).numpy(), expected, rtol=1e-9,
-                                   atol=1e-12)
+        np.testing.assert_allclose(
+            weights[p].reshape(3, -1).numpy(), expected, rtol=1e-9, atol=1e-12
+        )
     levels = [Exposure(n, read_noise=3.0) for n in (10.0, 100.0, 1000.0)]
     mse = closed_form_mse(kernels, levels, statistics=stats, radius=2)
     assert bool((mse[1:] < mse[:-1]).all())
     one = closed_form_mse(kernels, levels[1], statistics=stats, radius=2)
     assert float(one) == pytest.approx(float(mse[1]), rel=1e-12)
+
+
+def test_crossover_interpolates_in_log_exposure() -> None:
+    from splitcam.evaluation.exposure import crossover
+
+    ref = {1.0: 10.0, 10.0: 20.0, 100.0: 30.0}
+    assert crossover({1.0: 12.0, 10.0: 20.0 + 1.0, 100.0: 29.0}, ref) == pytest.approx(10**1.5)
+    assert crossover({1.0: 11.0, 10.0: 21.0, 100.0: 31.0}, ref) == math.inf
+    assert crossover({1.0: 9.0, 10.0: 21.0, 100.0: 31.0}, ref) is None
+    # lower is better (CIEDE2000): wins below N = 10
+    assert crossover(
+        {1.0: 1.0, 10.0: 2.0, 100.0: 3.0}, {1.0: 2.0, 10.0: 2.0, 100.0: 2.0}, higher_is_better=False
+    ) == pytest.approx(10.0)
+
+
+def test_raw_snr_follows_the_signal_gain() -> None:
+    """On a flat grey scene a lossless splitter gathers k = 3 times the filter's signal; its raw
+    SNR gain is near 10 log10 k shot-limited and 20 log10 k read-limited (not exactly: its
+    pixels are not k times the filter's one by one)."""
+    from splitcam.evaluation.exposure import raw_snr_check
+
+    grey = [("grey", torch.full((3, 64, 64), 0.5))]
+    snr = raw_snr_check(grey, patterns=["A", "D", "bayer"])
+    for name in ("A", "D"):
+        assert snr[name]["k"] == pytest.approx(3.0, rel=0.03)  # borders lose a little
+        assert abs(snr[name]["shot_gain_db"] - snr[name]["shot_theory_db"]) < 0.6
+        assert abs(snr[name]["read_gain_db"] - snr[name]["read_theory_db"]) < 0.6
+    assert snr["bayer"]["k"] == 1.0 and snr["bayer"]["read_gain_db"] == 0.0
+
+
+def test_study_exposure_cli(tmp_path, capsys) -> None:
+    from splitcam.cli import main
+
+    assert (
+        main(
+            [
+                "study",
+                "exposure",
+                "--max-images",
+                "1",
+                "--photons",
+                "3",
+                "300",
+                "--patterns",
+                "D,bayer",
+                "--out",
+                str(tmp_path),
+                "--quiet",
+            ]
+        )
+        == 0
+    )
+    text = (tmp_path / "exposure.md").read_text()
+    assert "| D |" in text and "Crossover" in text and "Raw SNR" in text
+    assert (tmp_path / "exposure.png").is_file()
+    data = json_load(tmp_path / "exposure.json")
+    assert data["results"]["D"]["300"]["psnr"] > data["results"]["D"]["3"]["psnr"]
+    assert main(["study", "exposure", "--photons", "-1", "--out", str(tmp_path)]) == 1
+    assert "photons" in capsys.readouterr().err
+
+
+def json_load(path):
+    import json
+
+    return json.loads(path.read_text())

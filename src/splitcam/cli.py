@@ -452,6 +452,36 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_study(args: argparse.Namespace) -> int:
+    from .evaluation.exposure import (
+        default_exposures,
+        exposure_study,
+        raw_snr_check,
+        write_study,
+    )
+
+    photons = args.photons or default_exposures(args.points)
+    datasets = load_datasets(args.datasets, args.max_images)
+    images = [img for _, imgs in datasets for img in imgs]
+    names = ", ".join(f"{d} ({len(i)})" for d, i in datasets)
+    results = exposure_study(
+        images,
+        patterns=args.patterns,
+        photons=photons,
+        read_noise=args.read_noise,
+        progress=not args.quiet,
+    )
+    snr = raw_snr_check(images, patterns=args.patterns) if "bayer" in args.patterns else None
+    note = (
+        f"Images: {names}. Read noise {args.read_noise:g} e-, no saturation or ADC. Command: "
+        f"`splitcam study exposure {' '.join(sys.argv[3:])}`"
+    )
+    path = write_study(results, snr, args.out, note=note)
+    print(path.read_text(encoding="utf-8"))
+    print(f"wrote {path}, exposure.json and exposure.png")
+    return 0
+
+
 def _add_train_parser(sub) -> None:
     p = sub.add_parser(
         "train",
@@ -723,6 +753,31 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-wait", action="store_true", help="slurm: submit and return")
     p.add_argument("--dry-run", action="store_true", help="show what each experiment needs")
     p.set_defaults(handler=cmd_sweep)
+
+    p = sub.add_parser(
+        "study",
+        help="studies beyond the paper: `study exposure` (filters and splitters at equal light)",
+        description="`splitcam study exposure`: PSNR and CIEDE2000 of the closed-form LMMSE of "
+        "every pattern against exposure under the photon model (shot and read noise, the same "
+        "photon flux for every pattern), the exposure below which each splitter beats the Bayer "
+        "filter, and the raw SNR of each pattern against the filter next to theory.",
+    )
+    p.add_argument("study", choices=["exposure"])
+    p.add_argument("--datasets", default="default")
+    p.add_argument("--max-images", type=int, help="at most this many images per dataset")
+    p.add_argument(
+        "--patterns",
+        type=lambda s: [x for x in s.split(",") if x],
+        default=["A", "B", "C", "D", "E", "bayer"],
+    )
+    p.add_argument(
+        "--photons", type=float, nargs="+", help="exposures (default: log-spaced from 1 to 10^4)"
+    )
+    p.add_argument("--points", type=int, default=9, help="default exposures: how many")
+    p.add_argument("--read-noise", type=float, default=2.0, help="electrons (default 2)")
+    p.add_argument("--out", default="results/exposure")
+    p.add_argument("--quiet", action="store_true")
+    p.set_defaults(handler=cmd_study)
 
     p = sub.add_parser(
         "reproduce",

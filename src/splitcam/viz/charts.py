@@ -6,7 +6,7 @@ import os
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
-__all__ = ["sigma_chart"]
+__all__ = ["exposure_chart", "sigma_chart"]
 
 
 def sigma_chart(
@@ -55,6 +55,37 @@ def sigma_chart(
     for ax in (ax1, ax2):
         ax.grid(alpha=0.3)
     ax2.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1))
+    fig.tight_layout()
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=120)
+    return path
+
+
+def exposure_chart(
+    results: Mapping[str, Mapping[float, Mapping[str, float]]], path: str | os.PathLike
+) -> Path:
+    """PSNR and CIEDE2000 against exposure (log axis) for every pattern; the Bayer filter
+    dashed black."""
+    import matplotlib
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(12, 4.6))
+    ax1, ax2 = fig.subplots(1, 2)
+    colours = matplotlib.rcParams["axes.prop_cycle"].by_key()["color"]
+    for i, (label, per) in enumerate(results.items()):
+        xs = sorted(per)
+        style = {"color": "black", "ls": "--"} if label == "bayer" else {"color": colours[i]}
+        style = {"marker": "o", "ms": 3, "ls": "-", **style}
+        ax1.plot(xs, [per[x]["psnr"] for x in xs], label=label, **style)
+        ax2.plot(xs, [per[x]["ciede2000"] for x in xs], label=label, **style)
+    for ax, name in ((ax1, "PSNR (dB)"), (ax2, "CIEDE2000 (lower is better)")):
+        ax.set_xscale("log")
+        ax.set_xlabel("exposure N: photo-electrons of a lossless full-light pixel")
+        ax.set_ylabel(name)
+        ax.grid(alpha=0.3, which="both")
+    ax1.set_title("LMMSE at equal exposure (photon model)", fontsize=10)
+    ax2.legend(fontsize=8, loc="upper right")
     fig.tight_layout()
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
