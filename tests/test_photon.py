@@ -113,15 +113,15 @@ def test_bad_parameters_are_refused(kwargs, message) -> None:
 def test_training_draws_exposures_log_uniformly_and_resumes() -> None:
     noise = PhotonNoise((10.0, 1e4), per_sample=True, seed=3)
     raw = torch.full((400, 1, 2, 2), 0.5)
-    _, photons = noise(raw)
-    logs = np.log10(photons.numpy())
+    _, exposures = noise(raw)
+    logs = np.log10([e.photons for e in exposures])
     assert logs.min() >= 1 - 1e-6 and logs.max() <= 4 + 1e-6
     assert abs(np.mean(logs) - 2.5) < 0.1 and abs(np.mean(logs < 2) - 1 / 3) < 0.08
     state = noise.state_dict()
     a = noise(raw[:4])
     noise.load_state_dict(state)
     b = noise(raw[:4])
-    assert torch.equal(a[0], b[0]) and torch.equal(a[1], b[1])
+    assert torch.equal(a[0], b[0]) and a[1] == b[1]
     with pytest.raises(ValueError, match="lo <= hi"):
         PhotonNoise((100.0, 10.0))
 
@@ -213,3 +213,67 @@ def json_load(path):
     import json
 
     return json.loads(path.read_text())
+
+
+def test_training_under_the_photon_model(tmp_path) -> None:
+    """`train --noise photon`: the physics network is told each patch's exposure, validation is
+    per exposure, the checkpoint records the noise model, and an untrained network is the LMMSE
+    under signal-dependent noise."""
+    from PIL import Image
+
+    from splitcam.evaluation.protocol import mean_psnr
+    from splitcam.recon.closed_form import closed_form_lmmse
+    from splitcam.training import TrainConfig, train
+    from splitcam.training import checkpoint as ckpt_io
+    from splitcam.training.trainer import _val_images
+
+    folder = tmp_path / "img"
+    folder.mkdir()
+    rng = np.random.default_rng(0)
+    for i in range(5):
+        img = np.kron(rng.random((6, 6, 3)), np.ones((8, 8, 1)))
+        Image.fromarray((img * 255).astype(np.uint8)).save(folder / f"im{i}.png")
+    config = TrainConfig().override(
+        {
+            "data.train": str(folder),
+            "data.val_split": 2,
+            "data.val_crop": 32,
+            "data.patch_size": 16,
+            "data.batch_size": 4,
+            "network.features": 8,
+            "network.blocks": 1,
+            "optim.steps": 4,
+            "optim.warmup_steps": 2,
+            "run.log_every": 1,
+            "run.val_every": 4,
+            "run.checkpoint_every": 4,
+            "run.threads": 1,
+            "run.out": str(tmp_path / "run"),
+            "noise.model": "photon",
+            "noise.photons": [20.0, 2000.0],
+            "noise.val_photons": [30.0, 1000.0],
+        }
+    )
+    train(config, progress=False)
+    rows = [
+        json_load_line(x) for x in (tmp_path / "run" / "metrics.jsonl").read_text().splitlines()
+    ]
+    first = next(r for r in rows if "val_psnr_N30" in r)
+    assert first["step"] == 0 and "val_psnr_N1000" in first
+    assert first["val_psnr_N1000"] > first["val_psnr_N30"]
+    levels = [Exposure(30.0), Exposure(1000.0)]
+    lmmse = mean_psnr(closed_form_lmmse("D"), _val_images(config), levels)
+    assert first["val_psnr_N30"] == pytest.approx(lmmse[levels[0]], abs=1e-3)
+    assert ckpt_io.load(tmp_path / "run").meta["config"]["noise"]["model"] == "photon"
+    from splitcam.training.config import ConfigError
+
+    with pytest.raises(ConfigError, match="noise"):
+        TrainConfig().override({"noise.model": "photon", "noise.photons": [100.0, 10.0]}).validate()
+    with pytest.raises(ConfigError, match="bits"):
+        TrainConfig().override({"noise.model": "photon", "noise.bits": 0}).validate()
+
+
+def json_load_line(text):
+    import json
+
+    return json.loads(text)

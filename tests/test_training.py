@@ -548,7 +548,7 @@ def test_every_setting_has_a_flag_with_its_default_in_the_help():
         elif default is not None:
             assert action.help.endswith(f"(default: {default})"), key
         assert action.default is None  # "not given": the config file's value stays
-    assert flags["optim.lr"].help.endswith("(default: 0.0005)")
+    assert flags["optim.lr"].help.endswith("(default: 0.001)")
     # The flag names of the hand-written table this replaced keep their meaning.
     old = {
         "pattern": "pattern.name", "learn_pattern": "pattern.learn", "init": "pattern.init",

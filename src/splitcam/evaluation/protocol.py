@@ -26,7 +26,7 @@ import torch
 
 from ..data.imageio import write_image
 from ..patterns import Pattern, save
-from ..physics.noise import check_sigma
+from ..physics.noise import Exposure, check_sigma
 from ..physics.sensor import SplitterSensor
 from ..physics.system import simulate
 from ..recon.base import Reconstructor
@@ -78,9 +78,10 @@ def score_images(
     """``(image name, sigma, reconstruction, scores)`` for every image at every sigma."""
     sensor = sensor if sensor is not None else SplitterSensor(method.pattern)
     for sigma in sigmas:
+        level = sigma if isinstance(sigma, Exposure) else float(sigma)
         for name, rgb in images:
-            pred = simulate_and_reconstruct(method, sensor, name, rgb, sigma)
-            yield name, float(sigma), pred, score(pred, rgb, crop=crop)
+            pred = simulate_and_reconstruct(method, sensor, name, rgb, level)
+            yield name, level, pred, score(pred, rgb, crop=crop)
 
 
 def mean_psnr(
@@ -90,8 +91,9 @@ def mean_psnr(
     *,
     sensor: SplitterSensor | None = None,
 ) -> dict[float, float]:
-    """Mean PSNR per sigma over ``images`` (infinite PSNRs left out, as in the tables)."""
-    scores: dict[float, list[float]] = {float(s): [] for s in sigmas}
+    """Mean PSNR per sigma over ``images`` (infinite PSNRs left out, as in the tables); a noise
+    level may also be a photon-model :class:`~splitcam.physics.noise.Exposure`."""
+    scores: dict = {s if isinstance(s, Exposure) else float(s): [] for s in sigmas}
     for _, sigma, _, values in score_images(method, images, sigmas, sensor=sensor):
         scores[sigma].append(values["psnr"])
     return {s: mean_over_images(v).mean for s, v in scores.items()}

@@ -231,8 +231,8 @@ class PhotonNoise:
         **sensor: ``read_noise``, ``full_well``, ``gain``, ``bits``, ``shot`` of
             :class:`Exposure`.
 
-    Returns (when called on ``(N, 1, H, W)`` raw images): the noisy images and the exposures
-    ``(N,)`` used.
+    Returns (when called on ``(N, 1, H, W)`` raw images): the noisy images and the
+    :class:`Exposure` of each image (what the physics-informed network is told).
     """
 
     def __init__(
@@ -260,13 +260,9 @@ class PhotonNoise:
             lo + (hi - lo) * torch.rand(n, generator=self.generator, dtype=torch.float64)
         )
         photons = photons.expand(raw.shape[0]) if n == 1 else photons
-        out = torch.cat(
-            [
-                Exposure(float(p), **self.sensor).apply(raw[i : i + 1], self.generator)
-                for i, p in enumerate(photons)
-            ]
-        )
-        return out, photons.float()
+        exposures = [Exposure(float(p), **self.sensor) for p in photons]
+        out = torch.cat([e.apply(raw[i : i + 1], self.generator) for i, e in enumerate(exposures)])
+        return out, exposures
 
     def state_dict(self) -> dict[str, torch.Tensor]:
         return {"generator": self.generator.get_state()}

@@ -15,7 +15,7 @@ import torch
 from torch import nn
 
 from ..patterns import Pattern
-from ..physics.noise import check_sigma
+from ..physics.noise import Exposure, check_sigma
 from ..physics.sensor import pattern_pixel_kernels
 
 __all__ = [
@@ -149,7 +149,8 @@ class NetworkReconstructor:
     def reconstruct(self, raw: torch.Tensor, sigma: float) -> torch.Tensor:
         from .tiling import reconstruct
 
-        check_sigma(sigma)
+        if not isinstance(sigma, Exposure):
+            check_sigma(sigma)
         return reconstruct(
             self.network,
             raw,

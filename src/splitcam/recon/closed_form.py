@@ -457,6 +457,11 @@ def lmmse_estimate(
         - raw: ``(N, 1, H, W)``; output ``(N, 3, H, W)``.
     """
     ph, pw = kernels.shape[:2]
+    if isinstance(sigma, (list, tuple)):  # photon model: one Exposure per image
+        if len(set(sigma)) == 1:
+            sigma = sigma[0]
+        elif len(sigma) != raw.shape[0]:
+            raise ValueError(f"expected 1 or {raw.shape[0]} exposures, got {len(sigma)}")
     if isinstance(sigma, torch.Tensor):
         sigma = sigma.detach().reshape(-1).to("cpu", torch.float64)
         if sigma.numel() > 1 and bool((sigma == sigma[0]).all()):

@@ -30,6 +30,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from ..physics.noise import Exposure
 from ..physics.periodic import as_period as _as_period
 from ..physics.periodic import period_shuffle, period_unshuffle, phase_map
 from .base import check_raw
@@ -248,7 +249,10 @@ class PhysicsReconNet(_Reconstructor):
     filter radius.
 
     Shape:
-        - raw: ``(N, 1, H, W)``; sigma: a number or ``(N,)``; kernels ``(Ph, Pw, 3, kh, kw)``.
+        - raw: ``(N, 1, H, W)``; sigma: a number or ``(N,)``, or for the photon model an
+          :class:`~splitcam.physics.noise.Exposure` or one per image (the noise-level input is
+          then the per-pixel noise it implies, :func:`noise_level_map`); kernels
+          ``(Ph, Pw, 3, kh, kw)``.
         - Output: ``(N, 3, H, W)``.
     """
 
@@ -293,12 +297,9 @@ class PhysicsReconNet(_Reconstructor):
             raise ValueError(
                 f"expected kernels of period {self.period}, got {tuple(kernels.shape[:2])}"
             )
-        n = raw.shape[0]
         estimate = lmmse_estimate(raw, kernels, sigma, self.statistics(), self.radius)
-        sig = torch.as_tensor(sigma, dtype=raw.dtype, device=raw.device).reshape(-1)
-        sig = sig.expand(n) if sig.numel() == 1 else sig
         cells = period_unshuffle(raw, self.period)
-        level = (sig / 25.5).view(n, 1, 1, 1).expand(n, 1, *cells.shape[-2:])
+        level = noise_level_map(raw, sigma, self.period) / 25.5
         x = torch.cat([cells, period_unshuffle(estimate, self.period), level.to(cells.dtype)], 1)
         correction = period_shuffle(self.trunk(x), self.period, raw.shape[-2:])
         return estimate + correction
@@ -312,6 +313,33 @@ class PhysicsReconNet(_Reconstructor):
 
     def config(self) -> dict[str, Any]:
         return {**super().config(), "radius": self.radius}
+
+
+def noise_level_map(
+    raw: torch.Tensor, sigma: float | torch.Tensor | Exposure | list[Exposure], period
+) -> torch.Tensor:
+    """The noise standard deviation (8-bit units) at cell resolution, ``(N, 1, H/Ph, W/Pw)``.
+
+    Gaussian noise (a sigma, or one per image): that constant. The photon model (an
+    :class:`~splitcam.physics.noise.Exposure`, or one per image): ``255 sqrt(a g + b)`` with the
+    raw value ``g`` (clamped at 0) as the estimate of each pixel's signal, averaged over each
+    period cell: the per-pixel noise the exposure implies, in the same units.
+    """
+    n = raw.shape[0]
+    cells = period_unshuffle(raw, period)
+    shape = (n, 1, *cells.shape[-2:])
+    exposures = [sigma] if isinstance(sigma, Exposure) else sigma
+    if isinstance(exposures, (list, tuple)) and exposures and isinstance(exposures[0], Exposure):
+        if len(exposures) == 1:
+            exposures = list(exposures) * n
+        coef = torch.tensor(
+            [e.variance_coefficients() for e in exposures], dtype=raw.dtype, device=raw.device
+        )
+        var = coef[:, 0, None, None, None] * cells.clamp_min(0) + coef[:, 1, None, None, None]
+        return (255.0 * var.sqrt()).mean(1, keepdim=True)
+    sig = torch.as_tensor(sigma, dtype=raw.dtype, device=raw.device).reshape(-1)
+    sig = sig.expand(n) if sig.numel() == 1 else sig
+    return sig.view(n, 1, 1, 1).expand(shape)
 
 
 #: Network classes by their ``config()["arch"]`` name.

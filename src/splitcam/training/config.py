@@ -118,6 +118,36 @@ class OptimConfig:
 
 
 @dataclass
+class NoiseConfig:
+    model: str = _opt(
+        "gaussian",
+        "gaussian (the paper's: sigma ~ U[optim.sigma_min, optim.sigma_max]) or photon (shot "
+        "and read noise at an exposure drawn log-uniformly from --photons, SPEC section 11)",
+        flag="noise",
+    )
+    photons: list[float] = _opt(
+        [10.0, 10000.0],
+        "photon model: range of full-light exposures (photo-electrons of a lossless pixel)",
+    )
+    read_noise: float = _opt(2.0, "photon model: read noise in electrons")
+    full_well: float | None = _opt(None, "photon model: full-well capacity in electrons")
+    gain: float | None = _opt(None, "photon model: ADC gain in electrons per DN (none: no ADC)")
+    bits: int = _opt(12, "photon model: ADC bits")
+    val_photons: list[float] = _opt(
+        [30.0, 1000.0], "photon model: exposures of the validation (val_psnr_N<photons>)"
+    )
+
+    def sensor(self) -> dict[str, Any]:
+        """The :class:`~splitcam.physics.noise.Exposure` settings besides the exposure."""
+        return {
+            "read_noise": self.read_noise,
+            "full_well": self.full_well,
+            "gain": self.gain,
+            "bits": self.bits,
+        }
+
+
+@dataclass
 class RunConfig:
     out: str = _opt("runs/default", "run folder")
     seed: int = _opt(0, "random seed")
@@ -154,6 +184,7 @@ class TrainConfig:
     network: NetworkConfig = field(default_factory=NetworkConfig)
     data: DataConfig = field(default_factory=DataConfig)
     optim: OptimConfig = field(default_factory=OptimConfig)
+    noise: NoiseConfig = field(default_factory=NoiseConfig)
     run: RunConfig = field(default_factory=RunConfig)
 
     def to_dict(self) -> dict[str, Any]:
@@ -227,9 +258,32 @@ class TrainConfig:
                 "data.val_split must be >= 0",
             ),
         ]
+        checks.append(
+            (
+                self.noise.model in ("gaussian", "photon"),
+                f"noise.model must be gaussian or photon, got {self.noise.model!r}",
+            )
+        )
+        checks.append(
+            (
+                len(self.noise.photons) == 2
+                and 0 < self.noise.photons[0] <= self.noise.photons[1]
+                and bool(self.noise.val_photons)
+                and min(self.noise.val_photons) > 0,
+                f"noise.photons must be two exposures 0 < lo <= hi (photo-electrons), got "
+                f"{self.noise.photons}; noise.val_photons positive",
+            )
+        )
         for ok, message in checks:
             if not ok:
                 raise ConfigError(message)
+        if self.noise.model == "photon":
+            from ..physics.noise import Exposure
+
+            try:
+                Exposure(self.noise.photons[0], **self.noise.sensor())
+            except ValueError as exc:
+                raise ConfigError(f"noise: {exc}") from None
 
     def write(self, path: str | Path) -> Path:
         path = Path(path)

@@ -20,7 +20,7 @@ import torch.nn.functional as F
 from .. import patterns
 from ..data.patches import ImageCache, PatchSampler, list_images
 from ..evaluation.protocol import mean_psnr
-from ..physics.noise import GaussianNoise
+from ..physics.noise import Exposure, GaussianNoise, PhotonNoise
 from ..physics.sensor import LearnableSplitterSensor, SplitterSensor
 from ..physics.system import ImagingSystem
 from ..recon.base import NetworkReconstructor, fast_precision
@@ -229,9 +229,10 @@ def _train_source(config: TrainConfig) -> Any:
 def validate(
     system: ImagingSystem,
     images: list[tuple[str, torch.Tensor]],
-    sigmas: list[float],
+    sigmas: list[float] | list[Exposure],
 ) -> dict[str, float]:
-    """Mean PSNR per sigma on the validation images, by the evaluation protocol itself
+    """Mean PSNR per noise level (a sigma, or a photon-model exposure: ``val_psnr_N<photons>``)
+    on the validation images, by the evaluation protocol itself
     (:func:`splitcam.evaluation.protocol.mean_psnr`): the pattern as a run's checkpoint records
     it, the same simulation, noise, reconstruction, rounding and averaging as ``splitcam
     evaluate``, so the logged value is what ``evaluate`` reports for this step."""
@@ -240,7 +241,10 @@ def validate(
     method = NetworkReconstructor(system.network, system.sensor.to_pattern(), "validation")
     means = mean_psnr(method, images, sigmas)
     system.train(was_training)
-    out = {f"val_psnr_{sigma:g}": value for sigma, value in means.items()}
+    out = {
+        f"val_psnr_N{s.photons:g}" if isinstance(s, Exposure) else f"val_psnr_{s:g}": value
+        for s, value in means.items()
+    }
     out["val_psnr"] = sum(means.values()) / len(means)
     return out
 
@@ -457,12 +461,24 @@ def _train(
         rank=dist_info.rank,
         world_size=dist_info.world_size,
     )
-    noise = GaussianNoise(
-        (config.optim.sigma_min, config.optim.sigma_max),
-        per_sample=config.optim.per_sample_sigma,
-        seed=config.run.seed * 7919 + 1 + 104729 * dist_info.rank,
-    )
+    noise_seed = config.run.seed * 7919 + 1 + 104729 * dist_info.rank
+    if config.noise.model == "photon":
+        noise: GaussianNoise | PhotonNoise = PhotonNoise(
+            tuple(config.noise.photons),
+            per_sample=config.optim.per_sample_sigma,
+            seed=noise_seed,
+            **config.noise.sensor(),
+        )
+    else:
+        noise = GaussianNoise(
+            (config.optim.sigma_min, config.optim.sigma_max),
+            per_sample=config.optim.per_sample_sigma,
+            seed=noise_seed,
+        )
     val_images = _val_images(config) if dist_info.is_main else []
+    val_levels: list = list(config.data.val_sigmas)
+    if config.noise.model == "photon":
+        val_levels = [Exposure(n, **config.noise.sensor()) for n in config.noise.val_photons]
 
     step = 0
     train_seconds = 0.0  # training time of the run so far, all processes (not validation)
@@ -570,7 +586,7 @@ def _train(
     timed_out = False
     with _StopFlag() as stop:
         if step == 0 and val_images and dist_info.is_main:
-            start = validate(system, val_images, config.data.val_sigmas)
+            start = validate(system, val_images, val_levels)
             with open(metrics_path, "a", encoding="utf-8") as fh:
                 fh.write(json.dumps({"step": 0, **start, "time": time.time()}) + "\n")
         while step < config.optim.steps:
@@ -624,7 +640,7 @@ def _train(
                 }
             if val_now and dist_info.is_main:
                 t_val = time.perf_counter()
-                last.update(validate(system, val_images, config.data.val_sigmas))
+                last.update(validate(system, val_images, val_levels))
                 last["step"] = step
                 t_window += time.perf_counter() - t_val  # keep steps/s about training only
             if (log_now or val_now) and dist_info.is_main:

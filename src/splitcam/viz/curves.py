@@ -81,17 +81,20 @@ def plot_run(run: str | os.PathLike, out: str | os.PathLike | None = None) -> Pa
         alpha=0.6,
         label="training batches (noisy, all sigmas)",
     )
-    sigmas = sorted(
-        {k for r in val for k in r if k.startswith("val_psnr_")},
-        key=lambda k: float(k.rsplit("_", 1)[1]),
-    )
+    def level(key: str) -> tuple[int, float]:
+        """``val_psnr_15`` (sigma 15) or ``val_psnr_N100`` (photon model, exposure 100)."""
+        text = key.rsplit("_", 1)[1]
+        return (1, float(text[1:])) if text.startswith("N") else (0, float(text))
+
+    sigmas = sorted({k for r in val for k in r if k.startswith("val_psnr_")}, key=level)
     for key in sigmas:
+        kind, value = level(key)
         ax2.plot(
             [r["step"] for r in val],
-            [r[key] for r in val],
+            [r.get(key, float("nan")) for r in val],
             marker="o",
             ms=3,
-            label=f"validation, sigma {key.rsplit('_', 1)[1]}",
+            label=f"validation, {'exposure N' if kind else 'sigma'} {value:g}",
         )
     ax2.set_xlabel("step")
     ax2.set_ylabel("PSNR (dB)")
