@@ -265,6 +265,19 @@ def test_training_under_the_photon_model(tmp_path) -> None:
     lmmse = mean_psnr(closed_form_lmmse("D"), _val_images(config), levels)
     assert first["val_psnr_N30"] == pytest.approx(lmmse[levels[0]], abs=1e-3)
     assert ckpt_io.load(tmp_path / "run").meta["config"]["noise"]["model"] == "photon"
+    # The exposure study takes the trained network beside the LMMSE of its pattern.
+    from splitcam.evaluation.exposure import exposure_study
+    from splitcam.methods import build_method
+
+    study = exposure_study(
+        _val_images(config),
+        patterns=["D"],
+        photons=[30.0, 1000.0],
+        methods=[build_method(str(tmp_path / "run"))],
+        progress=False,
+    )
+    assert set(study) == {"D", "run"}
+    assert study["run"][1000.0]["psnr"] > study["run"][30.0]["psnr"]
     from splitcam.training.config import ConfigError
 
     with pytest.raises(ConfigError, match="noise"):

@@ -464,11 +464,15 @@ def cmd_study(args: argparse.Namespace) -> int:
     datasets = load_datasets(args.datasets, args.max_images)
     images = [img for _, imgs in datasets for img in imgs]
     names = ", ".join(f"{d} ({len(i)})" for d, i in datasets)
+    from .methods import build_method, build_model
+
+    methods = [build_model(m) for m in args.model] + [build_method(c) for c in args.checkpoint]
     results = exposure_study(
         images,
         patterns=args.patterns,
         photons=photons,
         read_noise=args.read_noise,
+        methods=methods,
         progress=not args.quiet,
     )
     snr = raw_snr_check(images, patterns=args.patterns) if "bayer" in args.patterns else None
@@ -775,6 +779,13 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--points", type=int, default=9, help="default exposures: how many")
     p.add_argument("--read-noise", type=float, default=2.0, help="electrons (default 2)")
+    p.add_argument("--model", action="append", default=[], help="a shipped model too")
+    p.add_argument(
+        "--checkpoint",
+        action="append",
+        default=[],
+        help="a trained run too (e.g. one trained with --noise photon)",
+    )
     p.add_argument("--out", default="results/exposure")
     p.add_argument("--quiet", action="store_true")
     p.set_defaults(handler=cmd_study)

@@ -24,6 +24,7 @@ import torch
 from ..patterns import get
 from ..physics.noise import Exposure, add_exposure_noise
 from ..physics.sensor import SplitterSensor
+from ..recon.base import Reconstructor
 from ..recon.closed_form import closed_form_lmmse
 from .metrics import mean_over_images
 from .protocol import Images, score, simulate_and_reconstruct
@@ -44,10 +45,13 @@ def exposure_study(
     patterns: Sequence[str] = DEFAULT_PATTERNS,
     photons: Sequence[float] | None = None,
     read_noise: float = 2.0,
+    methods: Sequence[Reconstructor] = (),
     progress: bool = True,
 ) -> dict[str, dict[float, dict[str, float]]]:
-    """``{pattern: {photons: {"psnr", "ssim", "ciede2000"}}}``: the closed-form LMMSE of each
-    pattern on ``images`` at each exposure (means over images)."""
+    """``{label: {photons: {"psnr", "ssim", "ciede2000"}}}``: the closed-form LMMSE of each
+    pattern (label: the pattern's name) and each of ``methods`` (label: the method's name, e.g.
+    a network trained with ``--noise photon``) on ``images`` at each exposure (means over
+    images)."""
     photons = list(photons or default_exposures())
     for n in photons:
         Exposure(n, read_noise=read_noise)  # bad values fail before any work
@@ -56,9 +60,11 @@ def exposure_study(
     if progress:
         from tqdm.auto import tqdm
 
-        bar = tqdm(total=len(patterns) * len(photons) * len(images), desc="exposure study")
-    for name in patterns:
-        method = closed_form_lmmse(get(name))
+        total = (len(patterns) + len(methods)) * len(photons) * len(images)
+        bar = tqdm(total=total, desc="exposure study")
+    todo = [(name, closed_form_lmmse(get(name))) for name in patterns]
+    todo += [(m.name, m) for m in methods]
+    for name, method in todo:
         sensor = SplitterSensor(method.pattern)
         results[name] = {}
         for n in photons:
