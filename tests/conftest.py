@@ -18,3 +18,44 @@ def shared_data() -> Path:
     if not SHARED_DATA.is_dir():
         pytest.skip(f"shared data not found at {SHARED_DATA}")
     return SHARED_DATA
+
+
+#: A training run small enough for a test: 16-pixel patches, an 8-feature one-block network,
+#: validation on 2 held-out images.
+TINY_SETTINGS = {
+    "data.val_split": 2,
+    "data.val_max_images": 2,
+    "data.val_crop": 32,
+    "data.patch_size": 16,
+    "data.batch_size": 4,
+    "network.features": 8,
+    "network.blocks": 1,
+    "optim.steps": 6,
+    "optim.lr": 1e-3,
+    "optim.warmup_steps": 5,
+    "run.log_every": 1,
+    "run.val_every": 3,
+    "run.checkpoint_every": 3,
+    "run.threads": 1,
+}
+
+
+def blocky_images(folder: Path, count: int, seed: int = 0) -> Path:
+    """``count`` smooth random 48x48 colour images (learnable in a few steps) in ``folder``."""
+    import numpy as np
+    from PIL import Image
+
+    folder.mkdir(parents=True, exist_ok=True)
+    rng = np.random.default_rng(seed)
+    for i in range(count):
+        img = np.kron(rng.random((6, 6, 3)), np.ones((8, 8, 1)))
+        Image.fromarray((img * 255).astype(np.uint8)).save(folder / f"im{i}.png")
+    return folder
+
+
+def tiny_config(folder: Path, out: Path, **changes):
+    """A :class:`TrainConfig` of :data:`TINY_SETTINGS` on ``folder`` into ``out``."""
+    from splitcam.training import TrainConfig
+
+    settings = {**TINY_SETTINGS, "data.train": str(folder), "run.out": str(out), **changes}
+    return TrainConfig().override(settings)

@@ -6,10 +6,9 @@ from __future__ import annotations
 import json
 import re
 
-import numpy as np
 import pytest
 import torch
-from PIL import Image
+from conftest import TINY_SETTINGS, blocky_images, tiny_config
 
 from splitcam.cli import main
 from splitcam.evaluation.protocol import mean_psnr
@@ -23,36 +22,20 @@ from splitcam.training.sweep import load_experiments, run_sweep, status
 
 @pytest.fixture(scope="module")
 def image_folder(tmp_path_factory):
-    folder = tmp_path_factory.mktemp("images")
-    rng = np.random.default_rng(3)
-    for i in range(6):
-        small = rng.random((6, 6, 3))
-        img = np.kron(small, np.ones((8, 8, 1)))
-        Image.fromarray((img * 255).astype(np.uint8)).save(folder / f"im{i}.png")
-    return folder
+    return blocky_images(tmp_path_factory.mktemp("images"), 6, seed=3)
 
 
 SMALL = {
-    "data.val_split": 2,
-    "data.val_max_images": 2,
-    "data.val_crop": 32,
-    "data.patch_size": 16,
-    "data.batch_size": 4,
-    "network.features": 8,
-    "network.blocks": 1,
+    **TINY_SETTINGS,
     "optim.steps": 4,
-    "optim.lr": 1e-3,
     "optim.warmup_steps": 2,
-    "run.log_every": 1,
     "run.val_every": 2,
     "run.checkpoint_every": 2,
-    "run.threads": 1,
 }
 
 
 def _config(folder, out, **changes) -> TrainConfig:
-    return TrainConfig().override({**SMALL, "data.train": str(folder), "run.out": str(out),
-                                   **changes})
+    return tiny_config(folder, out, **{**SMALL, **changes})
 
 
 @pytest.fixture(scope="module")
@@ -92,8 +75,10 @@ def test_export_round_trip_matches_the_run(trained_run, tmp_path, storage):
         assert abs(ours[sigma] - theirs[sigma]) < (1e-9 if storage == "float32" else 0.01)
     if storage == "float16":  # half the bytes of the weights (the statistics stay float64)
         full = export_model(trained_run, tmp_path / "full", storage="float32")
-        assert (path.with_suffix(".safetensors").stat().st_size
-                < full.with_suffix(".safetensors").stat().st_size)
+        assert (
+            path.with_suffix(".safetensors").stat().st_size
+            < full.with_suffix(".safetensors").stat().st_size
+        )
 
 
 def test_shipped_names_resolve_and_unknown_names_list_them(trained_run, tmp_path, monkeypatch):
@@ -132,8 +117,23 @@ def test_cli_models_export_list_and_evaluate(trained_run, tmp_path, monkeypatch,
     assert main(["models"]) == 0
     out = capsys.readouterr().out
     assert re.search(r"\| D +\| D +\| physics \| 4 +\| 4 +\|", out), out
-    assert main(["evaluate", "--model", "D", "--max-images", "1", "--sigmas", "5",
-                 "--out", str(tmp_path / "ev"), "--quiet"]) == 0
+    assert (
+        main(
+            [
+                "evaluate",
+                "--model",
+                "D",
+                "--max-images",
+                "1",
+                "--sigmas",
+                "5",
+                "--out",
+                str(tmp_path / "ev"),
+                "--quiet",
+            ]
+        )
+        == 0
+    )
     summary = json.loads((tmp_path / "ev" / "summary.json").read_text())
     assert list(summary) == ["net-D"]
     assert main(["reconstruct", "--model", "Q", "--image", "x.png", "--out", "y.png"]) == 1
@@ -146,13 +146,20 @@ def test_training_from_a_model_continues_its_weights_and_provenance(
     model = export_model(trained_run, tmp_path / "m", storage="float32")
     system, _ = load_model(model)
     out = tmp_path / "more"
-    config = _config(image_folder, out, **{"run.init_from": str(model), "optim.steps": 2,
-                                           "optim.lr": 1e-12, "optim.warmup_steps": 0})
+    config = _config(
+        image_folder,
+        out,
+        **{
+            "run.init_from": str(model),
+            "optim.steps": 2,
+            "optim.lr": 1e-12,
+            "optim.warmup_steps": 0,
+        },
+    )
     train(config, progress=False)
     continued = load_system(out)
     for key, value in system.network.state_dict().items():  # a tiny lr: the weights stay
-        torch.testing.assert_close(continued.network.state_dict()[key], value, rtol=0,
-                                   atol=1e-8)
+        torch.testing.assert_close(continued.network.state_dict()[key], value, rtol=0, atol=1e-8)
     meta = json.loads(export_model(out, tmp_path / "m2").read_text())
     prov = meta["provenance"]
     assert prov["total_steps"] == 6
@@ -161,25 +168,42 @@ def test_training_from_a_model_continues_its_weights_and_provenance(
     assert [r["step"] for r in prov["validation"]] == [0, 2, 4, 4, 6]
     # A fixed pattern must be the model's; another architecture is refused.
     with pytest.raises(ConfigError, match="another pattern"):
-        train(_config(image_folder, tmp_path / "x", **{"run.init_from": str(model),
-                                                       "pattern.name": "A"}), progress=False)
+        train(
+            _config(
+                image_folder, tmp_path / "x", **{"run.init_from": str(model), "pattern.name": "A"}
+            ),
+            progress=False,
+        )
     with pytest.raises(ConfigError, match="differs"):
-        train(_config(image_folder, tmp_path / "y", **{"run.init_from": str(model),
-                                                       "network.features": 4}), progress=False)
+        train(
+            _config(
+                image_folder, tmp_path / "y", **{"run.init_from": str(model), "network.features": 4}
+            ),
+            progress=False,
+        )
 
 
 def test_learned_pattern_starts_from_the_model_kernels(image_folder, tmp_path):
     out = tmp_path / "joint"
-    train(_config(image_folder, out, **{"pattern.learn": True, "optim.lr": 0.05}),
-          progress=False)
+    train(_config(image_folder, out, **{"pattern.learn": True, "optim.lr": 0.05}), progress=False)
     learned = load_system(out).sensor.pixel_kernels()
     model = export_model(out, tmp_path / "jm")
     out2 = tmp_path / "joint2"
-    train(_config(image_folder, out2, **{"pattern.learn": True, "run.init_from": str(model),
-                                         "optim.steps": 1, "optim.lr": 1e-12,
-                                         "optim.warmup_steps": 0}), progress=False)
-    torch.testing.assert_close(load_system(out2).sensor.pixel_kernels(), learned, rtol=0,
-                               atol=1e-5)
+    train(
+        _config(
+            image_folder,
+            out2,
+            **{
+                "pattern.learn": True,
+                "run.init_from": str(model),
+                "optim.steps": 1,
+                "optim.lr": 1e-12,
+                "optim.warmup_steps": 0,
+            },
+        ),
+        progress=False,
+    )
+    torch.testing.assert_close(load_system(out2).sensor.pixel_kernels(), learned, rtol=0, atol=1e-5)
 
 
 def _experiment(folder, name, **settings):
@@ -199,13 +223,22 @@ def _experiment(folder, name, **settings):
 def test_sweep_runs_skips_finished_and_resumes_interrupted(image_folder, tmp_path):
     exps = tmp_path / "experiments"
     exps.mkdir()
-    files = [_experiment(exps, "a", **{k: v for k, v in SMALL.items() if k != "run.threads"}),
-             _experiment(exps, "b", **{**{k: v for k, v in SMALL.items() if k != "run.threads"},
-                                       "pattern.name": "A"})]
+    files = [
+        _experiment(exps, "a", **{k: v for k, v in SMALL.items() if k != "run.threads"}),
+        _experiment(
+            exps,
+            "b",
+            **{**{k: v for k, v in SMALL.items() if k != "run.threads"}, "pattern.name": "A"},
+        ),
+    ]
     runs = tmp_path / "runs"
     # b was interrupted at step 2 of 4 (its own checkpoint, as a killed sweep leaves it).
-    train(_config(image_folder, runs / "b", **{"pattern.name": "A", "optim.steps": 2,
-                                                "run.threads": None}), progress=False)
+    train(
+        _config(
+            image_folder, runs / "b", **{"pattern.name": "A", "optim.steps": 2, "run.threads": None}
+        ),
+        progress=False,
+    )
     experiments = load_experiments(files, runs, data=str(image_folder))
     assert [status(e) for e in experiments] == ["new", "partial"]
     said: list[str] = []
@@ -247,8 +280,13 @@ def test_sweep_slurm_path_through_submitit(image_folder, tmp_path):
     f = _experiment(exps, "s", **{k: v for k, v in SMALL.items() if k != "run.threads"})
     experiments = load_experiments([f], tmp_path / "runs", data=str(image_folder))
     said: list[str] = []
-    result = run_sweep(experiments, executor="slurm", slurm={"time": 5, "partition": "cpu"},
-                       say=said.append, cluster="debug")
+    result = run_sweep(
+        experiments,
+        executor="slurm",
+        slurm={"time": 5, "partition": "cpu"},
+        say=said.append,
+        cluster="debug",
+    )
     assert result == {"s": "done"}
     assert any("submitted" in s for s in said)
 
@@ -257,8 +295,22 @@ def test_cli_sweep_dry_run_and_set(image_folder, tmp_path, capsys):
     exps = tmp_path / "e"
     exps.mkdir()
     f = _experiment(exps, "a", **{"optim.steps": 2})
-    assert main(["sweep", str(f), "--out", str(tmp_path / "runs"), "--data", str(image_folder),
-                 "--set", "optim.steps=7", "--dry-run"]) == 0
+    assert (
+        main(
+            [
+                "sweep",
+                str(f),
+                "--out",
+                str(tmp_path / "runs"),
+                "--data",
+                str(image_folder),
+                "--set",
+                "optim.steps=7",
+                "--dry-run",
+            ]
+        )
+        == 0
+    )
     assert "a: new" in capsys.readouterr().out
     assert main(["sweep", str(f), "--data", str(image_folder), "--set", "optim.stepz=7"]) == 1
     assert "unknown setting 'optim.stepz'" in capsys.readouterr().err
@@ -274,8 +326,25 @@ def test_reproduce_writes_the_paper_tables_from_shipped_models(
     for name in ("A", "B", "C", "D", "E", "bayer", "D-opt"):
         export_model(trained_run, shipped / name, name=name)
     out = tmp_path / "rep"
-    assert main(["reproduce", "--datasets", str(image_folder), "--max-images", "2",
-                 "--sigmas", "0", "10", "--out", str(out), "--no-baselines", "--quiet"]) == 0
+    assert (
+        main(
+            [
+                "reproduce",
+                "--datasets",
+                str(image_folder),
+                "--max-images",
+                "2",
+                "--sigmas",
+                "0",
+                "10",
+                "--out",
+                str(out),
+                "--no-baselines",
+                "--quiet",
+            ]
+        )
+        == 0
+    )
     text = (out / "reproduce.md").read_text()
     assert "## Table 1" in text and "## Table 3: D against D optimised" in text
     assert "| D | " in text and "(40.35, " in text  # the paper's D at sigma 0 beside ours

@@ -8,6 +8,7 @@ import math
 import numpy as np
 import pytest
 import torch
+from conftest import blocky_images, tiny_config
 
 from splitcam.physics.noise import Exposure, PhotonNoise, add_exposure_noise
 from splitcam.physics.sensor import SplitterSensor, pattern_pixel_kernels
@@ -219,7 +220,6 @@ def test_training_under_the_photon_model(tmp_path) -> None:
     """`train --noise photon`: the physics network is told each patch's exposure, validation is
     per exposure, the checkpoint records the noise model, and an untrained network is the LMMSE
     under signal-dependent noise."""
-    from PIL import Image
 
     from splitcam.evaluation.protocol import mean_psnr
     from splitcam.recon.closed_form import closed_form_lmmse
@@ -227,32 +227,19 @@ def test_training_under_the_photon_model(tmp_path) -> None:
     from splitcam.training import checkpoint as ckpt_io
     from splitcam.training.trainer import _val_images
 
-    folder = tmp_path / "img"
-    folder.mkdir()
-    rng = np.random.default_rng(0)
-    for i in range(5):
-        img = np.kron(rng.random((6, 6, 3)), np.ones((8, 8, 1)))
-        Image.fromarray((img * 255).astype(np.uint8)).save(folder / f"im{i}.png")
-    config = TrainConfig().override(
-        {
-            "data.train": str(folder),
-            "data.val_split": 2,
-            "data.val_crop": 32,
-            "data.patch_size": 16,
-            "data.batch_size": 4,
-            "network.features": 8,
-            "network.blocks": 1,
+    folder = blocky_images(tmp_path / "img", 5)
+    config = tiny_config(
+        folder,
+        tmp_path / "run",
+        **{
             "optim.steps": 4,
             "optim.warmup_steps": 2,
-            "run.log_every": 1,
             "run.val_every": 4,
             "run.checkpoint_every": 4,
-            "run.threads": 1,
-            "run.out": str(tmp_path / "run"),
             "noise.model": "photon",
             "noise.photons": [20.0, 2000.0],
             "noise.val_photons": [30.0, 1000.0],
-        }
+        },
     )
     train(config, progress=False)
     rows = [

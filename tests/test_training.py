@@ -13,6 +13,7 @@ import time
 import numpy as np
 import pytest
 import torch
+from conftest import blocky_images, tiny_config
 from PIL import Image
 
 from splitcam import patterns
@@ -27,36 +28,11 @@ from splitcam.training.trainer import _val_images
 @pytest.fixture(scope="module")
 def image_folder(tmp_path_factory):
     """Eight smooth random colour images (learnable in a few steps)."""
-    folder = tmp_path_factory.mktemp("images")
-    rng = np.random.default_rng(0)
-    for i in range(8):
-        small = rng.random((6, 6, 3))
-        img = np.kron(small, np.ones((8, 8, 1)))  # blocky, 48x48
-        Image.fromarray((img * 255).astype(np.uint8)).save(folder / f"im{i}.png")
-    return folder
+    return blocky_images(tmp_path_factory.mktemp("images"), 8)
 
 
 def tiny(folder, out, **changes) -> TrainConfig:
-    settings = {
-        "data.train": str(folder),
-        "data.val_split": 2,
-        "data.val_max_images": 2,
-        "data.val_crop": 32,
-        "data.patch_size": 16,
-        "data.batch_size": 4,
-        "network.features": 8,
-        "network.blocks": 1,
-        "optim.steps": 6,
-        "optim.lr": 1e-3,
-        "optim.warmup_steps": 5,
-        "run.out": str(out),
-        "run.log_every": 1,
-        "run.val_every": 3,
-        "run.checkpoint_every": 3,
-        "run.threads": 1,
-    }
-    settings.update(changes)
-    return TrainConfig().override(settings)
+    return tiny_config(folder, out, **changes)
 
 
 def losses(run) -> list[float]:
