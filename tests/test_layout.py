@@ -11,7 +11,7 @@ from pathlib import Path
 
 import splitcam
 
-LAYERS = ["patterns", "physics", "data", "recon", "viz", "evaluation", "training", "methods",
+LAYERS = ["patterns", "physics", "optics", "data", "recon", "viz", "evaluation", "training", "methods",
           "cli"]
 PACKAGE = Path(splitcam.__file__).parent
 
