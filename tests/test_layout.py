@@ -11,8 +11,8 @@ from pathlib import Path
 
 import splitcam
 
-LAYERS = ["patterns", "physics", "optics", "data", "recon", "viz", "evaluation", "training", "methods",
-          "cli"]
+LAYERS = ["patterns", "physics", "optics", "data", "recon", "viz", "evaluation", "training",
+          "methods", "cli"]
 PACKAGE = Path(splitcam.__file__).parent
 
 
