@@ -105,3 +105,56 @@ def test_bad_parameters_get_clear_errors(kwargs, message) -> None:
         Optics(**kwargs)
     with pytest.raises(ValueError, match="height map of shape"):
         kernels_of(torch.zeros(5, 5, dtype=torch.float64), (1, 1), Optics())
+
+
+def test_bayer_collection_of_known_patterns() -> None:
+    """A colour filter keeps 1/4 of red and blue and 1/2 of green; pattern A routes every colour
+    to its pixels (a perfect router)."""
+    from splitcam import patterns
+    from splitcam.optics import bayer_collection
+
+    assert bayer_collection(patterns.get("bayer")) == pytest.approx([0.25, 0.5, 0.25])
+    assert bayer_collection(patterns.get("A")) == pytest.approx([1.0, 1.0, 1.0])
+    with pytest.raises(ValueError, match="2x2"):
+        bayer_collection(patterns.get("E"))
+
+
+def test_design_raises_the_closed_form_psnr_and_the_cli_writes_its_files(tmp_path, capsys):
+    from splitcam import patterns
+    from splitcam.cli import main
+    from splitcam.recon.design import design_metasurface
+
+    small = Optics(pitch=0.5, samples=4, distance=1.0, wavelengths=[450.0, 550.0, 650.0], guard=1)
+    result = design_metasurface((2, 2), small, init="random", steps=8, lr=0.2)
+    assert np.mean(list(result.psnr_after.values())) > np.mean(list(result.psnr_before.values()))
+    assert float(result.height.min()) >= 0 and float(result.height.max()) <= small.max_height
+    assert result.pattern.kernels.sum((2, 3)).max() <= 1.0
+    out = tmp_path / "router.toml"
+    assert (
+        main(
+            [
+                "optics",
+                "--profile",
+                "lens",
+                "--pitch",
+                "0.5",
+                "--samples",
+                "4",
+                "--distance",
+                "1",
+                "--design",
+                "--steps",
+                "2",
+                "--out",
+                str(out),
+                "--quiet",
+            ]
+        )
+        == 0
+    )
+    assert "collection efficiency into RGGB pixels" in capsys.readouterr().out
+    assert patterns.load(out).period == (2, 2)
+    assert np.load(tmp_path / "router.npy").shape == (8, 8)
+    assert (tmp_path / "router.png").is_file()
+    assert main(["optics", "--distance", "-1", "--out", str(out)]) == 1
+    assert "distance" in capsys.readouterr().err

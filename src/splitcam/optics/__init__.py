@@ -34,7 +34,15 @@ import torch
 
 from ..patterns import Pattern
 
-__all__ = ["Optics", "default_spectra", "flat_profile", "kernels_of", "lens_profile", "pattern_of"]
+__all__ = [
+    "Optics",
+    "bayer_collection",
+    "default_spectra",
+    "flat_profile",
+    "kernels_of",
+    "lens_profile",
+    "pattern_of",
+]
 
 
 def _gaussian(lam: np.ndarray, centre: float, width: float) -> np.ndarray:
@@ -245,3 +253,26 @@ def pattern_of(
             "max_height": optics.max_height,
         },
     )
+
+
+#: The colour of each pixel of a 2x2 Bayer-type router (RGGB): the target of that colour's light.
+BAYER_TARGET = ((0, 1), (1, 2))
+
+
+def bayer_collection(pattern: Pattern) -> list[float]:
+    """Per-colour collection efficiency of a 2x2 router: the share of each colour's light falling
+    on the period that reaches a pixel of that colour in an RGGB arrangement (what measured
+    routers report, e.g. Zou et al., Nat. Commun. 2022: 58/59/49 % peak for R/G/B)."""
+    if pattern.period != (2, 2):
+        raise ValueError(f"a Bayer-type router has a 2x2 period, got {pattern.period}")
+    k = pattern.kernels
+    kh, kw = k.shape[-2:]
+    eff = [0.0, 0.0, 0.0]
+    for i in range(2):
+        for j in range(2):
+            s = int(pattern.layout[i][j])
+            for a in range(kh):
+                for b in range(kw):
+                    target = BAYER_TARGET[(i + a - kh // 2) % 2][(j + b - kw // 2) % 2]
+                    eff[target] += float(k[s, target, a, b]) / 4.0
+    return eff
