@@ -158,3 +158,32 @@ def test_design_raises_the_closed_form_psnr_and_the_cli_writes_its_files(tmp_pat
     assert (tmp_path / "router.png").is_file()
     assert main(["optics", "--distance", "-1", "--out", str(out)]) == 1
     assert "distance" in capsys.readouterr().err
+
+
+def test_training_a_metasurface_with_the_network(tmp_path) -> None:
+    """`train --metasurface random`: the height map is learned through the optics and the
+    reconstruction; the run's checkpoint holds the pattern it makes."""
+    from conftest import blocky_images, tiny_config
+
+    from splitcam.optics import MetasurfaceSensor
+    from splitcam.training import build_system, load_system, train
+
+    folder = blocky_images(tmp_path / "img", 4)
+    config = tiny_config(
+        folder,
+        tmp_path / "run",
+        **{"pattern.metasurface": "random", "optim.steps": 2, "pattern.lr": 0.5},
+    )
+    start = build_system(config).sensor
+    assert isinstance(start, MetasurfaceSensor)
+    train(config, progress=False)
+    system = load_system(tmp_path / "run")
+    learned = system.sensor.to_pattern()
+    assert learned.provenance == "optics" and learned.kernels.sum((2, 3)).max() <= 1.0
+    assert not np.allclose(learned.kernels, start.to_pattern().kernels, atol=1e-4)
+    with pytest.raises(Exception, match="metasurface"):
+        build_system(
+            tiny_config(
+                folder, tmp_path / "x", **{"pattern.metasurface": str(tmp_path / "none.npy")}
+            )
+        )

@@ -33,8 +33,10 @@ import numpy as np
 import torch
 
 from ..patterns import Pattern
+from ..physics.sensor import SplitterSensor
 
 __all__ = [
+    "MetasurfaceSensor",
     "Optics",
     "bayer_collection",
     "default_spectra",
@@ -276,3 +278,49 @@ def bayer_collection(pattern: Pattern) -> list[float]:
                     target = BAYER_TARGET[(i + a - kh // 2) % 2][(j + b - kw // 2) % 2]
                     eff[target] += float(k[s, target, a, b]) / 4.0
     return eff
+
+
+class MetasurfaceSensor(SplitterSensor):
+    """A sensor whose splitter kernels come from a learnable metasurface height map.
+
+    The height is ``h_max * sigmoid(z)`` (``z`` the learned parameter, so the height stays in
+    ``[0, h_max]``); every call to :meth:`weights` propagates it through :func:`kernels_of`, so
+    gradients from the reconstruction loss reach the metasurface. Drop-in for
+    :class:`~splitcam.physics.sensor.SplitterSensor` in an imaging system (``splitcam train
+    --metasurface random``).
+
+    Args:
+        height: Starting height map ``(Ph * q, Pw * q)`` in µm.
+        period: ``(Ph, Pw)``.
+        optics: Geometry and materials (default :class:`Optics`).
+    """
+
+    def __init__(
+        self, height: torch.Tensor, period: tuple[int, int], optics: Optics | None = None
+    ) -> None:
+        self.optics = optics or Optics()
+        self._start_height = height.detach().to(torch.float64)
+        self._period_of = tuple(period)
+        super().__init__(
+            pattern_of(self._start_height, self._period_of, self.optics, name="metasurface")
+        )
+
+    def _init_kernels(self, pattern: Pattern) -> None:
+        frac = (self._start_height / self.optics.max_height).clamp(1e-3, 1 - 1e-3)
+        self.height_logits = torch.nn.Parameter(torch.log(frac / (1 - frac)).float())
+
+    def height(self) -> torch.Tensor:
+        """The current height map (µm)."""
+        return self.optics.max_height * torch.sigmoid(self.height_logits)
+
+    def weights(self) -> torch.Tensor:
+        return kernels_of(self.height(), self._period_of, self.optics)
+
+    def to_pattern(self, name: str | None = None) -> Pattern:
+        height = self.height().detach().double().cpu()
+        return pattern_of(height, self._period_of, self.optics, name=name or "metasurface")
+
+    def extra_repr(self) -> str:
+        return (
+            f"period={self._period_of}, pitch={self.optics.pitch}, distance={self.optics.distance}"
+        )

@@ -53,6 +53,11 @@ class PatternConfig:
     lr: float | None = _opt(
         None, "learning rate of the pattern logits (default: the network's)", flag="pattern_lr"
     )
+    metasurface: str | None = _opt(
+        None,
+        "learn a metasurface instead of free kernels (splitcam.optics, default geometry): its "
+        "starting height map, random, lens or a .npy file (µm); the period is the pattern's",
+    )
     design_steps: int = _opt(
         0,
         "with --learn-pattern: first design the kernels for the closed-form LMMSE for this many "

@@ -100,6 +100,8 @@ def build_system(
             )
             with torch.no_grad():
                 sensor.logits.copy_(designed.logits)
+    elif config.pattern.metasurface:
+        sensor = _metasurface_sensor(config.pattern.metasurface, pattern.period, config.run.seed)
     else:
         sensor = SplitterSensor(pattern)
     net = build_network(
@@ -111,6 +113,32 @@ def build_system(
         }
     )
     return ImagingSystem(sensor, net)
+
+
+def _metasurface_sensor(spec: str, period: tuple[int, int], seed: int) -> SplitterSensor:
+    """A :class:`~splitcam.optics.MetasurfaceSensor` of the default geometry starting from
+    ``random``, ``lens`` or a height map file (.npy, µm)."""
+    import numpy as np
+
+    from ..optics import MetasurfaceSensor, Optics, lens_profile
+
+    optics = Optics()
+    q = optics.samples
+    if spec == "random":
+        gen = torch.Generator().manual_seed(seed + 17)
+        shape = (period[0] * q, period[1] * q)
+        height = torch.rand(shape, generator=gen, dtype=torch.float64) * optics.max_height
+    elif spec == "lens":
+        height = lens_profile(period, optics)
+    else:
+        try:
+            height = torch.from_numpy(np.load(spec, allow_pickle=False)).to(torch.float64)
+        except (OSError, ValueError) as exc:
+            raise ConfigError(f"pattern.metasurface: cannot read {spec!r}: {exc}") from None
+    try:
+        return MetasurfaceSensor(height, period, optics)
+    except ValueError as exc:
+        raise ConfigError(f"pattern.metasurface: {exc}") from None
 
 
 def device_name(device: torch.device) -> str:
@@ -762,6 +790,7 @@ FIXED_ON_RESUME = (
     "pattern.learn",
     "pattern.init",
     "pattern.design_steps",
+    "pattern.metasurface",
     "network.arch",
     "network.features",
     "network.blocks",
