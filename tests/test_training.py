@@ -639,3 +639,11 @@ def patterns_kernels(pattern: patterns.Pattern) -> torch.Tensor:
     from splitcam.physics.sensor import pattern_pixel_kernels
 
     return pattern_pixel_kernels(pattern)
+
+
+def test_a_run_past_its_time_limit_does_no_more_steps_on_resume(image_folder, tmp_path):
+    config = tiny(image_folder, tmp_path / "t", **{"run.time_limit": 1e-5, "optim.steps": 50})
+    first = train(config, progress=False)
+    assert 1 <= first.step < 50
+    again = train(config, resume=True, progress=False)
+    assert again.step == first.step

@@ -611,13 +611,14 @@ def _train(
     window_loss, window_n, data_time = 0.0, 0, 0.0
     t_window = time.perf_counter()
     interrupted = False
-    timed_out = False
+    # A resumed run whose time limit is already spent does no more steps.
+    timed_out = time_limit_s is not None and train_seconds >= time_limit_s
     with _StopFlag() as stop:
         if step == 0 and val_images and dist_info.is_main:
             start = validate(system, val_images, val_levels)
             with open(metrics_path, "a", encoding="utf-8") as fh:
                 fh.write(json.dumps({"step": 0, **start, "time": time.time()}) + "\n")
-        while step < config.optim.steps:
+        while step < config.optim.steps and not timed_out:
             t0 = time.perf_counter()
             run_progress = progress_of(step, config.optim.steps, train_seconds, time_limit_s)
             for group in optimizer.param_groups:
