@@ -30,7 +30,7 @@ def bench(arch, learn, n=16, steps=8):
         return raw + torch.randn_like(raw) * (s / 255).view(-1, 1, 1, 1), s
 
     ts = []
-    for i in range(steps):
+    for _ in range(steps):
         t = time.perf_counter()
         with torch.autocast("cpu", dtype=torch.bfloat16):
             out = sys_(x, noise)
