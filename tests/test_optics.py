@@ -187,3 +187,19 @@ def test_training_a_metasurface_with_the_network(tmp_path) -> None:
                 folder, tmp_path / "x", **{"pattern.metasurface": str(tmp_path / "none.npy")}
             )
         )
+
+
+def test_profiles_by_name_or_file_and_their_errors(tmp_path) -> None:
+    from splitcam.optics import profile
+
+    optics = Optics()
+    rand = profile("random", (2, 2), optics, seed=3)
+    assert rand.shape == (16, 16) and 0 <= float(rand.min()) and float(rand.max()) <= 1.2
+    assert torch.equal(rand, profile("random", (2, 2), optics, seed=3))
+    np.save(tmp_path / "h.npy", rand.numpy())
+    assert torch.equal(profile(str(tmp_path / "h.npy"), (2, 2), optics), rand)
+    torch.testing.assert_close(profile("lens", (2, 2), optics), lens_profile((2, 2), optics))
+    with pytest.raises(ValueError, match="shape"):
+        profile(str(tmp_path / "h.npy"), (1, 1), optics)
+    with pytest.raises(ValueError, match="cannot read"):
+        profile(str(tmp_path / "missing.npy"), (2, 2), optics)

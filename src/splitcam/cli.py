@@ -488,10 +488,9 @@ def cmd_study(args: argparse.Namespace) -> int:
 
 def cmd_optics(args: argparse.Namespace) -> int:
     import numpy as np
-    import torch
 
     from . import patterns
-    from .optics import Optics, bayer_collection, flat_profile, lens_profile, pattern_of
+    from .optics import Optics, bayer_collection, pattern_of, profile
     from .viz.patterns import draw_pattern
 
     period = tuple(int(v) for v in args.period.lower().split("x"))
@@ -507,16 +506,7 @@ def cmd_optics(args: argparse.Namespace) -> int:
         kernel_size=(args.kernel, args.kernel),
     )
     out = Path(args.out)
-    if args.profile == "random":
-        gen = torch.Generator().manual_seed(args.seed)
-        shape = (period[0] * optics.samples, period[1] * optics.samples)
-        height = torch.rand(shape, generator=gen, dtype=torch.float64) * optics.max_height
-    elif args.profile in ("flat", "lens"):
-        height = (
-            flat_profile(period, optics) if args.profile == "flat" else lens_profile(period, optics)
-        )
-    else:
-        height = torch.from_numpy(np.load(args.profile, allow_pickle=False)).to(torch.float64)
+    height = profile(args.profile, period, optics, args.seed)
     if args.design:
         from .recon.design import design_metasurface
 

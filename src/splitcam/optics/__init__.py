@@ -44,6 +44,7 @@ __all__ = [
     "kernels_of",
     "lens_profile",
     "pattern_of",
+    "profile",
 ]
 
 
@@ -324,3 +325,32 @@ class MetasurfaceSensor(SplitterSensor):
         return (
             f"period={self._period_of}, pitch={self.optics.pitch}, distance={self.optics.distance}"
         )
+
+
+PROFILES = ("flat", "lens", "random")
+
+
+def profile(spec: str, period: tuple[int, int], optics: Optics, seed: int = 0) -> torch.Tensor:
+    """A starting height map by name (``flat``, ``lens``, ``random``: uniform in
+    ``[0, h_max]`` from ``seed``) or from a ``.npy`` file (µm, no pickles): the one place the
+    CLI, ``train --metasurface`` and :func:`~splitcam.recon.design.design_metasurface` read it.
+
+    Raises:
+        ValueError: An unreadable file or a map of the wrong shape for the period.
+    """
+    shape = (period[0] * optics.samples, period[1] * optics.samples)
+    if spec == "flat":
+        height = flat_profile(period, optics)
+    elif spec == "lens":
+        height = lens_profile(period, optics)
+    elif spec == "random":
+        gen = torch.Generator().manual_seed(seed)
+        height = torch.rand(shape, generator=gen, dtype=torch.float64) * optics.max_height
+    else:
+        try:
+            height = torch.from_numpy(np.load(spec, allow_pickle=False)).to(torch.float64)
+        except (OSError, ValueError) as exc:
+            raise ValueError(f"cannot read the height map {spec!r}: {exc}") from None
+    if tuple(height.shape) != shape:
+        raise ValueError(f"expected a height map of shape {shape}, got {tuple(height.shape)}")
+    return height

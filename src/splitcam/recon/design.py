@@ -320,23 +320,19 @@ def design_metasurface(
             the distance) or a height map.
         steps, lr, seed, radius, statistics, sigmas: As :func:`design_pattern`.
     """
-    from ..optics import kernels_of, lens_profile, pattern_of
+    from ..optics import kernels_of, pattern_of, profile
     from ..physics.sensor import pixel_kernels
 
     sigma_list = _check_sigmas(sigmas)
-    q = optics.samples
-    shape = (period[0] * q, period[1] * q)
     if isinstance(init, torch.Tensor):
         start = init.to(torch.float64)
-    elif init == "lens":
-        start = lens_profile(period, optics)
-    elif init == "random":
-        g = torch.Generator().manual_seed(seed)
-        start = torch.rand(shape, generator=g, dtype=torch.float64) * optics.max_height
+        shape = (period[0] * optics.samples, period[1] * optics.samples)
+        if tuple(start.shape) != shape:
+            raise ValueError(f"expected a height map of shape {shape}, got {tuple(start.shape)}")
+    elif init in ("random", "lens"):
+        start = profile(init, period, optics, seed)
     else:
         raise ValueError(f"init must be random, lens or a height map, got {init!r}")
-    if tuple(start.shape) != shape:
-        raise ValueError(f"expected a height map of shape {shape}, got {tuple(start.shape)}")
     hmax = optics.max_height
     frac = (start / hmax).clamp(1e-3, 1 - 1e-3)
     z = torch.log(frac / (1 - frac)).requires_grad_(True)

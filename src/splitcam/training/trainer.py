@@ -117,26 +117,12 @@ def build_system(
 
 def _metasurface_sensor(spec: str, period: tuple[int, int], seed: int) -> SplitterSensor:
     """A :class:`~splitcam.optics.MetasurfaceSensor` of the default geometry starting from
-    ``random``, ``lens`` or a height map file (.npy, µm)."""
-    import numpy as np
-
-    from ..optics import MetasurfaceSensor, Optics, lens_profile
+    :func:`~splitcam.optics.profile` ``spec`` (``random``, ``lens``, ``flat`` or a .npy file)."""
+    from ..optics import MetasurfaceSensor, Optics, profile
 
     optics = Optics()
-    q = optics.samples
-    if spec == "random":
-        gen = torch.Generator().manual_seed(seed + 17)
-        shape = (period[0] * q, period[1] * q)
-        height = torch.rand(shape, generator=gen, dtype=torch.float64) * optics.max_height
-    elif spec == "lens":
-        height = lens_profile(period, optics)
-    else:
-        try:
-            height = torch.from_numpy(np.load(spec, allow_pickle=False)).to(torch.float64)
-        except (OSError, ValueError) as exc:
-            raise ConfigError(f"pattern.metasurface: cannot read {spec!r}: {exc}") from None
     try:
-        return MetasurfaceSensor(height, period, optics)
+        return MetasurfaceSensor(profile(spec, period, optics, seed + 17), period, optics)
     except ValueError as exc:
         raise ConfigError(f"pattern.metasurface: {exc}") from None
 
@@ -192,8 +178,9 @@ def _start_from(system: ImagingSystem, spec: str) -> dict[str, Any]:
     if isinstance(own, LearnableSplitterSensor):
         if tuple(own.logits.shape) != tuple(source.sensor.kernels.shape):
             raise ConfigError(f"--init-from {spec}: its pattern has another layout or kernel size")
+        exact = LearnableSplitterSensor(source.sensor.to_pattern(), init="exact")
         with torch.no_grad():
-            own.logits.copy_(source.sensor.kernels.clamp_min(1e-6).log().to(own.logits))
+            own.logits.copy_(exact.logits)
     elif not torch.allclose(own.pixel_kernels().detach().double(), kernels.double(), atol=1e-6):
         raise ConfigError(
             f"--init-from {spec}: it was trained for another pattern "
