@@ -277,3 +277,142 @@ def json_load_line(text):
     import json
 
     return json.loads(text)
+
+
+# --- the photon model in `evaluate` and in the fitted LMMSE --------------------------------------
+
+
+def _fitted(pattern: str = "D"):
+    from splitcam.recon.lmmse import fit_lmmse
+
+    gen = torch.Generator().manual_seed(3)
+    images = torch.nn.functional.interpolate(
+        torch.rand(4, 3, 8, 8, generator=gen), size=(40, 40), mode="bilinear"
+    )
+    return fit_lmmse(pattern, images, radius=2)
+
+
+def test_fitted_lmmse_under_signal_dependent_noise_is_the_explicit_solve() -> None:
+    """The fitted statistics' filters for an Exposure equal a solve of the noisy second moment
+    written out by hand: the clean moment plus ``a E[g] + b`` on the diagonal of the raw entries
+    (``E[g]``: the mean raw value at that window position), the bias entry untouched."""
+    from splitcam.recon.lmmse import _RIDGE
+
+    stats = _fitted()
+    exposure = Exposure(40.0, read_noise=3.0)
+    weights, bias = stats.filters(exposure)
+    a, b = exposure.variance_coefficients()
+    n = stats.counts.numpy().astype(float)
+    for p in range(len(n)):
+        mxx = stats.xx[p].numpy() / n[p]
+        mxy = stats.xy[p].numpy() / n[p]
+        d = mxx.shape[0] - 1
+        noisy = mxx.copy()
+        for i in range(d):
+            noisy[i, i] += a * mxx[i, d] + b + _RIDGE * np.trace(mxx[:d, :d]) / d
+        w = np.linalg.solve(noisy, mxy)
+        got = weights[p].reshape(3, -1).numpy()
+        np.testing.assert_allclose(got, w[:d].T, rtol=1e-8, atol=1e-10)
+        np.testing.assert_allclose(bias[p].numpy(), w[d], rtol=1e-8, atol=1e-10)
+
+
+def test_fitted_lmmse_exposure_without_shot_noise_is_the_gaussian_filter() -> None:
+    """Read noise only, ``r = N sigma / (3 * 255)`` electrons: the same filters as sigma."""
+    stats = _fitted("A")
+    n, sigma = 300.0, 12.0
+    exposure = Exposure(n, read_noise=n * sigma / (3 * 255), shot=False)
+    for got, want in zip(stats.filters(exposure), stats.filters(sigma), strict=True):
+        torch.testing.assert_close(got, want, rtol=1e-10, atol=1e-12)
+    assert stats.expected_mse(exposure) == pytest.approx(stats.expected_mse(sigma), rel=1e-10)
+    # Shot noise adds variance where there is signal: the expected error grows.
+    assert stats.expected_mse(Exposure(n, read_noise=exposure.read_noise)) > stats.expected_mse(
+        sigma
+    )
+
+
+def _photos(count: int = 2) -> list[tuple[str, torch.Tensor]]:
+    gen = torch.Generator().manual_seed(5)
+    small = torch.rand(count, 3, 6, 6, generator=gen)
+    big = torch.nn.functional.interpolate(small, size=(36, 40), mode="bilinear")
+    return [(f"ph{i}", big[i]) for i in range(count)]
+
+
+def test_evaluate_at_exposures_scores_what_the_exposure_study_scores(tmp_path) -> None:
+    """`evaluate` with Exposures: rows labelled N<photons> beside the Gaussian ones, the same
+    numbers as `study exposure` for the same method and images (two paths, one protocol)."""
+    from splitcam.evaluation import evaluate
+    from splitcam.evaluation.exposure import exposure_study
+    from splitcam.evaluation.tables import read_rows
+    from splitcam.recon.closed_form import closed_form_lmmse
+
+    images = _photos()
+    levels = [5.0, Exposure(30.0, read_noise=2.0), Exposure(3000.0, read_noise=2.0)]
+    rows = evaluate([closed_form_lmmse("D")], [("set", images)], levels, tmp_path, progress=False)
+    assert {r.level for r in rows} == {"5", "N30", "N3000"}
+    study = exposure_study(images, patterns=["D"], photons=[30.0, 3000.0], progress=False)
+    for n in (30.0, 3000.0):
+        mine = [r.psnr for r in rows if r.photons == n]
+        assert np.mean(mine) == pytest.approx(study["D"][n]["psnr"], rel=1e-12)
+    summary = json_load(tmp_path / "summary.json")
+    assert summary["lmmse"]["all"]["N3000"]["psnr"] > summary["lmmse"]["all"]["N30"]["psnr"]
+    assert list(summary["lmmse"]["all"]) == ["5", "N30", "N3000"]  # sigmas first
+    assert "N=30 e⁻" in (tmp_path / "table.md").read_text()
+    assert read_rows(tmp_path / "per_image.csv") == rows
+
+
+def test_evaluate_resumes_photon_rows_only_under_the_same_sensor(tmp_path) -> None:
+    from splitcam.evaluation import evaluate
+
+    class Counter:
+        name = "count"
+        pattern = __import__("splitcam").patterns.get("D")
+
+        def __init__(self) -> None:
+            self.calls = 0
+
+        def reconstruct(self, raw, sigma):
+            self.calls += 1
+            return raw.expand(-1, 3, -1, -1) / 3
+
+    images = _photos()
+    first = Counter()
+    evaluate([first], [("s", images)], [0.0, Exposure(100.0)], tmp_path, progress=False)
+    assert first.calls == 4
+    again = Counter()
+    evaluate([again], [("s", images)], [0.0, Exposure(100.0)], tmp_path, progress=False)
+    assert again.calls == 0
+    other_sensor = Counter()  # another read noise: the photon rows are recomputed, sigma 0 kept
+    evaluate([other_sensor], [("s", images)], [0.0, Exposure(100.0, read_noise=5.0)], tmp_path,
+             progress=False)
+    assert other_sensor.calls == 2
+    with pytest.raises(ValueError, match="share their sensor settings"):
+        evaluate([Counter()], [("s", images)], [Exposure(10.0), Exposure(100.0, read_noise=5.0)],
+                 tmp_path, progress=False)
+
+
+def test_results_written_before_the_photons_column_still_read(tmp_path) -> None:
+    from splitcam.evaluation.tables import read_rows
+
+    path = tmp_path / "per_image.csv"
+    path.write_text(
+        "method,pattern,dataset,image,sigma,psnr,ssim,ciede2000\n"
+        "m,D,set,a,5,30.5,0.9,2.0\n"
+        "m,D,set,b,5,31.5,0.9\n"  # cut short by a kill
+    )
+    (row,) = read_rows(path)
+    assert (row.sigma, row.photons, row.level, row.psnr) == (5.0, 0.0, "5", 30.5)
+
+
+def test_evaluate_photons_cli(tmp_path, capsys) -> None:
+    from splitcam.cli import main
+
+    args = ["evaluate", "--method", "lmmse", "--method", "malvar2004", "--patterns", "A,bayer",
+            "--max-images", "1", "--quiet", "--out", str(tmp_path)]
+    assert main([*args, "--photons", "20", "2000", "--read-noise", "1.5"]) == 0
+    out = capsys.readouterr().out
+    assert "N=20 e⁻" in out and "σ=" not in out  # --photons alone: no Gaussian levels
+    summary = json_load(tmp_path / "summary.json")
+    assert set(summary["bayer+malvar2004"]["all"]) == {"N20", "N2000"}
+    assert json_load(tmp_path / "evaluation.json")["photon_sensor"]["read_noise"] == 1.5
+    assert main([*args, "--photons", "-3"]) == 1
+    assert "photons" in capsys.readouterr().err

@@ -276,12 +276,17 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
         fast=args.fast,
         progress=not args.quiet,
     )
+    from .physics.noise import Exposure
+
+    exposures = [Exposure(n, **_sensor(args)) for n in args.photons or ()]  # checked first
+    paper_sigmas = [0.0, 5.0, 10.0, 15.0, 20.0]  # SPEC section 7
+    sigmas = args.sigmas if args.sigmas is not None else [] if exposures else paper_sigmas
     datasets = load_datasets(args.datasets, args.max_images)
     try:
         rows = evaluate(
             methods,
             datasets,
-            args.sigmas,
+            [*sigmas, *exposures],
             args.out,
             save_images=args.save_images,
             zoom_images=zooms if args.zoom else None,
@@ -471,13 +476,16 @@ def cmd_study(args: argparse.Namespace) -> int:
         images,
         patterns=args.patterns,
         photons=photons,
-        read_noise=args.read_noise,
         methods=methods,
+        **_sensor(args),
         progress=not args.quiet,
     )
     snr = raw_snr_check(images, patterns=args.patterns) if "bayer" in args.patterns else None
     note = (
-        f"Images: {names}. Read noise {args.read_noise:g} e-, no saturation or ADC. Command: "
+        f"Images: {names}. Read noise {args.read_noise:g} e-, "
+        + (f"full well {args.full_well:g} e-, " if args.full_well else "no saturation, ")
+        + (f"ADC {args.bits} bits at {args.gain:g} e-/DN. " if args.gain else "no ADC. ")
+        + "Command: "
         f"`splitcam study exposure {' '.join(sys.argv[3:])}`"
     )
     path = write_study(results, snr, args.out, note=note)
@@ -633,6 +641,32 @@ def _add_method_options(p: argparse.ArgumentParser) -> None:
     )
 
 
+def _add_sensor_options(p: argparse.ArgumentParser) -> None:
+    """The photon model's sensor besides the exposure (splitcam.physics.noise.Exposure), shared
+    by `evaluate` and `study exposure`."""
+    p.add_argument(
+        "--read-noise", type=float, default=2.0, help="photon model: electrons (default 2)"
+    )
+    p.add_argument(
+        "--full-well", type=float, help="photon model: saturation, electrons (default: none)"
+    )
+    p.add_argument(
+        "--gain", type=float, help="photon model: ADC electrons per DN (default: no ADC)"
+    )
+    p.add_argument("--bits", type=int, default=12, help="photon model: ADC bits (default 12)")
+
+
+def _sensor(args: argparse.Namespace) -> dict:
+    """The keyword arguments of :class:`~splitcam.physics.noise.Exposure` from the options of
+    :func:`_add_sensor_options`."""
+    return {
+        "read_noise": args.read_noise,
+        "full_well": args.full_well,
+        "gain": args.gain,
+        "bits": args.bits,
+    }
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="splitcam",
@@ -716,7 +750,21 @@ def build_parser() -> argparse.ArgumentParser:
         help="comma-separated: kodak24, mcmaster, folders; default: the sample photos "
         "shipped with scikit-image",
     )
-    p.add_argument("--sigmas", type=float, nargs="+", default=[0.0, 5.0, 10.0, 15.0, 20.0])
+    p.add_argument(
+        "--sigmas",
+        type=float,
+        nargs="+",
+        help="Gaussian noise levels, 8-bit units (default: 0 5 10 15 20, or none with --photons)",
+    )
+    p.add_argument(
+        "--photons",
+        type=float,
+        nargs="+",
+        metavar="N",
+        help="photon-model exposures too: full-light photo-electrons of a lossless pixel (shot "
+        "and read noise, the same photon flux for every pattern; rows N<photons>)",
+    )
+    _add_sensor_options(p)
     p.add_argument("--max-images", type=int, help="use at most N images per dataset")
     p.add_argument(
         "--crop",
@@ -835,7 +883,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--photons", type=float, nargs="+", help="exposures (default: log-spaced from 1 to 10^4)"
     )
     p.add_argument("--points", type=int, default=9, help="default exposures: how many")
-    p.add_argument("--read-noise", type=float, default=2.0, help="electrons (default 2)")
+    _add_sensor_options(p)
     p.add_argument("--model", action="append", default=[], help="a shipped model too")
     p.add_argument(
         "--checkpoint",

@@ -47,8 +47,13 @@ def save_pair(
         str(tensors_path),
         metadata={"format": fmt, "version": str(version)},
     )
-    header = {"format": fmt, "version": version, **meta, "tensors": tensors_path.name,
-              "sha256": hashlib.sha256(tensors_path.read_bytes()).hexdigest()}
+    header = {
+        "format": fmt,
+        "version": version,
+        **meta,
+        "tensors": tensors_path.name,
+        "sha256": hashlib.sha256(tensors_path.read_bytes()).hexdigest(),
+    }
     meta_path.write_text(json.dumps(header, indent=1) + "\n")
     return meta_path
 
@@ -84,15 +89,18 @@ def load_pair(
     if not isinstance(meta, dict) or meta.get("format") != fmt:
         raise error(f"'{meta_path}' is not a {what} file ({fmt})")
     if meta.get("version") != version:
-        raise error(f"'{meta_path}': expected format version {version}, got "
-                    f"{meta.get('version')!r}")
+        raise error(
+            f"'{meta_path}': expected format version {version}, got {meta.get('version')!r}"
+        )
     try:
         blob = tensors_path.read_bytes()
     except OSError as exc:
         raise error(f"cannot read {what} tensors '{tensors_path}': {exc}") from None
     if hashlib.sha256(blob).hexdigest() != meta.get("sha256"):
-        raise error(f"'{tensors_path}' does not match the checksum recorded in '{meta_path}' "
-                    f"(damaged, or from another file)")
+        raise error(
+            f"'{tensors_path}' does not match the checksum recorded in '{meta_path}' "
+            f"(damaged, or from another file)"
+        )
     try:
         tensors = load(blob)
     except SafetensorError as exc:

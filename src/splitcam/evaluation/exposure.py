@@ -17,6 +17,7 @@ import math
 import os
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import torch
@@ -47,14 +48,16 @@ def exposure_study(
     read_noise: float = 2.0,
     methods: Sequence[Reconstructor] = (),
     progress: bool = True,
+    **settings: Any,
 ) -> dict[str, dict[float, dict[str, float]]]:
     """``{label: {photons: {"psnr", "ssim", "ciede2000"}}}``: the closed-form LMMSE of each
     pattern (label: the pattern's name) and each of ``methods`` (label: the method's name, e.g.
     a network trained with ``--noise photon``) on ``images`` at each exposure (means over
-    images)."""
+    images). ``settings``: the other settings of :class:`~splitcam.physics.noise.Exposure`
+    (``full_well``, ``gain``, ``bits``)."""
     photons = list(photons or default_exposures())
     for n in photons:
-        Exposure(n, read_noise=read_noise)  # bad values fail before any work
+        Exposure(n, read_noise=read_noise, **settings)  # bad values fail before any work
     results: dict[str, dict[float, dict[str, float]]] = {}
     bar = None
     if progress:
@@ -68,7 +71,7 @@ def exposure_study(
         sensor = SplitterSensor(method.pattern)
         results[name] = {}
         for n in photons:
-            exposure = Exposure(n, read_noise=read_noise)
+            exposure = Exposure(n, read_noise=read_noise, **settings)
             values: dict[str, list[float]] = {"psnr": [], "ssim": [], "ciede2000": []}
             for image_name, rgb in images:
                 pred = simulate_and_reconstruct(method, sensor, image_name, rgb, exposure)

@@ -19,20 +19,20 @@ import hashlib
 import json
 import os
 from collections.abc import Iterator, Sequence
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import torch
 
 from ..data.imageio import write_image
 from ..patterns import Pattern, save
-from ..physics.noise import Exposure, check_sigma
+from ..physics.noise import Exposure, check_level
 from ..physics.sensor import SplitterSensor
 from ..physics.system import simulate
 from ..recon.base import Reconstructor
 from ..viz.zoom import check_region, zoom_figure
 from .metrics import compute_all, mean_over_images
-from .tables import CSV_NAME, EvalRow, append_rows, read_rows, write_summary
+from .tables import CSV_NAME, EvalRow, append_rows, level_label, read_rows, write_summary
 
 __all__ = [
     "Zoom",
@@ -49,10 +49,15 @@ SETTINGS_NAME = "evaluation.json"
 
 
 def simulate_and_reconstruct(
-    method: Reconstructor, sensor: SplitterSensor, image_name: str, rgb: torch.Tensor, sigma: float
+    method: Reconstructor,
+    sensor: SplitterSensor,
+    image_name: str,
+    rgb: torch.Tensor,
+    sigma: float | Exposure,
 ) -> torch.Tensor:
     """One step of the protocol: the noisy raw image of ``rgb`` (:func:`splitcam.physics.simulate`)
-    and the method's reconstruction, clamped to [0, 1].
+    and the method's reconstruction, clamped to [0, 1]. ``sigma`` is a Gaussian sigma or a
+    photon-model :class:`~splitcam.physics.noise.Exposure`.
 
     Shape:
         - rgb: ``(3, H, W)``; output ``(3, H, W)`` float32 in [0, 1], on the CPU.
@@ -78,7 +83,7 @@ def score_images(
     """``(image name, sigma, reconstruction, scores)`` for every image at every sigma."""
     sensor = sensor if sensor is not None else SplitterSensor(method.pattern)
     for sigma in sigmas:
-        level = sigma if isinstance(sigma, Exposure) else float(sigma)
+        level = check_level(sigma)
         for name, rgb in images:
             pred = simulate_and_reconstruct(method, sensor, name, rgb, level)
             yield name, level, pred, score(pred, rgb, crop=crop)
@@ -93,7 +98,7 @@ def mean_psnr(
 ) -> dict[float, float]:
     """Mean PSNR per sigma over ``images`` (infinite PSNRs left out, as in the tables); a noise
     level may also be a photon-model :class:`~splitcam.physics.noise.Exposure`."""
-    scores: dict = {s if isinstance(s, Exposure) else float(s): [] for s in sigmas}
+    scores: dict = {check_level(s): [] for s in sigmas}
     for _, sigma, _, values in score_images(method, images, sigmas, sensor=sensor):
         scores[sigma].append(values["psnr"])
     return {s: mean_over_images(v).mean for s, v in scores.items()}
@@ -156,7 +161,7 @@ def _fingerprint(method: Reconstructor, crop: int) -> str:
 def evaluate(
     methods: Sequence[Reconstructor],
     datasets: Sequence[tuple[str, Images]],
-    sigmas: Sequence[float],
+    sigmas: Sequence[float | Exposure],
     out: str | os.PathLike | None = None,
     *,
     save_images: bool = False,
@@ -167,7 +172,10 @@ def evaluate(
     zoom_only: bool = False,
     zoom_sigmas: Sequence[float] | None = None,
 ) -> list[EvalRow]:
-    """Score every method on every image at every sigma, writing results to ``out`` as it goes.
+    """Score every method on every image at every noise level, writing results to ``out`` as it
+    goes. A noise level is the paper's Gaussian sigma (8-bit units) or a photon-model
+    :class:`~splitcam.physics.noise.Exposure` (SPEC section 11; rows labelled ``N<photons>``);
+    the exposures of one evaluation share their sensor settings (read noise, full well, ADC).
 
     Writes ``per_image.csv`` (a row as soon as it is computed), then ``summary.json``,
     ``table.md``, each method's pattern under ``patterns/`` and ``evaluation.json`` (what the
@@ -184,17 +192,19 @@ def evaluate(
     evaluation continues where it stopped.
 
     Raises:
-        ValueError: No method, duplicate method names, a bad sigma or crop, or a zoom that names
-            an unknown image or a region outside it; all checked before any work.
+        ValueError: No method, duplicate method names, a bad sigma or crop, exposures with
+            different sensor settings, or a zoom that names an unknown image or a region outside
+            it; all checked before any work.
     """
     if not methods:
         raise ValueError("expected at least one method to evaluate")
     names = [m.name for m in methods]
     if len(set(names)) != len(names):
         raise ValueError(f"expected distinct method names, got {names}")
-    sigmas = [check_sigma(s) for s in sigmas]
+    sigmas = [check_level(s) for s in sigmas]
     if not sigmas:
         raise ValueError("expected at least one sigma")
+    sensor_settings = _sensor_settings(sigmas)
     if isinstance(crop, bool) or not isinstance(crop, int) or crop < 0:
         raise ValueError(f"expected crop as an integer >= 0, got {crop!r}")
     zooms = [z if isinstance(z, Zoom) else parse_zoom(z) for z in zoom_images or ()]
@@ -207,12 +217,16 @@ def evaluate(
     done: dict[tuple, EvalRow] = {}
     if out_dir is not None:
         out_dir.mkdir(parents=True, exist_ok=True)
-        done = _previous_rows(out_dir, fingerprints) if resume else {}
+        done = _previous_rows(out_dir, fingerprints, sensor_settings) if resume else {}
         # Rewrite the CSV with the rows kept, then append: the file always holds exactly the
         # results of this evaluation so far.
         write_summary(list(done.values()), out_dir)
         (out_dir / SETTINGS_NAME).write_text(
-            json.dumps({"crop": crop, "fingerprints": fingerprints}, indent=2) + "\n",
+            json.dumps(
+                {"crop": crop, "fingerprints": fingerprints, "photon_sensor": sensor_settings},
+                indent=2,
+            )
+            + "\n",
             encoding="utf-8",
         )
         (out_dir / "patterns").mkdir(exist_ok=True)
@@ -243,8 +257,10 @@ def evaluate(
                 and (zoom_sigmas is None or sigma in zoom_sigmas)
             )
             outputs = {}
+            photons = sigma.photons if isinstance(sigma, Exposure) else 0.0
+            level = level_label(0.0 if photons else sigma, photons)
             for method in methods:
-                key = (method.name, dataset, image_name, sigma)
+                key = (method.name, dataset, image_name, level)
                 if key in done and not zoomed:
                     rows.append(done[key])
                     continue
@@ -253,7 +269,13 @@ def evaluate(
                 )
                 scores = score(pred, rgb, crop=crop)
                 row = EvalRow(
-                    method.name, method.pattern.name, dataset, image_name, sigma, **scores
+                    method.name,
+                    method.pattern.name,
+                    dataset,
+                    image_name,
+                    0.0 if photons else sigma,
+                    **scores,
+                    photons=photons,
                 )
                 rows.append(row)
                 outputs[method.name] = (pred, scores)
@@ -263,7 +285,8 @@ def evaluate(
                     if key not in done:
                         bar.update(1)
                     bar.set_postfix_str(
-                        f"{dataset}/{image_name} s{sigma:g} {method.name} {scores['psnr']:.2f} dB",
+                        f"{dataset}/{image_name} {'' if photons else 's'}{level} {method.name} "
+                        f"{scores['psnr']:.2f} dB",
                         refresh=False,
                     )
             if out_dir is not None and outputs and (save_images or zoomed):
@@ -285,19 +308,46 @@ def evaluate(
     return rows
 
 
-def _previous_rows(out_dir: Path, fingerprints: dict[str, str]) -> dict[tuple, EvalRow]:
-    """Rows of an earlier (possibly interrupted) evaluation in ``out_dir`` that still apply."""
+def _sensor_settings(levels: Sequence[float | Exposure]) -> dict | None:
+    """The photon-model sensor settings shared by the exposures among ``levels`` (everything
+    but the exposure itself), or None without exposures.
+
+    Raises:
+        ValueError: Exposures with different settings (their rows could not be told apart).
+    """
+    settings = {
+        json.dumps({k: v for k, v in asdict(e).items() if k != "photons"}, sort_keys=True)
+        for e in levels
+        if isinstance(e, Exposure)
+    }
+    if len(settings) > 1:
+        raise ValueError(
+            "expected the exposures of one evaluation to share their sensor settings (read "
+            "noise, full well, gain, bits, shot noise); evaluate the others into another folder"
+        )
+    return json.loads(settings.pop()) if settings else None
+
+
+def _previous_rows(
+    out_dir: Path, fingerprints: dict[str, str], sensor_settings: dict | None = None
+) -> dict[tuple, EvalRow]:
+    """Rows of an earlier (possibly interrupted) evaluation in ``out_dir`` that still apply:
+    same method fingerprint, and for photon-model rows the same sensor settings."""
     csv_path, settings_path = out_dir / CSV_NAME, out_dir / SETTINGS_NAME
     if not (csv_path.is_file() and settings_path.is_file()):
         return {}
     try:
-        before = json.loads(settings_path.read_text(encoding="utf-8"))["fingerprints"]
+        settings = json.loads(settings_path.read_text(encoding="utf-8"))
+        before = settings["fingerprints"]
     except (OSError, ValueError, KeyError, TypeError):
         return {}
+    same_sensor = settings.get("photon_sensor") == sensor_settings
     return {
         row.key: row
         for row in read_rows(csv_path)
-        if row.method in fingerprints and before.get(row.method) == fingerprints[row.method]
+        if row.method in fingerprints
+        and before.get(row.method) == fingerprints[row.method]
+        and (not row.photons or same_sensor)
     }
 
 
@@ -305,7 +355,7 @@ def _save_images(
     out_dir: Path,
     dataset: str,
     image: str,
-    sigma: float,
+    sigma: float | Exposure,
     rgb: torch.Tensor,
     outputs: dict,
     zoom: Zoom | None,
@@ -314,15 +364,19 @@ def _save_images(
     """Write each reconstruction in ``outputs`` and, with ``zoom``, the side-by-side zoom of
     ``zoom_outputs`` (default: ``outputs``)."""
     safe = image.replace("/", "_")
+    if isinstance(sigma, Exposure):
+        suffix, title = f"N{sigma.photons:g}", f"{sigma.photons:g} photo-electrons"
+    else:
+        suffix, title = f"sigma{sigma:g}", f"sigma {sigma:g}"
     for name, (pred, _) in outputs.items():
-        path = out_dir / "images" / name / dataset / f"{safe}_sigma{sigma:g}.png"
+        path = out_dir / "images" / name / dataset / f"{safe}_{suffix}.png"
         path.parent.mkdir(parents=True, exist_ok=True)
         write_image(path, pred)
     if zoom is not None:
         zoom_figure(
             rgb,
             zoom_outputs if zoom_outputs is not None else outputs,
-            out_dir / "zoom" / f"{dataset}_{safe}_sigma{sigma:g}.png",
+            out_dir / "zoom" / f"{dataset}_{safe}_{suffix}.png",
             region=zoom.region,
-            title=f"{dataset}/{image}, sigma {sigma:g}",
+            title=f"{dataset}/{image}, {title}",
         )

@@ -8,8 +8,9 @@ import os
 from pathlib import Path
 
 from .. import patterns
-from ..viz.charts import sigma_chart
+from ..viz.charts import exposure_chart, sigma_chart
 from ..viz.patterns import draw_pattern
+from .tables import level_heading
 
 #: SPEC section 8: mean over Kodak24 and McMaster (42 images), PSNR dB / SSIM, from 10^6 GPU
 #: training steps on DIV2K (Liu & Lam, Tables 1-3).
@@ -95,7 +96,9 @@ def make_report(results: list[str | os.PathLike], out: str | os.PathLike) -> Pat
     ]
     sigmas = list(dict.fromkeys(s for _, _, e, _ in entries for s in e["all"]))
     lines.append(
-        "| result | method | pattern | images | " + " | ".join(f"σ={s}" for s in sigmas) + " |"
+        "| result | method | pattern | images | "
+        + " | ".join(level_heading(s) for s in sigmas)
+        + " |"
     )
     lines.append("|---|---|---|---|" + "---|" * len(sigmas))
     for folder, method, entry, pattern in entries:
@@ -114,7 +117,7 @@ def make_report(results: list[str | os.PathLike], out: str | os.PathLike) -> Pat
         n = max(st["n_images"] for st in entry["all"].values())
         lines.append(f"| {folder} | {method} | {pattern.name} | {n} | " + " | ".join(cells) + " |")
     lines += ["", "## CIEDE2000 (lower is better)", ""]
-    lines.append("| result | method | " + " | ".join(f"σ={s}" for s in sigmas) + " |")
+    lines.append("| result | method | " + " | ".join(level_heading(s) for s in sigmas) + " |")
     lines.append("|---|---|" + "---|" * len(sigmas))
     for folder, method, entry, _ in entries:
         cells = [
@@ -141,8 +144,20 @@ def make_report(results: list[str | os.PathLike], out: str | os.PathLike) -> Pat
         ref: [(float(s), p) for s, (p, _) in zip(PAPER_SIGMAS, PAPER[ref], strict=True)]
         for ref in refs
     }
-    chart = sigma_chart(curves, out / "sigma_curves.png", references)
-    lines += ["", "## PSNR and CIEDE2000 against noise", "", f"![curves]({chart.name})", ""]
+    if any(not s.startswith("N") for s in sigmas):
+        chart = sigma_chart(curves, out / "sigma_curves.png", references)
+        lines += ["", "## PSNR and CIEDE2000 against noise", "", f"![curves]({chart.name})", ""]
+    exposures = {
+        label: {float(s[1:]): st for s, st in per.items() if s.startswith("N")}
+        for label, per in curves
+    }
+    if any(exposures.values()):
+        chart = exposure_chart(
+            {k: v for k, v in exposures.items() if v},
+            out / "exposure_curves.png",
+            title="at equal exposure (photon model)",
+        )
+        lines += ["", "## PSNR and CIEDE2000 against exposure", "", f"![exposure]({chart.name})"]
     report = out / "report.md"
     report.write_text("\n".join(lines) + "\n", encoding="utf-8")
     return report

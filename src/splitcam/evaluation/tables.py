@@ -19,6 +19,8 @@ __all__ = [
     "METRICS",
     "EvalRow",
     "append_rows",
+    "level_heading",
+    "level_label",
     "markdown_tables",
     "read_rows",
     "summarise",
@@ -29,12 +31,23 @@ METRICS = ("psnr", "ssim", "ciede2000")
 CSV_NAME = "per_image.csv"
 # Scores at full precision: a resumed evaluation reads them back and must summarise exactly like
 # an uninterrupted one.
-_FORMATS = {"sigma": "{:g}", "psnr": "{!r}", "ssim": "{!r}", "ciede2000": "{!r}"}
+_FORMATS = {
+    "sigma": "{:g}",
+    "psnr": "{!r}",
+    "ssim": "{!r}",
+    "ciede2000": "{!r}",
+    "photons": "{:g}",
+}
 
 
 @dataclass(frozen=True)
 class EvalRow:
-    """The scores of one method on one image at one noise level."""
+    """The scores of one method on one image at one noise level.
+
+    The noise level is the paper's Gaussian ``sigma`` (8-bit units) when ``photons`` is 0, else
+    the photon model's exposure ``photons`` (full-light photo-electrons; ``sigma`` is 0 and the
+    sensor's other settings are the evaluation's, in its ``evaluation.json``).
+    """
 
     method: str
     pattern: str
@@ -44,17 +57,39 @@ class EvalRow:
     psnr: float
     ssim: float
     ciede2000: float
+    photons: float = 0.0
 
     @property
-    def key(self) -> tuple[str, str, str, float]:
-        """What identifies the row in an evaluation: method, dataset, image, sigma."""
-        return (self.method, self.dataset, self.image, self.sigma)
+    def key(self) -> tuple[str, str, str, str]:
+        """What identifies the row in an evaluation: method, dataset, image, noise level."""
+        return (self.method, self.dataset, self.image, self.level)
+
+    @property
+    def level(self) -> str:
+        """The noise level as it labels tables and summaries: ``"15"`` (sigma) or ``"N1000"``
+        (photo-electrons)."""
+        return level_label(self.sigma, self.photons)
 
     def cells(self) -> list[str]:
         return [
             _FORMATS.get(f.name, "{}").format(v)
             for f, v in zip(fields(self), astuple(self), strict=True)
         ]
+
+
+def level_label(sigma: float, photons: float = 0.0) -> str:
+    """``"15"`` for a Gaussian sigma, ``"N1000"`` for an exposure of 1000 photo-electrons."""
+    return f"N{photons:g}" if photons else f"{sigma:g}"
+
+
+def _level_order(label: str) -> tuple[int, float]:
+    """Gaussian levels first by sigma, then exposures by photo-electrons."""
+    return (1, float(label[1:])) if label.startswith("N") else (0, float(label))
+
+
+def level_heading(label: str) -> str:
+    """A table heading: ``σ=15`` or ``N=1000 e-``."""
+    return f"N={label[1:]} e⁻" if label.startswith("N") else f"σ={label}"
 
 
 def append_rows(path: str | os.PathLike, rows: Iterable[EvalRow]) -> None:
@@ -72,7 +107,8 @@ def append_rows(path: str | os.PathLike, rows: Iterable[EvalRow]) -> None:
 
 
 def read_rows(path: str | os.PathLike) -> list[EvalRow]:
-    """Rows of a ``per_image.csv``; a last line cut short by a kill is dropped.
+    """Rows of a ``per_image.csv``; a last line cut short by a kill is dropped. Files written
+    before the ``photons`` column existed read as Gaussian rows.
 
     Raises:
         ValueError: The file is not a per-image results file (the message names it).
@@ -83,10 +119,12 @@ def read_rows(path: str | os.PathLike) -> list[EvalRow]:
         lines = list(csv.reader(fh))
     if not lines:
         return []
-    if lines[0] != names:
+    if lines[0] not in (names, names[:-1]):
         raise ValueError(f"{str(path)!r} is not a splitcam per-image results file")
     rows = []
     for cells in lines[1:]:
+        if len(cells) != len(lines[0]):
+            continue  # a line cut short by a kill
         try:
             rows.append(EvalRow(*cells[:4], *(float(v) for v in cells[4:])))
         except (TypeError, ValueError):
@@ -110,7 +148,8 @@ def write_summary(rows: Sequence[EvalRow], out_dir: str | os.PathLike) -> dict:
 
 
 def summarise(rows: Sequence[EvalRow]) -> dict:
-    """``{method: {dataset|"all": {sigma: {metric: mean, "n_images": n, "n_infinite": k}}}}``."""
+    """``{method: {dataset|"all": {level: {metric: mean, "n_images": n, "n_infinite": k}}}}``,
+    ``level`` as :attr:`EvalRow.level` (``"15"`` or ``"N1000"``)."""
     summary: dict = {}
     methods = list(dict.fromkeys(r.method for r in rows))
     for method in methods:
@@ -120,8 +159,8 @@ def summarise(rows: Sequence[EvalRow]) -> dict:
         for group in [*groups, "all"]:
             chosen = mine if group == "all" else [r for r in mine if r.dataset == group]
             per_sigma = {}
-            for sigma in sorted({r.sigma for r in chosen}):
-                at = [r for r in chosen if r.sigma == sigma]
+            for level in sorted({r.level for r in chosen}, key=_level_order):
+                at = [r for r in chosen if r.level == level]
                 stats = {}
                 for metric in METRICS:
                     m = mean_over_images(getattr(r, metric) for r in at)
@@ -129,7 +168,7 @@ def summarise(rows: Sequence[EvalRow]) -> dict:
                     if metric == "psnr":
                         stats["n_infinite"] = m.n_infinite
                 stats["n_images"] = len(at)
-                per_sigma[f"{sigma:g}"] = stats
+                per_sigma[level] = stats
             entry[group] = per_sigma
         summary[method] = entry
     return summary
@@ -155,7 +194,7 @@ def markdown_tables(summary: dict) -> str:
             default=0,
         )
         lines += [f"### {group} ({n} images): PSNR (dB) / SSIM", ""]
-        lines.append("| method | pattern | " + " | ".join(f"σ={s}" for s in sigmas) + " |")
+        lines.append("| method | pattern | " + " | ".join(level_heading(s) for s in sigmas) + " |")
         lines.append("|---|---|" + "---|" * len(sigmas))
         for m in methods:
             cells = []
@@ -164,7 +203,7 @@ def markdown_tables(summary: dict) -> str:
                 cells.append("–" if st is None else f"{_db(st['psnr'])} / {st['ssim']:.4f}")
             lines.append(f"| {m} | {summary[m]['pattern']} | " + " | ".join(cells) + " |")
         lines += ["", f"### {group}: CIEDE2000 (lower is better)", ""]
-        lines.append("| method | " + " | ".join(f"σ={s}" for s in sigmas) + " |")
+        lines.append("| method | " + " | ".join(level_heading(s) for s in sigmas) + " |")
         lines.append("|---|" + "---|" * len(sigmas))
         for m in methods:
             cells = [

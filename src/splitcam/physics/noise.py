@@ -24,6 +24,7 @@ __all__ = [
     "PhotonNoise",
     "add_exposure_noise",
     "add_evaluation_noise",
+    "check_level",
     "check_sigma",
     "evaluation_noise",
     "evaluation_seed",
@@ -86,6 +87,12 @@ class GaussianNoise:
 
     def load_state_dict(self, state: dict[str, torch.Tensor]) -> None:
         self.generator.set_state(state["generator"])
+
+
+def check_level(level: Any) -> float | Exposure:
+    """A noise level: a photon-model :class:`Exposure` as it is, anything else through
+    :func:`check_sigma` (a Gaussian sigma in 8-bit units)."""
+    return level if isinstance(level, Exposure) else check_sigma(level)
 
 
 def evaluation_seed(image_name: str, sigma: float) -> int:

@@ -15,13 +15,14 @@ import torch
 from torch import nn
 
 from ..patterns import Pattern
-from ..physics.noise import Exposure, check_sigma
+from ..physics.noise import check_level, check_sigma
 from ..physics.sensor import pattern_pixel_kernels
 
 __all__ = [
     "PRECISIONS",
     "NetworkReconstructor",
     "Reconstructor",
+    "check_level",
     "check_raw",
     "check_sigma",
     "fast_precision",
@@ -149,8 +150,7 @@ class NetworkReconstructor:
     def reconstruct(self, raw: torch.Tensor, sigma: float) -> torch.Tensor:
         from .tiling import reconstruct
 
-        if not isinstance(sigma, Exposure):
-            check_sigma(sigma)
+        check_level(sigma)
         return reconstruct(
             self.network,
             raw,

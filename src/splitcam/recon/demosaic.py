@@ -14,7 +14,7 @@ import numpy as np
 import torch
 
 from ..patterns import get
-from .base import check_raw, check_sigma
+from .base import check_level, check_raw
 from .tiling import DEFAULT_TILE, tiled
 
 __all__ = ["ClassicalDemosaic"]
@@ -76,14 +76,15 @@ class ClassicalDemosaic:
         self._function = _demosaic_functions()[key]
 
     def reconstruct(self, raw: torch.Tensor, sigma: float = 0.0) -> torch.Tensor:
-        """Demosaic each image of the batch in tiles (``sigma`` is checked, then ignored).
+        """Demosaic each image of the batch in tiles (``sigma``, a Gaussian sigma or a photon-model
+        :class:`~splitcam.physics.noise.Exposure`, is checked, then ignored).
 
         Shape:
             - raw: ``(N, 1, H, W)``, the RGGB mosaic (R at (0, 0)).
             - output: ``(N, 3, H, W)``, same dtype and device as ``raw``.
         """
         check_raw(raw)
-        check_sigma(sigma)
+        check_level(sigma)
         return tiled(self.demosaic, raw, self.pattern.period, self.radius, tile=self.tile)
 
     def demosaic(self, raw: torch.Tensor) -> torch.Tensor:

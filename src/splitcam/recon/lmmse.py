@@ -23,9 +23,10 @@ import torch.nn.functional as F
 from ..data.patches import ImageCache, PatchSampler
 from ..data.tensorfiles import load_pair, save_pair
 from ..patterns import Pattern, PatternError, get
+from ..physics.noise import Exposure
 from ..physics.periodic import phase_conv, phase_map
 from ..physics.sensor import SplitterSensor
-from .base import check_raw, check_sigma
+from .base import check_level, check_raw
 from .tiling import DEFAULT_TILE, tiled
 
 __all__ = [
@@ -98,7 +99,7 @@ class LMMSEStatistics:
     yy: torch.Tensor
     counts: torch.Tensor
     info: dict[str, Any] = field(default_factory=dict)
-    _cache: dict[float, tuple[torch.Tensor, torch.Tensor]] = field(
+    _cache: dict[float | Exposure, tuple[torch.Tensor, torch.Tensor]] = field(
         default_factory=dict, init=False, repr=False
     )
 
@@ -140,7 +141,7 @@ class LMMSEStatistics:
             {"pooled": [self.info, other.info]},
         )
 
-    def _solve(self, sigma: float) -> torch.Tensor:
+    def _solve(self, sigma: float | Exposure) -> torch.Tensor:
         """The ``(P, d + 1, 3)`` LMMSE solution (filters and bias) at ``sigma``, float64."""
         if bool((self.counts == 0).any()):
             raise ValueError("expected statistics with at least one sample per phase, got none")
@@ -149,29 +150,38 @@ class LMMSEStatistics:
         mxy = self.xy / n
         d = mxx.shape[-1] - 1
         trace = torch.diagonal(mxx[:, :d, :d], dim1=-2, dim2=-1).sum(-1)
-        if sigma == 0 and bool((trace == 0).any()):
+        if isinstance(sigma, Exposure):
+            a, b = sigma.variance_coefficients()
+        else:
+            a, b = 0.0, (sigma / 255.0) ** 2
+        if a == 0 and b == 0 and bool((trace == 0).any()):
             dark = int((trace == 0).nonzero()[0, 0])
             raise ValueError(
                 f"pattern {self.pattern.name!r}: the pixels of phase {dark} receive no light in "
                 f"the training data, so no noise-free LMMSE exists (does the pattern collect "
                 f"any light?)"
             )
-        diag = (sigma / 255.0) ** 2 + _RIDGE * trace / d
-        eye = torch.zeros(d + 1, dtype=torch.float64)
-        eye[:d] = 1.0
-        # White noise independent of the signal and zero-mean: it adds (sigma/255)^2 to the
-        # variance of every raw value and nothing to any other moment (the bias entry included).
-        mxx = mxx + diag.view(-1, 1, 1) * torch.diag(eye)
+        # Noise independent of the signal given the signal, and zero-mean: it adds its variance
+        # to the second moment of every raw value and nothing to any other moment (the bias
+        # entry included). Its variance at a pixel of expected value g is a g + b (Gaussian:
+        # a = 0; photon model: shot noise a = 3 / N), so on average a E[g] + b, with E[g] the
+        # mean raw value at that window position, the moment with the constant entry.
+        mean_x = mxx[:, :d, d]  # (P, d)
+        var = a * mean_x + b + (_RIDGE * trace / d)[:, None]
+        mxx = mxx + torch.diag_embed(torch.cat([var, torch.zeros_like(var[:, :1])], 1))
         return torch.linalg.solve(mxx, mxy)
 
-    def filters(self, sigma: float) -> tuple[torch.Tensor, torch.Tensor]:
-        """The LMMSE filters and biases for noise level ``sigma`` (cached per sigma).
+    def filters(self, sigma: float | Exposure) -> tuple[torch.Tensor, torch.Tensor]:
+        """The LMMSE filters and biases for noise level ``sigma`` (cached per sigma), a Gaussian
+        sigma or a photon-model :class:`~splitcam.physics.noise.Exposure` (signal-dependent
+        noise, its variance at each window position's mean signal).
 
         Filter ``[p, c, a, b]`` multiplies the raw value at offset ``(a - r, b - r)`` from a pixel
         of phase ``p = i * Pw + j``, to predict colour ``c`` of that pixel.
 
         Args:
-            sigma: Noise standard deviation in 8-bit units (``0`` for noise-free raw images).
+            sigma: Noise standard deviation in 8-bit units (``0`` for noise-free raw images),
+                or an :class:`~splitcam.physics.noise.Exposure`.
 
         Returns:
             ``(weights, bias)`` in float64.
@@ -180,7 +190,7 @@ class LMMSEStatistics:
             - weights: ``(Ph * Pw, 3, 2r + 1, 2r + 1)``.
             - bias: ``(Ph * Pw, 3)``.
         """
-        sigma = check_sigma(sigma)
+        sigma = check_level(sigma)
         if sigma not in self._cache:
             w = self._solve(sigma)
             k = self.kernel_size
@@ -188,14 +198,14 @@ class LMMSEStatistics:
             self._cache[sigma] = (weights, w[:, -1, :].contiguous())
         return self._cache[sigma]
 
-    def expected_mse(self, sigma: float) -> float:
+    def expected_mse(self, sigma: float | Exposure) -> float:
         """Mean squared error of the LMMSE filters on the training neighbourhoods themselves.
 
         ``E|y - W^T x|^2 = tr(E[y y^T] - E[x y^T]^T W)`` at the optimum ``W``, averaged over the 3
         colours and over all neighbourhoods, in [0, 1] units. A score that needs no test
         images; being in-sample it is slightly optimistic, and it ignores image borders.
         """
-        sigma = check_sigma(sigma)
+        sigma = check_level(sigma)
         n = self.counts.to(torch.float64)
         w = self._solve(sigma)
         resid = torch.diagonal(self.yy, dim1=-2, dim2=-1).sum(-1) - (self.xy * w).sum((-2, -1))
@@ -414,7 +424,9 @@ def apply_filters(
         )
     h, w = raw.shape[-2:]
     out = F.conv2d(
-        raw.reshape(1, n, h, w), weights.reshape(n * p * o, 1, kh, kw), padding=(kh // 2, kw // 2),
+        raw.reshape(1, n, h, w),
+        weights.reshape(n * p * o, 1, kh, kw),
+        padding=(kh // 2, kw // 2),
         groups=n,
     ).view(n, p, o, h, w)
     out = out.gather(1, phase.expand(n, 1, o, h, w)).squeeze(1)
@@ -457,7 +469,7 @@ class LMMSE:
         """Save the statistics (see :meth:`LMMSEStatistics.save`)."""
         return self.statistics.save(path)
 
-    def reconstruct(self, raw: torch.Tensor, sigma: float) -> torch.Tensor:
+    def reconstruct(self, raw: torch.Tensor, sigma: float | Exposure) -> torch.Tensor:
         """Apply the phase filters for ``sigma``: one convolution, then a per-pixel phase pick.
 
         Runs in tiles of :data:`splitcam.recon.tiling.DEFAULT_TILE` pixels
@@ -469,7 +481,8 @@ class LMMSE:
 
         Args:
             raw: Raw image of :attr:`pattern` (phase ``(0, 0)`` at the top-left pixel).
-            sigma: Noise standard deviation in 8-bit units that the filters are solved for.
+            sigma: Noise standard deviation in 8-bit units that the filters are solved for, or
+                a photon-model :class:`~splitcam.physics.noise.Exposure`.
 
         Returns:
             RGB estimate, not clamped, in ``raw``'s dtype and device.

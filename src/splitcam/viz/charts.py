@@ -17,7 +17,8 @@ def sigma_chart(
     """PSNR and CIEDE2000 against sigma for every method (the paper's Fig. 9).
 
     Args:
-        curves: ``(label, {sigma: {"psnr": .., "ciede2000": ..}})`` per method.
+        curves: ``(label, {sigma: {"psnr": .., "ciede2000": ..}})`` per method (photon-model
+            levels, keys ``"N<photons>"``, are left out: :func:`exposure_chart` draws those).
         path: PNG to write.
         references: Reference PSNR curves ``{label: [(sigma, psnr), ...]}``, drawn grey dashed
             (the paper's trained networks).
@@ -30,7 +31,7 @@ def sigma_chart(
     colours = matplotlib.rcParams["axes.prop_cycle"].by_key()["color"]
     for i, (label, per_sigma) in enumerate(curves):
         colour = colours[i % len(colours)]
-        sig = sorted(per_sigma, key=float)
+        sig = sorted((s for s in per_sigma if not s.startswith("N")), key=float)  # N...: exposures
         xs = [float(s) for s in sig]
         ax1.plot(xs, [per_sigma[s]["psnr"] for s in sig], "o-", color=colour, label=label)
         ax2.plot(xs, [per_sigma[s]["ciede2000"] for s in sig], "o-", color=colour, label=label)
@@ -63,7 +64,10 @@ def sigma_chart(
 
 
 def exposure_chart(
-    results: Mapping[str, Mapping[float, Mapping[str, float]]], path: str | os.PathLike
+    results: Mapping[str, Mapping[float, Mapping[str, float]]],
+    path: str | os.PathLike,
+    *,
+    title: str = "LMMSE at equal exposure (photon model)",
 ) -> Path:
     """PSNR and CIEDE2000 against exposure (log axis) for every pattern; the Bayer filter
     dashed black."""
@@ -75,7 +79,8 @@ def exposure_chart(
     colours = matplotlib.rcParams["axes.prop_cycle"].by_key()["color"]
     for i, (label, per) in enumerate(results.items()):
         xs = sorted(per)
-        style = {"color": "black", "ls": "--"} if label == "bayer" else {"color": colours[i]}
+        bayer = label == "bayer" or label.startswith("bayer+")
+        style = {"color": "black", "ls": "--"} if bayer else {"color": colours[i % len(colours)]}
         style = {"marker": "o", "ms": 3, "ls": "-", **style}
         ax1.plot(xs, [per[x]["psnr"] for x in xs], label=label, **style)
         ax2.plot(xs, [per[x]["ciede2000"] for x in xs], label=label, **style)
@@ -84,7 +89,7 @@ def exposure_chart(
         ax.set_xlabel("exposure N: photo-electrons of a lossless full-light pixel")
         ax.set_ylabel(name)
         ax.grid(alpha=0.3, which="both")
-    ax1.set_title("LMMSE at equal exposure (photon model)", fontsize=10)
+    ax1.set_title(title, fontsize=10)
     ax2.legend(fontsize=8, loc="upper right")
     fig.tight_layout()
     path = Path(path)

@@ -81,6 +81,7 @@ def plot_run(run: str | os.PathLike, out: str | os.PathLike | None = None) -> Pa
         alpha=0.6,
         label="training batches (noisy, all sigmas)",
     )
+
     def level(key: str) -> tuple[int, float]:
         """``val_psnr_15`` (sigma 15) or ``val_psnr_N100`` (photon model, exposure 100)."""
         text = key.rsplit("_", 1)[1]
