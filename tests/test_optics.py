@@ -203,3 +203,50 @@ def test_profiles_by_name_or_file_and_their_errors(tmp_path) -> None:
         profile(str(tmp_path / "h.npy"), (1, 1), optics)
     with pytest.raises(ValueError, match="cannot read"):
         profile(str(tmp_path / "missing.npy"), (2, 2), optics)
+
+
+def test_rggb_collection_is_the_sum_over_the_rggb_targets_and_differentiable() -> None:
+    """The tensor form equals a direct count on a random 2x2 pattern (every kernel entry whose
+    landing pixel has the entry's colour in RGGB, a quarter per site), and its gradient reaches
+    exactly those entries."""
+    from splitcam.optics import rggb_collection
+
+    gen = torch.Generator().manual_seed(0)
+    kernels = torch.rand(4, 3, 3, 3, generator=gen, dtype=torch.float64).requires_grad_(True)
+    layout = [[0, 1], [2, 3]]
+    colour = [["R", "G"], ["G", "B"]]  # RGGB, R at (0, 0)
+    want = [0.0, 0.0, 0.0]
+    for i in range(2):
+        for j in range(2):
+            for a in range(3):
+                for b in range(3):
+                    target = colour[(i + a - 1) % 2][(j + b - 1) % 2]
+                    c = "RGB".index(target)
+                    want[c] += float(kernels.detach()[layout[i][j], c, a, b]) / 4
+    eff = rggb_collection(kernels, layout)
+    np.testing.assert_allclose(eff.detach().numpy(), want, rtol=1e-12)
+    eff.sum().backward()
+    # each (site, colour, a, b) entry counts once, for its own colour only
+    assert torch.all((kernels.grad == 0) | (kernels.grad == 0.25))
+    assert int((kernels.grad > 0).sum()) == 4 * 9  # one colour per landing pixel
+
+
+def test_routing_design_raises_the_rggb_collection(tmp_path, capsys) -> None:
+    from splitcam.cli import main
+    from splitcam.recon.design import design_metasurface
+
+    small = Optics(pitch=0.5, samples=4, distance=1.0, wavelengths=[450.0, 550.0, 650.0], guard=1)
+    result = design_metasurface((2, 2), small, init="random", steps=15, lr=0.1, objective="routing")
+    before, after = np.array(result.collection_before), np.array(result.collection_after)
+    assert np.prod(after) ** (1 / 3) > np.prod(before) ** (1 / 3)  # the balanced objective
+    assert result.history[-1] > result.history[0]
+    assert result.pattern.kernels.sum((2, 3)).max() <= 1.0
+    with pytest.raises(ValueError, match="2x2"):
+        design_metasurface((1, 3), small, steps=1, objective="routing")
+    with pytest.raises(ValueError, match="lmmse or routing"):
+        design_metasurface((2, 2), small, steps=1, objective="colour")
+    args = ["optics", "--profile", "lens", "--pitch", "0.5", "--samples", "4", "--distance", "1",
+            "--design", "--objective", "routing", "--steps", "3", "--quiet",
+            "--out", str(tmp_path / "r.toml")]
+    assert main(args) == 0
+    assert "collection efficiency into RGGB pixels" in capsys.readouterr().out

@@ -527,6 +527,7 @@ def cmd_optics(args: argparse.Namespace) -> int:
             seed=args.seed,
             name=out.stem,
             progress=not args.quiet,
+            objective=args.objective,
         )
         height, pattern = result.height, result.pattern
         for s in result.psnr_before:
@@ -915,6 +916,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--max-height", type=float, default=1.2, help="µm (default 1.2)")
     p.add_argument("--kernel", type=int, default=3, help="kernel size (odd, default 3)")
     p.add_argument("--design", action="store_true", help="optimise the height map")
+    p.add_argument(
+        "--objective",
+        choices=["lmmse", "routing"],
+        default="lmmse",
+        help="with --design: the closed-form LMMSE of the reconstruction (default), or the "
+        "mean RGGB collection efficiency of a Bayer-type router (2x2)",
+    )
     p.add_argument("--steps", type=int, default=200)
     p.add_argument("--lr", type=float, default=0.1)
     p.add_argument("--seed", type=int, default=0)

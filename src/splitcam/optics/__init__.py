@@ -27,6 +27,7 @@ distances).
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -45,6 +46,7 @@ __all__ = [
     "lens_profile",
     "pattern_of",
     "profile",
+    "rggb_collection",
 ]
 
 
@@ -262,23 +264,34 @@ def pattern_of(
 BAYER_TARGET = ((0, 1), (1, 2))
 
 
-def bayer_collection(pattern: Pattern) -> list[float]:
-    """Per-colour collection efficiency of a 2x2 router: the share of each colour's light falling
-    on the period that reaches a pixel of that colour in an RGGB arrangement (what measured
-    routers report, e.g. Zou et al., Nat. Commun. 2022: 58/59/49 % peak for R/G/B)."""
-    if pattern.period != (2, 2):
-        raise ValueError(f"a Bayer-type router has a 2x2 period, got {pattern.period}")
-    k = pattern.kernels
-    kh, kw = k.shape[-2:]
-    eff = [0.0, 0.0, 0.0]
+def rggb_collection(kernels: torch.Tensor, layout: Sequence[Sequence[int]]) -> torch.Tensor:
+    """Per-colour collection efficiency ``(3,)`` of a 2x2 router's kernels, differentiable: the
+    share of each colour's light falling on the period that reaches a pixel of that colour in an
+    RGGB arrangement (R at (0, 0)).
+
+    Args:
+        kernels: ``(S, 3, kh, kw)`` splitter kernels (odd sizes, centre = own pixel).
+        layout: ``2 x 2`` splitter index of each site.
+    """
+    kh, kw = kernels.shape[-2:]
+    terms: list[list[torch.Tensor]] = [[], [], []]
     for i in range(2):
         for j in range(2):
-            s = int(pattern.layout[i][j])
+            k = kernels[int(layout[i][j])]
             for a in range(kh):
                 for b in range(kw):
                     target = BAYER_TARGET[(i + a - kh // 2) % 2][(j + b - kw // 2) % 2]
-                    eff[target] += float(k[s, target, a, b]) / 4.0
-    return eff
+                    terms[target].append(k[target, a, b])
+    return torch.stack([torch.stack(t).sum() / 4.0 for t in terms])
+
+
+def bayer_collection(pattern: Pattern) -> list[float]:
+    """Per-colour collection efficiency of a 2x2 router pattern (:func:`rggb_collection`): what
+    measured routers report, e.g. Zou et al., Nat. Commun. 2022: 58/59/49 % peak for R/G/B."""
+    if pattern.period != (2, 2):
+        raise ValueError(f"a Bayer-type router has a 2x2 period, got {pattern.period}")
+    kernels = torch.tensor(np.array(pattern.kernels))
+    return [float(v) for v in rggb_collection(kernels, pattern.layout)]
 
 
 class MetasurfaceSensor(SplitterSensor):

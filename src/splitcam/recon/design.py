@@ -282,7 +282,9 @@ def design_pattern(
 @dataclass
 class MetasurfaceDesign:
     """What :func:`design_metasurface` found: the height map (µm), its pattern, the closed-form
-    LMMSE PSNR per sigma before and after, and the objective at every step (dB)."""
+    LMMSE PSNR per sigma before and after, the RGGB collection efficiency before and after (2x2
+    periods), and the objective at every step (dB for ``lmmse``, the geometric mean efficiency
+    for ``routing``)."""
 
     height: torch.Tensor
     start: torch.Tensor
@@ -291,6 +293,9 @@ class MetasurfaceDesign:
     psnr_after: dict[float, float]
     history: list[float] = field(default_factory=list)
     seconds: float = 0.0
+    objective: str = "lmmse"
+    collection_before: list[float] | None = None
+    collection_after: list[float] | None = None
 
 
 def design_metasurface(
@@ -306,12 +311,21 @@ def design_metasurface(
     statistics: ImageStatistics | None = None,
     name: str = "metasurface",
     progress: bool = False,
+    objective: str = "lmmse",
 ) -> MetasurfaceDesign:
-    """Optimise a metasurface height map for the closed-form LMMSE (SPEC sections 10 and 12).
+    """Optimise a metasurface height map for the closed-form LMMSE (SPEC sections 10 and 12), or
+    for Bayer-type routing.
 
-    The height is ``h_max * sigmoid(z)`` (always in ``[0, h_max]``); Adam on ``z`` maximises
-    ``-10 log10`` of the closed-form LMMSE error averaged over ``sigmas``, through
-    :func:`splitcam.optics.kernels_of` (differentiable). No images are needed.
+    The height is ``h_max * sigmoid(z)`` (always in ``[0, h_max]``); Adam on ``z`` maximises,
+    through :func:`splitcam.optics.kernels_of` (differentiable), with no images:
+
+    - ``objective="lmmse"``: ``-10 log10`` of the closed-form LMMSE error averaged over
+      ``sigmas`` (what the reconstruction gains);
+    - ``objective="routing"``: the geometric mean of the R, G and B collection efficiencies into
+      an RGGB pixel arrangement (:func:`splitcam.optics.rggb_collection`; 2x2 periods), the
+      figure of merit of published colour routers. The geometric mean, because the arithmetic
+      one was measured to settle on lopsided routers (default geometry, random start, 600 steps:
+      R 13 %, G 30 %, B 35 %; the geometric mean: 18 / 31 / 26 % in 400).
 
     Args:
         period: ``(Ph, Pw)`` of the router.
@@ -320,10 +334,14 @@ def design_metasurface(
             the distance) or a height map.
         steps, lr, seed, radius, statistics, sigmas: As :func:`design_pattern`.
     """
-    from ..optics import kernels_of, pattern_of, profile
+    from ..optics import kernels_of, pattern_of, profile, rggb_collection
     from ..physics.sensor import pixel_kernels
 
     sigma_list = _check_sigmas(sigmas)
+    if objective not in ("lmmse", "routing"):
+        raise ValueError(f"objective must be lmmse or routing, got {objective!r}")
+    if objective == "routing" and tuple(period) != (2, 2):
+        raise ValueError(f"the routing objective needs a 2x2 (RGGB) period, got {tuple(period)}")
     if isinstance(init, torch.Tensor):
         start = init.to(torch.float64)
         shape = (period[0] * optics.samples, period[1] * optics.samples)
@@ -344,8 +362,19 @@ def design_metasurface(
         kernels = pixel_kernels(kernels_of(height, period, optics), layout)
         return closed_form_mse(kernels, sig, statistics=stats, radius=radius)
 
+    def collection(height: torch.Tensor) -> list[float] | None:
+        if tuple(period) != (2, 2):
+            return None
+        return rggb_collection(kernels_of(height, period, optics), layout).tolist()
+
+    def value_of(height: torch.Tensor) -> torch.Tensor:
+        if objective == "routing":
+            return rggb_collection(kernels_of(height, period, optics), layout).log().mean().exp()
+        return _psnr(mse_of(height).mean())
+
     with torch.no_grad():
         before = mse_of(start)
+        collection_before = collection(start)
     optimizer = torch.optim.Adam([z], lr=lr)
     history: list[float] = []
     bar = None
@@ -355,19 +384,23 @@ def design_metasurface(
         bar = tqdm(total=steps, desc="metasurface design", unit="step")
     began = time.perf_counter()
     for _ in range(steps):
-        value = _psnr(mse_of(hmax * torch.sigmoid(z)).mean())
+        value = value_of(hmax * torch.sigmoid(z))
         optimizer.zero_grad(set_to_none=True)
         (-value).backward()
         optimizer.step()
         history.append(value.item())
         if bar is not None:
-            bar.set_postfix(dB=f"{history[-1]:.3f}", refresh=False)
+            bar.set_postfix(
+                {"dB" if objective == "lmmse" else "efficiency": f"{history[-1]:.3f}"},
+                refresh=False,
+            )
             bar.update(1)
     if bar is not None:
         bar.close()
     height = (hmax * torch.sigmoid(z)).detach()
     with torch.no_grad():
         after = mse_of(height)
+        collection_after = collection(height)
     return MetasurfaceDesign(
         height=height,
         start=start,
@@ -376,4 +409,7 @@ def design_metasurface(
         psnr_after={s: float(_psnr(m)) for s, m in zip(sigma_list, after, strict=True)},
         history=history,
         seconds=time.perf_counter() - began,
+        objective=objective,
+        collection_before=collection_before,
+        collection_after=collection_after,
     )
