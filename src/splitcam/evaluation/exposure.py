@@ -65,7 +65,7 @@ def exposure_study(
 
         total = (len(patterns) + len(methods)) * len(photons) * len(images)
         bar = tqdm(total=total, desc="exposure study")
-    todo = [(name, closed_form_lmmse(get(name))) for name in patterns]
+    todo = [(get(p).name, closed_form_lmmse(get(p))) for p in patterns]  # files: their name
     todo += [(m.name, m) for m in methods]
     for name, method in todo:
         sensor = SplitterSensor(method.pattern)

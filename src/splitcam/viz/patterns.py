@@ -142,3 +142,45 @@ def draw_pattern(pattern: Pattern, out: str | os.PathLike | None = None, *, dpi:
         Path(out).parent.mkdir(parents=True, exist_ok=True)
         fig.savefig(out, dpi=dpi)
     return fig
+
+
+def draw_height_maps(
+    heights: list[tuple[str, np.ndarray]],
+    out: str | os.PathLike,
+    *,
+    period: tuple[int, int] = (2, 2),
+    pitch: float | list[float] = 1.0,
+    max_height: float | list[float] = 1.2,
+) -> Path:
+    """Metasurface height maps of one ``period`` side by side (µm, each coloured from 0 to its
+    ``max_height``), the pixel boundaries drawn as white lines; ``pitch`` (µm, one or one per
+    map) scales the axes."""
+    from matplotlib.figure import Figure
+
+    n = len(heights)
+    pitches = pitch if isinstance(pitch, list) else [pitch] * n
+    tops = max_height if isinstance(max_height, list) else [max_height] * n
+    cols = min(n, 4)
+    rows = -(-n // cols)
+    fig = Figure(figsize=(3.1 * cols, 2.9 * rows))
+    axes = fig.subplots(rows, cols, squeeze=False)
+    for ax in axes.flat[n:]:
+        ax.set_visible(False)
+    for ax, (title, h), p, top in zip(axes.flat, heights, pitches, tops, strict=False):
+        h = np.asarray(h)
+        ph, pw = period
+        extent = (0, pw * p, ph * p, 0)
+        image = ax.imshow(h, cmap="viridis", vmin=0, vmax=top, extent=extent)
+        for k in range(1, ph):
+            ax.axhline(k * p, color="white", lw=0.8)
+        for k in range(1, pw):
+            ax.axvline(k * p, color="white", lw=0.8)
+        ax.set_title(title, fontsize=8)
+        ax.set_xlabel("µm", fontsize=7)
+        ax.tick_params(labelsize=6)
+        fig.colorbar(image, ax=ax, fraction=0.046, pad=0.03, label="height (µm)")
+    fig.tight_layout()
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=120)
+    return out
