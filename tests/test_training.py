@@ -647,3 +647,45 @@ def test_a_run_past_its_time_limit_does_no_more_steps_on_resume(image_folder, tm
     assert 1 <= first.step < 50
     again = train(config, resume=True, progress=False)
     assert again.step == first.step
+
+
+def _weights(run) -> dict:
+    tensors = ckpt_io.load(run).tensors
+    return {k: v for k, v in tensors.items() if k.startswith("model/network.")}
+
+
+def test_spike_guard_skips_the_update_of_an_outlier_step(image_folder, tmp_path):
+    """With a spike factor below 1, every step after the first 20 (the median needs a history)
+    whose loss exceeds the recent median is an outlier: its update is not applied, it is counted
+    in the log, and the weights are those of the steps that were applied. A run without the guard
+    changes the weights on those steps."""
+    base = {"optim.steps": 30, "run.log_every": 30, "run.checkpoint_every": 20,
+            "run.val_every": 1000, "optim.warmup_steps": 0, "optim.schedule": "constant"}
+    guarded = tiny(image_folder, tmp_path / "g", **base, **{"optim.spike_factor": 1e-6})
+    train(guarded, progress=False)
+    rows = [json.loads(x) for x in (tmp_path / "g/metrics.jsonl").read_text().splitlines()]
+    assert [r["skipped"] for r in rows if "skipped" in r] == [10]
+    assert all(r["grad_norm_max"] > 0 for r in rows if "grad_norm_max" in r)
+    at_30 = _weights(tmp_path / "g")
+    # the same run stopped at step 20 has the same weights: steps 21-30 changed nothing
+    train(tiny(image_folder, tmp_path / "g20", **{**base, "optim.steps": 20},
+               **{"optim.spike_factor": 1e-6}), progress=False)
+    at_20 = _weights(tmp_path / "g20")
+    assert all(torch.equal(at_30[k], at_20[k]) for k in at_20)
+    train(tiny(image_folder, tmp_path / "free", **base), progress=False)
+    free = _weights(tmp_path / "free")
+    assert any(not torch.equal(free[k], at_20[k]) for k in at_20)
+
+
+def test_gradient_clipping_bounds_the_update(image_folder, tmp_path):
+    """Clipping the gradient norm to 1e-12 leaves Adam's update at ~lr * 1e-12 / eps: the
+    weights barely move, where an unclipped run moves them by about lr per step."""
+    base = {"optim.steps": 5, "run.val_every": 1000, "optim.warmup_steps": 0}
+    train(tiny(image_folder, tmp_path / "c", **base, **{"optim.clip_grad": 1e-12}),
+          progress=False)
+    train(tiny(image_folder, tmp_path / "f", **base), progress=False)
+    train(tiny(image_folder, tmp_path / "z", **{**base, "optim.steps": 0}), progress=False)
+    start, clipped, free = (_weights(tmp_path / n) for n in ("z", "c", "f"))
+    moved = max(float((clipped[k] - start[k]).abs().max()) for k in start)
+    moved_free = max(float((free[k] - start[k]).abs().max()) for k in start)
+    assert moved < 1e-5 < 1e-3 < moved_free

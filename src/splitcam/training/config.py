@@ -115,6 +115,14 @@ class OptimConfig:
     )
     warmup_steps: int = _opt(100, "linear learning-rate warm-up steps (0: none)")
     betas: list[float] = _opt([0.9, 0.999], "Adam betas")
+    clip_grad: float | None = _opt(
+        None, "clip the global gradient norm to this (none: no clipping)"
+    )
+    spike_factor: float | None = _opt(
+        None,
+        "skip the update of a step whose loss exceeds this many times the median loss of the "
+        "last 100 steps, or is not finite (none: never skip)",
+    )
     sigma_min: float = _opt(0.0, "smallest training noise sigma (8-bit units)")
     sigma_max: float = _opt(30.0, "largest training noise sigma (8-bit units)")
     per_sample_sigma: bool = _opt(

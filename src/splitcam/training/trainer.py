@@ -3,11 +3,13 @@ validation, logs, and DistributedDataParallel when started by ``torchrun``."""
 
 from __future__ import annotations
 
+import collections
 import contextlib
 import json
 import math
 import os
 import signal
+import statistics
 import time
 import warnings
 from dataclasses import dataclass
@@ -596,6 +598,9 @@ def _train(
     last: dict[str, float] = {}
     last_batch: torch.Tensor | None = None
     window_loss, window_n, data_time = 0.0, 0, 0.0
+    window_grad, window_skipped = 0.0, 0  # largest gradient norm, updates skipped as spikes
+    recent: collections.deque[float] = collections.deque(maxlen=100)  # losses of applied steps
+    trainable = [p for g in optimizer.param_groups for p in g["params"]]
     t_window = time.perf_counter()
     interrupted = False
     # A resumed run whose time limit is already spent does no more steps.
@@ -624,14 +629,30 @@ def _train(
             loss = F.mse_loss(pred.float(), batch)
             optimizer.zero_grad(set_to_none=True)
             loss.backward()
-            optimizer.step()
+            value = loss.item()
+            grad_norm = float(
+                torch.nn.utils.clip_grad_norm_(
+                    trainable, config.optim.clip_grad or math.inf, foreach=True
+                )
+            )
+            spike = not math.isfinite(value) or (
+                config.optim.spike_factor is not None
+                and len(recent) >= 20
+                and value > config.optim.spike_factor * statistics.median(recent)
+            )
+            if _agree(spike, dist_info):
+                window_skipped += 1  # the update of an outlier batch is not applied
+            else:
+                optimizer.step()
+                recent.append(value)
             step += 1
             train_seconds += time.perf_counter() - t0
             if dist_info.world_size > 1:
                 # Every rank must use the same learning rate, which depends on the time.
                 train_seconds = _max_over_ranks(train_seconds)
-            window_loss += loss.item()
+            window_loss += value if math.isfinite(value) else 0.0
             window_n += 1
+            window_grad = max(window_grad, grad_norm)
             if bar is not None:
                 bar.update(1)
             if time_limit_s is not None and train_seconds >= time_limit_s:
@@ -653,6 +674,8 @@ def _train(
                     / elapsed,
                     "data_frac": data_time / elapsed,
                     "lr": optimizer.param_groups[0]["lr"],
+                    "grad_norm_max": window_grad,
+                    "skipped": window_skipped,
                 }
             if val_now and dist_info.is_main:
                 t_val = time.perf_counter()
@@ -674,6 +697,7 @@ def _train(
                     bar.set_postfix(post, refresh=False)
             if log_now:
                 window_loss, window_n, data_time = 0.0, 0, 0.0
+                window_grad, window_skipped = 0.0, 0
                 t_window = time.perf_counter()
             if _agree(stop.requested or timed_out, dist_info):
                 interrupted = not timed_out
