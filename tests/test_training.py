@@ -654,27 +654,46 @@ def _weights(run) -> dict:
     return {k: v for k, v in tensors.items() if k.startswith("model/network.")}
 
 
-def test_spike_guard_skips_the_update_of_an_outlier_step(image_folder, tmp_path):
-    """With a spike factor below 1, every step after the first 20 (the median needs a history)
-    whose loss exceeds the recent median is an outlier: its update is not applied, it is counted
-    in the log, and the weights are those of the steps that were applied. A run without the guard
-    changes the weights on those steps."""
-    base = {"optim.steps": 30, "run.log_every": 30, "run.checkpoint_every": 20,
+def test_divergence_rolls_back_and_halves_the_learning_rate(image_folder, tmp_path):
+    """A divergence factor below 1 makes step 21 (the first with 20 losses of history) a
+    divergence: its update is not applied, the weights go back to the step-0 snapshot, and the
+    learning rate is halved from there on; the checkpoint records the scale and a resumed run
+    keeps it. Without divergence the rate is the schedule's."""
+    base = {"optim.steps": 25, "run.log_every": 1, "run.checkpoint_every": 100,
             "run.val_every": 1000, "optim.warmup_steps": 0, "optim.schedule": "constant"}
-    guarded = tiny(image_folder, tmp_path / "g", **base, **{"optim.spike_factor": 1e-6})
-    train(guarded, progress=False)
+    train(tiny(image_folder, tmp_path / "g", **base, **{"optim.divergence_factor": 1e-6}),
+          progress=False)
     rows = [json.loads(x) for x in (tmp_path / "g/metrics.jsonl").read_text().splitlines()]
-    assert [r["skipped"] for r in rows if "skipped" in r] == [10]
-    assert all(r["grad_norm_max"] > 0 for r in rows if "grad_norm_max" in r)
-    at_30 = _weights(tmp_path / "g")
-    # the same run stopped at step 20 has the same weights: steps 21-30 changed nothing
-    train(tiny(image_folder, tmp_path / "g20", **{**base, "optim.steps": 20},
-               **{"optim.spike_factor": 1e-6}), progress=False)
-    at_20 = _weights(tmp_path / "g20")
-    assert all(torch.equal(at_30[k], at_20[k]) for k in at_20)
+    by_step = {r["step"]: r for r in rows if "rollbacks" in r}
+    assert [s for s, r in by_step.items() if r["rollbacks"]] == [21]
+    assert by_step[20]["lr"] == pytest.approx(1e-3) and by_step[22]["lr"] == pytest.approx(5e-4)
+    assert ckpt_io.load(tmp_path / "g").meta["lr_scale"] == 0.5
+    train(tiny(image_folder, tmp_path / "g", **{**base, "optim.steps": 27},
+               **{"optim.divergence_factor": None}), resume=True, progress=False)
+    rows = [json.loads(x) for x in (tmp_path / "g/metrics.jsonl").read_text().splitlines()]
+    assert [r["lr"] for r in rows if r.get("step") in (26, 27)] == pytest.approx([5e-4, 5e-4])
     train(tiny(image_folder, tmp_path / "free", **base), progress=False)
-    free = _weights(tmp_path / "free")
-    assert any(not torch.equal(free[k], at_20[k]) for k in at_20)
+    rows = [json.loads(x) for x in (tmp_path / "free/metrics.jsonl").read_text().splitlines()]
+    assert all(r["lr"] == pytest.approx(1e-3) and r["rollbacks"] == 0 for r in rows if "lr" in r)
+
+
+def test_divergence_guard_restores_the_older_snapshot() -> None:
+    from splitcam.training.guard import DivergenceGuard
+
+    model = torch.nn.Linear(2, 1)
+    optimizer = torch.optim.Adam(model.parameters(), lr=0.1)
+    guard = DivergenceGuard(10.0, every=3, min_history=2)
+    states = []
+    for _ in range(7):  # snapshots after 0, 3 and 6 healthy steps: kept 3 and 6
+        states.append(model.weight.detach().clone())
+        guard.applied(1.0, model, optimizer)
+        model.weight.data += 1.0
+    assert not guard.diverged(5.0) and guard.diverged(11.0) and guard.diverged(float("nan"))
+    guard.roll_back(model, optimizer)
+    assert torch.equal(model.weight, states[3]) and guard.lr_scale == 0.5
+    assert not guard.diverged(1e9)  # the window starts afresh
+    with pytest.raises(ValueError, match="factor"):
+        DivergenceGuard(-1.0)
 
 
 def test_gradient_clipping_bounds_the_update(image_folder, tmp_path):

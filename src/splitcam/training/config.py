@@ -118,10 +118,11 @@ class OptimConfig:
     clip_grad: float | None = _opt(
         None, "clip the global gradient norm to this (none: no clipping)"
     )
-    spike_factor: float | None = _opt(
-        None,
-        "skip the update of a step whose loss exceeds this many times the median loss of the "
-        "last 100 steps, or is not finite (none: never skip)",
+    divergence_factor: float | None = _opt(
+        20.0,
+        "a step whose loss exceeds this many times the median of the last 100 (or is not "
+        "finite) diverged: roll back 50-100 steps and halve the learning rate (none: only "
+        "non-finite losses; see docs/results/divergence.md)",
     )
     sigma_min: float = _opt(0.0, "smallest training noise sigma (8-bit units)")
     sigma_max: float = _opt(30.0, "largest training noise sigma (8-bit units)")

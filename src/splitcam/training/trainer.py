@@ -3,13 +3,12 @@ validation, logs, and DistributedDataParallel when started by ``torchrun``."""
 
 from __future__ import annotations
 
-import collections
 import contextlib
 import json
 import math
 import os
 import signal
-import statistics
+import sys
 import time
 import warnings
 from dataclasses import dataclass
@@ -30,6 +29,7 @@ from ..recon.design import design_pattern
 from ..recon.networks import build_network
 from . import checkpoint as ckpt_io
 from .config import ConfigError, TrainConfig
+from .guard import DivergenceGuard
 from .schedule import learning_rate
 from .schedule import progress as progress_of
 
@@ -513,6 +513,11 @@ def _train(
             group["peak_lr"] = peak
             group["betas"] = tuple(config.optim.betas)
 
+    guard = DivergenceGuard(
+        config.optim.divergence_factor,
+        lr_scale=float(loaded.meta.get("lr_scale", 1.0)) if loaded is not None else 1.0,
+    )
+
     model: torch.nn.Module = system
     if dist_info.world_size > 1:
         from torch.nn.parallel import DistributedDataParallel
@@ -566,6 +571,7 @@ def _train(
             "optimizer": opt_meta,
             "world_size": dist_info.world_size,
             "train_seconds": train_seconds,
+            "lr_scale": guard.lr_scale,
             "device": device_name(device),
             "precision": "bf16" if fast else "fp32",
             "train_images": len(cache),
@@ -598,8 +604,7 @@ def _train(
     last: dict[str, float] = {}
     last_batch: torch.Tensor | None = None
     window_loss, window_n, data_time = 0.0, 0, 0.0
-    window_grad, window_skipped = 0.0, 0  # largest gradient norm, updates skipped as spikes
-    recent: collections.deque[float] = collections.deque(maxlen=100)  # losses of applied steps
+    window_grad, window_rollbacks = 0.0, 0  # largest gradient norm, divergences rolled back
     trainable = [p for g in optimizer.param_groups for p in g["params"]]
     t_window = time.perf_counter()
     interrupted = False
@@ -616,7 +621,7 @@ def _train(
             for group in optimizer.param_groups:
                 group["lr"] = learning_rate(
                     config.optim.schedule,
-                    group["peak_lr"],
+                    group["peak_lr"] * guard.lr_scale,
                     step,
                     config.optim.warmup_steps,
                     run_progress,
@@ -635,16 +640,19 @@ def _train(
                     trainable, config.optim.clip_grad or math.inf, foreach=True
                 )
             )
-            spike = not math.isfinite(value) or (
-                config.optim.spike_factor is not None
-                and len(recent) >= 20
-                and value > config.optim.spike_factor * statistics.median(recent)
-            )
-            if _agree(spike, dist_info):
-                window_skipped += 1  # the update of an outlier batch is not applied
+            if _agree(guard.diverged(value), dist_info):
+                # Not applied; back to weights from before the instability, at a lower rate.
+                guard.roll_back(system, optimizer)
+                window_rollbacks += 1
+                if dist_info.is_main:
+                    print(
+                        f"step {step + 1}: loss {value:.3g} diverged; rolled back and scaled "
+                        f"the learning rate by {guard.lr_scale:g}",
+                        file=sys.stderr,
+                    )
             else:
                 optimizer.step()
-                recent.append(value)
+                guard.applied(value, system, optimizer)
             step += 1
             train_seconds += time.perf_counter() - t0
             if dist_info.world_size > 1:
@@ -675,7 +683,8 @@ def _train(
                     "data_frac": data_time / elapsed,
                     "lr": optimizer.param_groups[0]["lr"],
                     "grad_norm_max": window_grad,
-                    "skipped": window_skipped,
+                    "rollbacks": window_rollbacks,
+                    "lr_scale": guard.lr_scale,
                 }
             if val_now and dist_info.is_main:
                 t_val = time.perf_counter()
@@ -697,7 +706,7 @@ def _train(
                     bar.set_postfix(post, refresh=False)
             if log_now:
                 window_loss, window_n, data_time = 0.0, 0, 0.0
-                window_grad, window_skipped = 0.0, 0
+                window_grad, window_rollbacks = 0.0, 0
                 t_window = time.perf_counter()
             if _agree(stop.requested or timed_out, dist_info):
                 interrupted = not timed_out
