@@ -122,7 +122,7 @@ class OptimConfig:
         20.0,
         "a step whose loss exceeds this many times the median of the last 100 (or is not "
         "finite) diverged: roll back 50-100 steps and halve the learning rate (none: only "
-        "non-finite losses; see docs/results/divergence.md)",
+        "non-finite losses; see docs/results/divergence/)",
     )
     sigma_min: float = _opt(0.0, "smallest training noise sigma (8-bit units)")
     sigma_max: float = _opt(30.0, "largest training noise sigma (8-bit units)")

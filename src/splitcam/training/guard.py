@@ -1,6 +1,6 @@
 """A divergence guard for training: roll back and lower the learning rate when the loss explodes.
 
-Measured here (docs/results/divergence.md): the default recipe (Adam peaking at 1e-3, batch 8,
+Measured here (docs/results/divergence/): the default recipe (Adam peaking at 1e-3, batch 8,
 bfloat16) trained patterns A and D stably for 1160 and 2160 steps, then the gradient norm grew
 five-fold within 20 steps and the loss jumped from 1e-3 to 1e4-1e10 and never recovered: the
 learning rate had become too large for the network where training had taken it (an Adam
