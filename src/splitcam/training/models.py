@@ -128,7 +128,10 @@ def provenance_of(loaded: ckpt_io.Checkpoint, run_dir: Path | None = None) -> di
             "pattern_init": config.get("pattern", {}).get("init"),
             "design_steps": config.get("pattern", {}).get("design_steps"),
             "time_limit_min": run.get("time_limit"),
+            "divergence_factor": optim.get("divergence_factor"),
         },
+        # the divergence guard's learning-rate scale at the end (1: it never rolled back)
+        "lr_scale": meta.get("lr_scale", 1.0),
         "finished": meta.get("time"),
     }
     segments = [*before.get("segments", []), segment]
