@@ -155,7 +155,7 @@ def test_design_raises_the_closed_form_psnr_and_the_cli_writes_its_files(tmp_pat
     assert "collection efficiency into RGGB pixels" in capsys.readouterr().out
     assert patterns.load(out).period == (2, 2)
     assert np.load(tmp_path / "router.npy").shape == (8, 8)
-    assert (tmp_path / "router.png").is_file()
+    assert (tmp_path / "router.png").is_file() and (tmp_path / "router_height.png").is_file()
     assert main(["optics", "--distance", "-1", "--out", str(out)]) == 1
     assert "distance" in capsys.readouterr().err
 
@@ -181,6 +181,15 @@ def test_training_a_metasurface_with_the_network(tmp_path) -> None:
     learned = system.sensor.to_pattern()
     assert learned.provenance == "optics" and learned.kernels.sum((2, 3)).max() <= 1.0
     assert not np.allclose(learned.kernels, start.to_pattern().kernels, atol=1e-4)
+    # the run exports the learned profile and the pattern it makes
+    height = np.load(tmp_path / "run/height.npy")
+    remade = pattern_of(torch.from_numpy(height), (2, 2), start.optics)  # the optics again
+    np.testing.assert_allclose(remade.kernels, learned.kernels, atol=1e-5)
+    assert (tmp_path / "run/height.png").is_file()
+    from splitcam import patterns
+
+    exported = patterns.load(tmp_path / "run/pattern.toml")
+    np.testing.assert_allclose(exported.kernels, learned.kernels, atol=1e-6)
     with pytest.raises(Exception, match="metasurface"):
         build_system(
             tiny_config(

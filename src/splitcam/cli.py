@@ -499,7 +499,7 @@ def cmd_optics(args: argparse.Namespace) -> int:
 
     from . import patterns
     from .optics import Optics, bayer_collection, pattern_of, profile
-    from .viz.patterns import draw_pattern
+    from .viz.patterns import draw_height_maps, draw_pattern
 
     period = tuple(int(v) for v in args.period.lower().split("x"))
     if len(period) != 2 or min(period) < 1:
@@ -542,13 +542,24 @@ def cmd_optics(args: argparse.Namespace) -> int:
     np.save(out.with_suffix(".npy"), height.cpu().numpy())
     fig = draw_pattern(pattern, out.with_suffix(".png"))
     del fig
+    heights_png = out.with_name(out.stem + "_height.png")
+    draw_height_maps(
+        [(f"{out.stem}: height (µm)", height.cpu().numpy())],
+        heights_png,
+        period=period,
+        pitch=optics.pitch,
+        max_height=optics.max_height,
+    )
     collected = pattern.kernels.sum((2, 3))
     for i, row in enumerate(collected):
         print(f"pixel {i}: collected R {row[0]:.3f}, G {row[1]:.3f}, B {row[2]:.3f} of its light")
     if period == (2, 2):
         r, g, b = bayer_collection(pattern)
         print(f"collection efficiency into RGGB pixels: R {r:.1%}, G {g:.1%}, B {b:.1%}")
-    print(f"wrote {out}, {out.with_suffix('.npy')} (height map, µm) and {out.with_suffix('.png')}")
+    print(
+        f"wrote {out}, {out.with_suffix('.npy')} (height map, µm), {out.with_suffix('.png')} "
+        f"and {heights_png}"
+    )
     return 0
 
 

@@ -129,6 +129,23 @@ def _metasurface_sensor(spec: str, period: tuple[int, int], seed: int) -> Splitt
         raise ConfigError(f"pattern.metasurface: {exc}") from None
 
 
+def _export_profile(sensor: Any, run_dir: Path) -> None:
+    """A metasurface run's learned height map: ``height.npy`` (µm) and ``height.png``."""
+    import numpy as np
+
+    from ..viz.patterns import draw_height_maps
+
+    height = sensor.height().detach().cpu().to(torch.float64).numpy()
+    np.save(run_dir / "height.npy", height)
+    draw_height_maps(
+        [("learned height map", height)],
+        run_dir / "height.png",
+        period=tuple(sensor.period),
+        pitch=sensor.optics.pitch,
+        max_height=sensor.optics.max_height,
+    )
+
+
 def device_name(device: torch.device) -> str:
     """What the run trained on, for provenance: ``cuda (NVIDIA H100 ...)`` or ``cpu (<model>,
     N threads)``."""
@@ -580,11 +597,13 @@ def _train(
             "time": time.strftime("%Y-%m-%dT%H:%M:%S"),
         }
         ckpt_io.save(ckpt_path, meta, tensors)
-        if config.pattern.learn:
+        if config.pattern.learn or config.pattern.metasurface:
             patterns.save(
                 system.sensor.to_pattern(f"{start_pattern['name']}-learned"),
                 run_dir / "pattern.toml",
             )
+        if config.pattern.metasurface:
+            _export_profile(system.sensor, run_dir)
 
     bar = None
     if progress and dist_info.is_main:
