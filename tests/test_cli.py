@@ -129,3 +129,14 @@ def test_reconstruct_fast_matches_float32(tmp_path):
         outs[len(flag)] = read_image(path)
     difference = np.abs(outs[0] - outs[1])
     assert difference.max() <= 4 / 255  # bfloat16 moves 8-bit values by a few levels at most
+
+
+def test_evaluate_draws_the_sigma_chart(tmp_path):
+    from splitcam.cli import main
+
+    out = tmp_path / "e"
+    args = ["evaluate", "--method", "malvar2004", "--max-images", "1", "--sigmas", "0", "10",
+            "--out", str(out), "--quiet"]
+    assert main(args) == 0
+    assert (out / "sigma_curves.png").stat().st_size > 0
+    assert not (out / "zoom").exists()  # a named method draws crops only with --save-images

@@ -293,6 +293,8 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
             crop=args.crop,
             progress=not args.quiet,
             resume=not args.restart,
+            # the main job (no method named) also draws the zoomed side-by-side crops
+            zoom_only=not chosen and not args.save_images,
         )
     except KeyboardInterrupt:
         print(
@@ -301,8 +303,18 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
         return 130
-    print(markdown_tables(summarise(rows)))
-    print(f"wrote {args.out}/per_image.csv, summary.json and table.md")
+    summary = summarise(rows)
+    print(markdown_tables(summary))
+    written = "per_image.csv, summary.json and table.md"
+    if len(sigmas) > 1:
+        from .viz.charts import sigma_chart
+
+        curves = [(name, entry["all"]) for name, entry in summary.items()]
+        sigma_chart(curves, Path(args.out) / "sigma_curves.png")
+        written += ", sigma_curves.png"
+    if not chosen or args.save_images:
+        written += " and the zoomed crops in zoom/"
+    print(f"wrote {args.out}/{written}")
     return 0
 
 

@@ -49,7 +49,9 @@ def sigma_chart(
         )
     ax1.set_xlabel("noise σ (8-bit units)")
     ax1.set_ylabel("PSNR (dB)")
-    ax1.set_title("PSNR (grey dashed: the paper's trained network)", fontsize=10)
+    ax1.set_title(
+        "PSNR (grey dashed: the paper's trained network)" if references else "PSNR", fontsize=10
+    )
     ax2.set_xlabel("noise σ (8-bit units)")
     ax2.set_ylabel("CIEDE2000 (lower is better)")
     ax2.set_title("colour error", fontsize=10)
