@@ -65,7 +65,8 @@ def exposure_study(
 
         total = (len(patterns) + len(methods)) * len(photons) * len(images)
         bar = tqdm(total=total, desc="exposure study")
-    todo = [(get(p).name, closed_form_lmmse(get(p))) for p in patterns]  # files: their name
+    loaded = [get(p) for p in patterns]  # a pattern file is labelled by its pattern's name
+    todo = [(p.name, closed_form_lmmse(p)) for p in loaded]
     todo += [(m.name, m) for m in methods]
     for name, method in todo:
         sensor = SplitterSensor(method.pattern)
