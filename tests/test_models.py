@@ -354,3 +354,31 @@ def test_reproduce_writes_the_paper_tables_from_shipped_models(
     assert "4 steps of batch 4" in text
     summary = json.loads((out / "evaluation" / "summary.json").read_text())
     assert set(summary) == {f"net-{n}" for n in ("A", "B", "C", "D", "E", "bayer", "D-opt")}
+
+
+def test_reproduce_tables_the_lmmse_of_every_pattern_beside_the_networks(
+    trained_run, image_folder, tmp_path, monkeypatch
+):
+    """With baselines, `reproduce` tables the training-free LMMSE of all six patterns (so patterns
+    without a shipped network are still compared) and each shipped network's gain over it; the
+    gain printed equals the difference of the two methods' means in summary.json."""
+    shipped = tmp_path / "shipped"
+    monkeypatch.setattr(models_module, "MODELS_DIR", shipped)
+    export_model(trained_run, shipped / "D", name="D")
+    out = tmp_path / "rep"
+    args = ["reproduce", "--datasets", str(image_folder), "--max-images", "2"]
+    assert main([*args, "--sigmas", "0", "10", "--out", str(out), "--quiet"]) == 0
+    text = (out / "reproduce.md").read_text()
+    summary = json.loads((out / "evaluation" / "summary.json").read_text())
+    assert {f"lmmse-{p}" for p in ("A", "B", "C", "D", "E", "bayer")} <= set(summary)
+    section = text.split("## Without training: the LMMSE of every pattern")[1]
+    lines = [line for line in section.splitlines() if line.startswith("| ")]
+    rows = {line.split(" | ")[0][2:]: line for line in lines}
+    assert {"A", "B", "C", "D", "E", "bayer", "bayer, Malvar 2004"} <= set(rows)
+    for s in ("0", "10"):
+        gain = summary["net-D"]["all"][s]["psnr"] - summary["lmmse-D"]["all"][s]["psnr"]
+        assert f"{summary['lmmse-D']['all'][s]['psnr']:.2f} / " in rows["D"]
+        assert f"(net {gain:+.2f})" in rows["D"]
+    assert "(net " not in rows["A"]  # no network for A shipped here
+    assert "LMMSE, holds: D ahead of A" in section or "LMMSE, **does not hold**: D ahead" in section
+    assert "Ranks by LMMSE PSNR among A–E: σ=0: " in section

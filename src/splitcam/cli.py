@@ -394,7 +394,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
 
 def cmd_reproduce(args: argparse.Namespace) -> int:
     from .evaluation.protocol import evaluate
-    from .evaluation.report import paper_tables
+    from .evaluation.report import TABLE1, paper_tables
     from .evaluation.tables import summarise
     from .methods import build_method, build_model
     from .training.models import load_model, model_names
@@ -417,7 +417,7 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     methods = [build_model(m, tile=args.tile, fast=args.fast) for m in rows.values()]
     if not args.no_baselines:
         methods.append(build_method("malvar2004"))
-        methods += [build_method("lmmse", pattern=p) for p in ("D", "bayer")]
+        methods += [build_method("lmmse", pattern=p) for p in (*TABLE1, "bayer")]
     datasets = load_datasets(args.datasets, args.max_images)
     names = {n for _, images in datasets for n, _ in images}
     zoom_spec = [z for z in ("kodim05", "kodim24") if z in names]
@@ -463,6 +463,7 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
         budgets=budgets,
         learned=learned,
         zooms=zooms,
+        baselines={r: f"lmmse-{r}" for r in (*TABLE1, "bayer")},
     )
     print(report.read_text(encoding="utf-8"))
     print(f"wrote {report}")
@@ -956,7 +957,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser(
         "reproduce",
         help="the paper's Tables 1-3 and Fig. 9 from the shipped models",
-        description="Evaluates the shipped models (and Malvar 2004, LMMSE of D and bayer) on "
+        description="Evaluates the shipped models (and Malvar 2004, the LMMSE of every pattern) on "
         "Kodak24 + McMaster at sigma 0-20 and writes OUT/reproduce.md: Table 1 with ranks, "
         "Tables 2 and 3, Fig. 9, the paper's conclusions checked, the learned patterns and the "
         "zoomed crops (kodim05 at sigma 10, kodim24 at sigma 5), beside the paper's numbers. "

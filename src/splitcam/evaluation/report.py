@@ -275,6 +275,7 @@ def paper_tables(
     budgets: dict[str, str] | None = None,
     learned: dict[str, patterns.Pattern] | None = None,
     zooms: list[str] | None = None,
+    baselines: dict[str, str] | None = None,
 ) -> Path:
     """``reproduce.md``: the paper's Tables 1-3 and Fig. 9 with our numbers beside the paper's,
     the conclusions checked, the learned patterns (Fig. 6) and the zoomed crops.
@@ -287,6 +288,10 @@ def paper_tables(
         budgets: Paper row name → one line on the training budget of our model.
         learned: Paper row name → learned pattern, drawn under ``patterns/``.
         zooms: Zoom figures (paths relative to ``out``) to link.
+        baselines: Paper row name (``A`` ... ``E``, ``bayer``) → a training-free method in
+            ``summary`` (the LMMSE of that pattern), tabled with ranks and the Table-1
+            conclusions checked on it: the patterns compared without any network, which also
+            covers patterns whose network is not shipped yet.
     """
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -395,6 +400,49 @@ def paper_tables(
     lines += ["", "## The paper's conclusions at our budget", ""]
     for statement, holds, numbers in checks(summary, rows, sigmas):
         lines.append(f"- {'holds' if holds else '**does not hold**'}: {statement} ({numbers})")
+    base = {r: m for r, m in (baselines or {}).items() if m in summary}
+    if base:
+        lines += [
+            "",
+            "## Without training: the LMMSE of every pattern",
+            "",
+            "The closed-form LMMSE (`--method lmmse`) of each pattern on the same images and "
+            "noise: no network, so every pattern is compared even where its network is not "
+            "shipped. Cells are PSNR dB / SSIM, then the shipped network's gain over it.",
+            "",
+            head,
+            rule,
+        ]
+        for row in (*TABLE1, "bayer"):
+            if row not in base:
+                continue
+            cells = []
+            for s in sigmas:
+                lm, net = summary[base[row]]["all"].get(s), ours(row, s)
+                cell = _cell(lm, None)
+                if lm is not None and net is not None:
+                    cell += f" (net {net['psnr'] - lm['psnr']:+.2f})"
+                cells.append(cell)
+            lines.append(f"| {row} | " + " | ".join(cells) + " |")
+        if "bayer+malvar2004" in summary:
+            malvar = summary["bayer+malvar2004"]["all"]
+            lines.append(
+                "| bayer, Malvar 2004 | "
+                + " | ".join(_cell(malvar.get(s), None) for s in sigmas)
+                + " |"
+            )
+        ranked = [r for r in TABLE1 if r in base]
+        if len(ranked) > 1:
+            per_sigma = {
+                s: _ranks({r: summary[base[r]]["all"][s]["psnr"] for r in ranked}) for s in sigmas
+            }
+            lines += ["", "Ranks by LMMSE PSNR among A–E: " + "; ".join(
+                f"σ={s}: " + " ".join(sorted(ranked, key=per_sigma[s].get)) for s in sigmas
+            ), ""]
+        for statement, holds, numbers in checks(summary, base, sigmas):
+            lines.append(
+                f"- LMMSE, {'holds' if holds else '**does not hold**'}: {statement} ({numbers})"
+            )
     if learned:
         lines += ["", "## Learned patterns (Fig. 6)", ""]
         (out / "patterns").mkdir(exist_ok=True)
