@@ -382,3 +382,17 @@ def test_reproduce_tables_the_lmmse_of_every_pattern_beside_the_networks(
     assert "(net " not in rows["A"]  # no network for A shipped here
     assert "LMMSE, holds: D ahead of A" in section or "LMMSE, **does not hold**: D ahead" in section
     assert "Ranks by LMMSE PSNR among A–E: σ=0: " in section
+
+
+def test_provenance_records_each_thread_count_of_a_resumed_run(image_folder, tmp_path):
+    """A run trained on 1 thread, then resumed on 2: the exported provenance says both, from the
+    run's changes.jsonl (the checkpoint alone only knows the last count)."""
+    out = tmp_path / "t"
+    train(_config(image_folder, out, **{"optim.steps": 2, "run.threads": 1}), progress=False)
+    config = _config(image_folder, out, **{"optim.steps": 4, "run.threads": 2})
+    train(config, resume=True, progress=False)
+    meta = json.loads(export_model(out, tmp_path / "m", name="m").with_suffix(".json").read_text())
+    segment = meta["provenance"]["segments"][-1]
+    assert segment["threads"] == [[0, 1], [2, 2]]
+    assert "1 thread, 2 from step 2)" in segment["device"]
+    assert meta["provenance"]["total_steps"] == 4

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import time
 from pathlib import Path
 from typing import Any
@@ -95,6 +96,42 @@ def _validation_curve(run_dir: Path, offset: int) -> list[dict[str, float]]:
     return curve
 
 
+def _thread_history(folder: Path, final: Any, steps: int) -> list[list[int]]:
+    """``[[from_step, threads], ...]`` of a run that was resumed with other thread counts, from
+    its ``changes.jsonl`` (one entry when it never changed). The checkpoint itself only knows the
+    last count, so without this a run trained mostly on 1 thread would claim 2."""
+    changes = []
+    path = folder / "changes.jsonl"
+    if path.is_file():
+        for line in path.read_text(encoding="utf-8").splitlines():
+            try:
+                entry = json.loads(line)
+                old, new = entry["changes"]["run.threads"]
+                changes.append((int(entry["step"]), old, new))
+            except (json.JSONDecodeError, KeyError, TypeError, ValueError):
+                continue
+    changes = [c for c in changes if c[0] < steps]
+    if not changes:
+        return [[0, final]]
+    history = [[0, changes[0][1]]]
+    for step, _, new in changes:
+        if history[-1][0] == step:
+            history[-1][1] = new
+        elif history[-1][1] != new:
+            history.append([step, new])
+    return history
+
+
+def _device_with_threads(device: str, history: list[list[int]]) -> str:
+    """``cpu (AMD EPYC, 2 threads)`` → ``cpu (AMD EPYC; 1 thread to step 11772, then 2)``."""
+    base = re.sub(r",? ?\d+ threads?\)$", ")", str(device))
+    parts = [f"{history[0][1]} thread{'s' if history[0][1] != 1 else ''}"]
+    parts += [f"{threads} from step {step}" for step, threads in history[1:]]
+    if base.endswith(")"):
+        return base[:-1] + "; " + ", ".join(parts) + ")"
+    return f"{base} ({', '.join(parts)})"
+
+
 def provenance_of(loaded: ckpt_io.Checkpoint, run_dir: Path | None = None) -> dict[str, Any]:
     """The accumulated provenance of a checkpoint: what it was started from plus this run."""
     meta = loaded.meta
@@ -134,6 +171,11 @@ def provenance_of(loaded: ckpt_io.Checkpoint, run_dir: Path | None = None) -> di
         "lr_scale": meta.get("lr_scale", 1.0),
         "finished": meta.get("time"),
     }
+    folder = run_dir if run_dir is not None else Path(loaded.path).parent
+    history = _thread_history(folder, run.get("threads"), segment["steps"])
+    if len(history) > 1:
+        segment["threads"] = history
+        segment["device"] = _device_with_threads(segment["device"], history)
     segments = [*before.get("segments", []), segment]
     curve = list(before.get("validation", []))
     if run_dir is not None:
