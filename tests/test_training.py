@@ -708,3 +708,16 @@ def test_gradient_clipping_bounds_the_update(image_folder, tmp_path):
     moved = max(float((clipped[k] - start[k]).abs().max()) for k in start)
     moved_free = max(float((free[k] - start[k]).abs().max()) for k in start)
     assert moved < 1e-5 < 1e-3 < moved_free
+
+
+def test_training_minutes_leave_out_the_pause_of_a_resumed_run():
+    """A run logged every 10 s, stopped for 80 minutes and resumed: the curves' time axis counts
+    the pause as one ordinary gap, and an uninterrupted run keeps its wall-clock minutes."""
+    from splitcam.viz.curves import active_minutes
+
+    times = [0, 10, 20, 30, 4830, 4840, 4850]
+    minutes = active_minutes([{"step": 10 * i, "time": t} for i, t in enumerate(times)])
+    assert minutes == pytest.approx([t / 60 for t in (0, 10, 20, 30, 40, 50, 60)])
+    steady = [0, 9, 21, 30, 41]
+    got = active_minutes([{"step": i, "time": t} for i, t in enumerate(steady)])
+    assert got == pytest.approx([t / 60 for t in steady])

@@ -113,6 +113,23 @@ def plot_run(run: str | os.PathLike, out: str | os.PathLike | None = None) -> Pa
     return out
 
 
+def active_minutes(rows: list[dict]) -> list[float]:
+    """Minutes of training at each logged row, with pauses left out: a gap between consecutive
+    rows longer than 10x their median gap (the run was stopped and resumed later, in another
+    session or after another run) counts as one median gap. Wall-clock time since the first
+    row would draw a resumed run as if it had trained through its pause."""
+    times = [float(r["time"]) for r in rows]
+    gaps = [b - a for a, b in zip(times, times[1:], strict=False)]
+    if not gaps:
+        return [0.0] * len(rows)
+    typical = sorted(gaps)[len(gaps) // 2]
+    minutes, total = [0.0], 0.0
+    for gap in gaps:
+        total += typical if gap > 10 * max(typical, 1e-9) else max(gap, 0.0)
+        minutes.append(total / 60)
+    return minutes
+
+
 def compare_runs(runs: list[str | os.PathLike], out: str | os.PathLike) -> Path:
     """Validation PSNR of several runs against wall-clock minutes and against steps: the
     picture of an equal-time comparison."""
@@ -123,10 +140,12 @@ def compare_runs(runs: list[str | os.PathLike], out: str | os.PathLike) -> Path:
     ax1, ax2 = fig.subplots(1, 2)
     colours = matplotlib.rcParams["axes.prop_cycle"].by_key()["color"]
     for i, run in enumerate(runs):
-        rows = [r for r in read_metrics(run) if "val_psnr" in r]
+        every = [r for r in read_metrics(run) if "time" in r]
+        active = active_minutes(every)
+        rows = [r for r in every if "val_psnr" in r]
         if not rows:
             raise ValueError(f"run {str(run)!r} has no validation results")
-        t0 = rows[0]["time"]
+        at = {id(r): m for r, m in zip(every, active, strict=True)}
         keys = sorted(
             (k for k in rows[0] if k.startswith("val_psnr_")),
             key=lambda k: float(k.rsplit("_", 1)[1]),
@@ -134,7 +153,7 @@ def compare_runs(runs: list[str | os.PathLike], out: str | os.PathLike) -> Path:
         for j, key in enumerate(keys):
             style = ["o-", "s--", "^:"][j % 3]
             label = f"{Path(run).name}, sigma {key.rsplit('_', 1)[1]}"
-            minutes = [(r["time"] - t0) / 60 for r in rows]
+            minutes = [at[id(r)] - at[id(rows[0])] for r in rows]
             ax1.plot(minutes, [r[key] for r in rows], style, color=colours[i], ms=3, label=label)
             ax2.plot(
                 [r["step"] for r in rows],
@@ -144,7 +163,7 @@ def compare_runs(runs: list[str | os.PathLike], out: str | os.PathLike) -> Path:
                 ms=3,
                 label=label,
             )
-    ax1.set_xlabel("wall-clock minutes since the first validation")
+    ax1.set_xlabel("training minutes since the first validation (pauses left out)")
     ax2.set_xlabel("step")
     ax2.set_xscale("symlog", linthresh=100)
     for ax in (ax1, ax2):
