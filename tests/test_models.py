@@ -381,6 +381,10 @@ def test_reproduce_tables_the_lmmse_of_every_pattern_beside_the_networks(
         assert f"(net {gain:+.2f})" in rows["D"]
     assert "(net " not in rows["A"]  # no network for A shipped here
     assert "LMMSE, holds: D ahead of A" in section or "LMMSE, **does not hold**: D ahead" in section
+    lmmse = {p: summary[f"lmmse-{p}"]["all"] for p in ("A", "D")}
+    d_ahead = all(lmmse["D"][s]["psnr"] > lmmse["A"][s]["psnr"] for s in ("0", "10"))
+    verdict = "holds" if d_ahead else "**does not hold**"
+    assert f"- LMMSE, {verdict}: D ahead of A at every σ" in section
     assert "Ranks by LMMSE PSNR among A–E: σ=0: " in section
 
 

@@ -433,12 +433,16 @@ def paper_tables(
             )
         ranked = [r for r in TABLE1 if r in base]
         if len(ranked) > 1:
-            per_sigma = {
-                s: _ranks({r: summary[base[r]]["all"][s]["psnr"] for r in ranked}) for s in sigmas
+            order = {
+                s: sorted(ranked, key=lambda r, s=s: -summary[base[r]]["all"][s]["psnr"])
+                for s in sigmas
             }
-            lines += ["", "Ranks by LMMSE PSNR among A–E: " + "; ".join(
-                f"σ={s}: " + " ".join(sorted(ranked, key=per_sigma[s].get)) for s in sigmas
-            ), ""]
+            lines += [
+                "",
+                "Ranks by LMMSE PSNR among A–E: "
+                + "; ".join(f"σ={s}: " + " ".join(order[s]) for s in sigmas),
+                "",
+            ]
         for statement, holds, numbers in checks(summary, base, sigmas):
             lines.append(
                 f"- LMMSE, {'holds' if holds else '**does not hold**'}: {statement} ({numbers})"

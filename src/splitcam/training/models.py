@@ -123,7 +123,7 @@ def _thread_history(folder: Path, final: Any, steps: int) -> list[list[int]]:
 
 
 def _device_with_threads(device: str, history: list[list[int]]) -> str:
-    """``cpu (AMD EPYC, 2 threads)`` → ``cpu (AMD EPYC; 1 thread to step 11772, then 2)``."""
+    """``cpu (AMD EPYC, 2 threads)`` → ``cpu (AMD EPYC; 1 thread, 2 from step 11772)``."""
     base = re.sub(r",? ?\d+ threads?\)$", ")", str(device))
     parts = [f"{history[0][1]} thread{'s' if history[0][1] != 1 else ''}"]
     parts += [f"{threads} from step {step}" for step, threads in history[1:]]

@@ -141,11 +141,11 @@ def compare_runs(runs: list[str | os.PathLike], out: str | os.PathLike) -> Path:
     colours = matplotlib.rcParams["axes.prop_cycle"].by_key()["color"]
     for i, run in enumerate(runs):
         every = [r for r in read_metrics(run) if "time" in r]
-        active = active_minutes(every)
-        rows = [r for r in every if "val_psnr" in r]
+        timed = [(r, m) for r, m in zip(every, active_minutes(every), strict=True)]
+        rows = [r for r, _ in timed if "val_psnr" in r]
         if not rows:
             raise ValueError(f"run {str(run)!r} has no validation results")
-        at = {id(r): m for r, m in zip(every, active, strict=True)}
+        val_minutes = [m for r, m in timed if "val_psnr" in r]
         keys = sorted(
             (k for k in rows[0] if k.startswith("val_psnr_")),
             key=lambda k: float(k.rsplit("_", 1)[1]),
@@ -153,7 +153,7 @@ def compare_runs(runs: list[str | os.PathLike], out: str | os.PathLike) -> Path:
         for j, key in enumerate(keys):
             style = ["o-", "s--", "^:"][j % 3]
             label = f"{Path(run).name}, sigma {key.rsplit('_', 1)[1]}"
-            minutes = [at[id(r)] - at[id(rows[0])] for r in rows]
+            minutes = [m - val_minutes[0] for m in val_minutes]
             ax1.plot(minutes, [r[key] for r in rows], style, color=colours[i], ms=3, label=label)
             ax2.plot(
                 [r["step"] for r in rows],
