@@ -270,3 +270,31 @@ def test_real_training_images() -> None:
     assert batch.shape == (80, 3, 64, 64) and batch.dtype == torch.float32
     assert 0.0 <= float(batch.min()) and float(batch.max()) <= 1.0
     assert float(batch.std()) > 0.01
+
+
+def test_partial_periods_cut_batches_part_way_through_a_period(coordinate_cache) -> None:
+    cache, images = coordinate_cache
+    plain = PatchSampler(cache, patch_size=16, seed=7, augment=False)
+    cut = PatchSampler(cache, patch_size=16, seed=7, augment=False, partial=0.5, period=(2, 3))
+    shapes = set()
+    for _ in range(60):
+        batch = cut.sample(4)
+        h, w = batch.shape[-2:]
+        shapes.add((h, w))
+        # Rows end part-way through a period of 2, columns of 3 (1 or 2 cut), or not at all.
+        assert h in (16, 15) and w in (16, 15, 14)
+        # What is left is the top-left of a plain window of that image.
+        levels = np.rint(batch.numpy() * 65535).astype(np.int64)
+        for patch in levels:
+            top, left = int(patch[0, 0, 0]), int(patch[1, 0, 0])
+            image = images[int(patch[2, 0, 0])].transpose(2, 0, 1)
+            assert np.array_equal(patch, image[:, top : top + h, left : left + w])
+    # Every combination turns up, whole batches included.
+    assert shapes == {(a, b) for a in (16, 15) for b in (16, 15, 14)}
+    # partial=0 draws nothing extra: the plain sequence is unchanged.
+    again = PatchSampler(cache, patch_size=16, seed=7, augment=False, partial=0.0, period=(2, 2))
+    assert torch.equal(again.sample(4), plain.sample(4))
+    with pytest.raises(ValueError, match="partial"):
+        PatchSampler(cache, patch_size=16, partial=1.5)
+    with pytest.raises(ValueError, match="period"):
+        PatchSampler(cache, patch_size=16, period=(2, 16))

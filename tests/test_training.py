@@ -72,6 +72,33 @@ def test_resume_equals_the_uninterrupted_run(image_folder, tmp_path):
         assert torch.equal(a[key], b[key]), key
 
 
+def test_partial_period_batches_train_and_resume_exactly(image_folder, tmp_path, monkeypatch):
+    """Batches cut part-way through a period reach the loss at their cut size (a learned
+    pattern and the physics network included), and the cuts come from the checkpointed
+    generator: a resumed run repeats the uninterrupted one."""
+    shapes = []
+    original = torch.nn.functional.mse_loss
+
+    def spy(pred, target, *args, **kwargs):
+        shapes.append(tuple(target.shape[-2:]))
+        return original(pred, target, *args, **kwargs)
+
+    monkeypatch.setattr("splitcam.training.trainer.F.mse_loss", spy)
+    changes = {
+        "optim.schedule": "constant",
+        "data.partial_periods": 0.5,
+        "pattern.learn": True,
+        "network.arch": "physics",
+    }
+    train(tiny(image_folder, tmp_path / "full", **changes), progress=False)
+    size = tiny(image_folder, tmp_path / "x").data.patch_size
+    assert set(shapes) <= {(size - a, size - b) for a in (0, 1) for b in (0, 1)}
+    assert len(set(shapes)) >= 2
+    train(tiny(image_folder, tmp_path / "split", **{**changes, "optim.steps": 3}), progress=False)
+    train(tiny(image_folder, tmp_path / "split", **changes), resume=True, progress=False)
+    assert losses(tmp_path / "split") == losses(tmp_path / "full")
+
+
 def test_schedule_survives_a_resume(image_folder, tmp_path):
     """The learning rate is a function of the step and the run's length: a run stopped early
     and resumed uses, after the resume, the learning rates of the uninterrupted run."""

@@ -94,6 +94,11 @@ class DataConfig:
     )
     val_sigmas: list[float] = _opt([0.0, 15.0], "validation noise levels")
     patch_size: int = _opt(64, "training patch size")
+    partial_periods: float = _opt(
+        0.0,
+        "probability that a batch's patches end part-way through a period (rows, and "
+        "independently columns), as images of odd size do; teaches the network that edge",
+    )
     batch_size: int = _opt(
         8,
         "patches per step (the paper: 80; 8 learns most per CPU-hour, "
@@ -248,6 +253,10 @@ class TrainConfig:
             ),
             (self.data.patch_size >= 1, "data.patch_size must be >= 1"),
             (self.data.batch_size >= 1, "data.batch_size must be >= 1"),
+            (
+                0 <= self.data.partial_periods <= 1,
+                f"data.partial_periods must be in [0, 1], got {self.data.partial_periods}",
+            ),
             (self.optim.steps >= 0, f"optim.steps must be >= 0, got {self.optim.steps}"),
             (self.optim.lr > 0, f"optim.lr must be > 0, got {self.optim.lr}"),
             (self.pattern.lr is None or self.pattern.lr > 0, "pattern.lr must be > 0"),

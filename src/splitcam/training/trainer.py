@@ -494,6 +494,8 @@ def _train(
         seed=config.run.seed,
         rank=dist_info.rank,
         world_size=dist_info.world_size,
+        partial=config.data.partial_periods,
+        period=system.sensor.period,
     )
     noise_seed = config.run.seed * 7919 + 1 + 104729 * dist_info.rank
     if config.noise.model == "photon":
