@@ -212,7 +212,8 @@ def main() -> None:
     sigmas = [0.0, 15.0]
     t0 = time.perf_counter()
     methods = [("LMMSE of " + args.pattern, "-", build_method("lmmse", pattern=args.pattern))]
-    methods += [(name, str(steps_of(run)), build_method(str(run))) for name, run in runs.items()]
+    for name, run in runs.items():  # float32 inference: comparable with the earlier runs
+        methods.append((name, str(steps_of(run)), build_method(str(run), precision="fp32")))
     whole = [(name, steps, score(m, images, sigmas)) for name, steps, m in methods]
     cut = [(name, steps, score(m, periods, sigmas)) for name, steps, m in methods]
     curves_path = Path(args.doc).with_suffix(".png") if args.doc else Path(args.out) / "curves.png"

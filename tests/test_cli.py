@@ -121,14 +121,24 @@ def test_reconstruct_fast_matches_float32(tmp_path):
         "data.train": str(folder), "data.val_split": 0, "data.patch_size": 16,
         "data.batch_size": 2, "network.features": 8, "network.blocks": 1, "optim.steps": 2,
         "run.out": str(tmp_path / "run"), "run.threads": 1}), progress=False)
+    from splitcam.recon.base import fast_precision
+
     outs = {}
-    for flag in ([], ["--fast"]):
-        path = tmp_path / f"rec{len(flag)}.png"
+    flags = {
+        "fp32": ["--precision", "fp32"], "bf16": ["--precision", "bf16"], "fast": ["--fast"],
+        "auto": [],
+    }
+    for key, flag in flags.items():
+        path = tmp_path / f"rec-{key}.png"
         assert main(["reconstruct", "--checkpoint", str(tmp_path / "run"), "--image",
                      str(folder / "p0.png"), "--out", str(path), "--quiet", *flag]) == 0
-        outs[len(flag)] = read_image(path)
-    difference = np.abs(outs[0] - outs[1])
-    assert difference.max() <= 4 / 255  # bfloat16 moves 8-bit values by a few levels at most
+        outs[key] = read_image(path)
+    difference = np.abs(outs["fp32"] - outs["bf16"])
+    assert 0 < difference.max() <= 4 / 255  # bfloat16 moves 8-bit values by a few levels at most
+    np.testing.assert_array_equal(outs["fast"], outs["bf16"])  # --fast: the old spelling
+    # The default follows the hardware: bfloat16 where it is native, float32 elsewhere.
+    native = fast_precision("auto", "cpu")
+    np.testing.assert_array_equal(outs["auto"], outs["bf16" if native else "fp32"])
 
 
 def test_evaluate_draws_the_sigma_chart(tmp_path):

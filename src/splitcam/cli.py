@@ -212,14 +212,14 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
         )
     spec = given[0]
     method = (
-        build_model(spec, tile=args.tile, fast=args.fast)
+        build_model(spec, tile=args.tile, precision=args.precision)
         if args.model
         else build_method(
             spec,
             pattern=args.pattern,
             lmmse_train=args.lmmse_train,
             tile=args.tile,
-            fast=args.fast,
+            precision=args.precision,
             progress=not args.quiet,
         )
     )
@@ -267,13 +267,13 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
         *args.checkpoint,
         *(args.method or ([] if chosen else ["lmmse", "malvar2004"])),
     ]
-    methods = [build_model(m, tile=args.tile, fast=args.fast) for m in models]
+    methods = [build_model(m, tile=args.tile, precision=args.precision) for m in models]
     methods += build_methods(
         specs,
         patterns_for_lmmse=args.patterns,
         lmmse_train=args.lmmse_train,
         tile=args.tile,
-        fast=args.fast,
+        precision=args.precision,
         progress=not args.quiet,
     )
     from .physics.noise import Exposure
@@ -414,7 +414,7 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     rows = {r: m for r, m in rows.items() if m in shipped}
     if not rows:
         raise ValueError("no shipped models to reproduce the paper with")
-    methods = [build_model(m, tile=args.tile, fast=args.fast) for m in rows.values()]
+    methods = [build_model(m, tile=args.tile, precision=args.precision) for m in rows.values()]
     if not args.no_baselines:
         methods.append(build_method("malvar2004"))
         methods += [build_method("lmmse", pattern=p) for p in (*TABLE1, "bayer")]
@@ -434,6 +434,9 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
         progress=not args.quiet,
     )
     summary = summarise(result)
+    from .recon.base import fast_precision
+
+    inference = "bfloat16" if fast_precision(args.precision, "cpu") else "float32"
     budgets, learned = {}, {}
     for row, name in rows.items():
         _, meta = load_model(name)
@@ -444,7 +447,7 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
         budgets[row] = (
             f"{prov.get('total_steps', '?')} steps of batch "
             f"{'/'.join(map(str, batch))}, {prov.get('train_seconds', 0) / 60:.0f} "
-            f"min of training on {devices}"
+            f"min of training on {devices}; evaluated in {inference}"
         )
         if meta["pattern"].get("provenance") == "learned":
             from .patterns import Pattern
@@ -659,10 +662,20 @@ def _add_method_options(p: argparse.ArgumentParser) -> None:
         help="fit LMMSE on these training images (default: the shipped fits)",
     )
     p.add_argument("--tile", type=int, default=512, help="tile size in pixels (default 512)")
+    _add_precision(p, "auto")
+
+
+def _add_precision(p: argparse.ArgumentParser, default: str) -> None:
+    """``--precision`` of network inference (``--fast``: the same as ``--precision bf16``)."""
     p.add_argument(
-        "--fast",
-        action="store_true",
-        help="bfloat16 + channels-last network inference (see README for its cost)",
+        "--precision",
+        choices=["auto", "fp32", "bf16"],
+        default=default,
+        help=f"network inference: auto = bfloat16 + channels-last where the hardware has it "
+        f"natively (about 3x faster there), fp32 = bit-exact float32 (default {default})",
+    )
+    p.add_argument(
+        "--fast", dest="precision", action="store_const", const="bf16", help=argparse.SUPPRESS
     )
 
 
@@ -969,7 +982,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--max-images", type=int, help="at most this many images per dataset")
     p.add_argument("--no-baselines", action="store_true")
     p.add_argument("--tile", type=int, default=512)
-    p.add_argument("--fast", action="store_true", help="bfloat16 network inference")
+    # float32 by default: the committed tables are float32, and a resumed run adds rows to them.
+    _add_precision(p, "fp32")
     p.add_argument("--quiet", action="store_true")
     p.set_defaults(handler=cmd_reproduce)
 

@@ -45,7 +45,7 @@ def method_names() -> list[str]:
 
 
 def build_model(
-    spec: str | os.PathLike, *, tile: int | None = 512, fast: bool = False
+    spec: str | os.PathLike, *, tile: int | None = 512, precision: str = "auto"
 ) -> NetworkReconstructor:
     """A shipped model (by name) or a model file as a reconstruction method, labelled
     ``net-<name>`` (the same for every command).
@@ -56,7 +56,7 @@ def build_model(
     system, meta = load_model(spec)
     name = meta.get("name") or Path(str(spec)).stem
     method = NetworkReconstructor(
-        system.network, system.sensor.to_pattern(), f"net-{name}", tile=tile, fast=fast
+        system.network, system.sensor.to_pattern(), f"net-{name}", tile=tile, precision=precision
     )
     method.fingerprint = f"model:{name}:{meta.get('sha256', '')}"
     return method
@@ -92,7 +92,7 @@ def build_method(
     pattern: str | os.PathLike | patterns.Pattern | None = None,
     lmmse_train: str | os.PathLike | None = None,
     tile: int | None = 512,
-    fast: bool = False,
+    precision: str = "auto",
     progress: bool = False,
 ) -> Reconstructor:
     """One reconstruction method from its name or a run folder / checkpoint file.
@@ -104,7 +104,8 @@ def build_method(
         lmmse_train: Fit the LMMSE on this folder of training images instead of using the
             shipped fit (needed for patterns other than the built-in ones).
         tile: Tile size of network reconstruction.
-        fast: bfloat16 + channels-last network inference.
+        precision: Network inference precision: ``auto`` (bfloat16 + channels-last where
+            native), ``fp32`` or ``bf16`` (:class:`~splitcam.recon.base.NetworkReconstructor`).
         progress: Progress bars while fitting.
 
     Raises:
@@ -131,15 +132,15 @@ def build_method(
         lmmse.name = _lmmse_label(pattern, resolved)
         return lmmse
     if isinstance(spec, str) and spec.strip() in model_names():
-        return build_model(spec.strip(), tile=tile, fast=fast)
+        return build_model(spec.strip(), tile=tile, precision=precision)
     if _is_path(spec) and str(spec).endswith(".json") and Path(spec).is_file():
-        return build_model(spec, tile=tile, fast=fast)
+        return build_model(spec, tile=tile, precision=precision)
     if _is_path(spec):
         path = resolve(spec)
         system = load_system(path)
         label = path.parent.name if path.name == CHECKPOINT_NAME else path.stem
         method = NetworkReconstructor(
-            system.network, system.sensor.to_pattern(), label, tile=tile, fast=fast
+            system.network, system.sensor.to_pattern(), label, tile=tile, precision=precision
         )
         stat = path.stat()
         method.fingerprint = f"{path.resolve()}:{stat.st_size}:{stat.st_mtime_ns}"

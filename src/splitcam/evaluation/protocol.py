@@ -148,10 +148,16 @@ def _check_zooms(zooms: Sequence[Zoom], datasets: Sequence[tuple[str, Images]]) 
 
 def _fingerprint(method: Reconstructor, crop: int) -> str:
     """What a stored result depends on besides its key: the method's kind, its pattern's kernels
-    and the border crop. A result is reused on resume only if this is unchanged."""
+    and the border crop, and bfloat16 inference where a network runs in it. A result is reused
+    on resume only if this is unchanged."""
+    from ..recon.base import fast_precision
+
     pattern: Pattern = method.pattern
+    items = [type(method).__name__, pattern.to_dict(), crop, getattr(method, "fingerprint", None)]
+    if fast_precision(getattr(method, "precision", "fp32"), "cpu"):
+        items.append("bf16")  # float32 results keep the fingerprint they had before
     text = json.dumps(
-        [type(method).__name__, pattern.to_dict(), crop, getattr(method, "fingerprint", None)],
+        items,
         sort_keys=True,
         default=str,
     )

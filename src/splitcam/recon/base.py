@@ -128,7 +128,9 @@ class NetworkReconstructor:
         pattern: The pattern whose raw images it reconstructs (learned kernels included).
         name: Label in tables.
         tile: Tile size in pixels (``None``: whole images).
-        fast: bfloat16 autocast and channels-last inference.
+        precision: ``auto`` (bfloat16 + channels-last where the hardware runs it natively, see
+            :func:`fast_precision`; about 3x faster on such CPUs), ``fp32`` (bit-exact float32)
+            or ``bf16``. Resolved for the device of each raw image.
     """
 
     def __init__(
@@ -138,25 +140,27 @@ class NetworkReconstructor:
         name: str,
         *,
         tile: int | None = 512,
-        fast: bool = False,
+        precision: str = "auto",
     ) -> None:
+        fast_precision(precision, "cpu")  # an unknown precision fails here, not at first use
         self.network = network
         self.pattern = pattern
         self.name = name
         self.tile = tile
-        self.fast = fast
+        self.precision = precision
         self._kernels = pattern_pixel_kernels(pattern)
 
     def reconstruct(self, raw: torch.Tensor, sigma: float) -> torch.Tensor:
         from .tiling import reconstruct
 
         check_level(sigma)
+        fast = fast_precision(self.precision, raw.device)
         return reconstruct(
             self.network,
             raw,
             tile=self.tile,
-            bf16=self.fast,
-            channels_last=self.fast,
+            bf16=fast,
+            channels_last=fast,
             sigma=sigma,
             kernels=self._kernels,
         )
