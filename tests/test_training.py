@@ -748,3 +748,23 @@ def test_training_minutes_leave_out_the_pause_of_a_resumed_run():
     steady = [0, 9, 21, 30, 41]
     got = active_minutes([{"step": i, "time": t} for i, t in enumerate(steady)])
     assert got == pytest.approx([t / 60 for t in steady])
+
+
+def test_a_run_saved_before_partial_periods_existed_resumes_without_them(image_folder, tmp_path):
+    from splitcam.training.trainer import resume_config
+
+    run = tmp_path / "old"
+    train(tiny(image_folder, run, **{"optim.steps": 2, "data.partial_periods": 0.0}),
+          progress=False)
+    assert TrainConfig().data.partial_periods == 0.5  # today's default
+    # Take the setting out of the checkpoint and config.json, as a run saved before it had it.
+    path = run / ckpt_io.CHECKPOINT_NAME
+    loaded = ckpt_io.load(path)
+    del loaded.meta["config"]["data"]["partial_periods"]
+    ckpt_io.save(path, loaded.meta, loaded.tensors)
+    assert resume_config(run).data.partial_periods == 0.0
+    (path).unlink()
+    saved = json.loads((run / "config.json").read_text())
+    del saved["data"]["partial_periods"]
+    (run / "config.json").write_text(json.dumps(saved))
+    assert resume_config(run).data.partial_periods == 0.0

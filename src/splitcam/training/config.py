@@ -109,6 +109,10 @@ class DataConfig:
     max_images: int | None = _opt(None, "use at most this many training images")
 
 
+#: Settings added after runs were saved without them, and the value that reproduces those runs.
+SAVED_BEFORE: dict[tuple[str, str], Any] = {("data", "partial_periods"): 0.0}
+
+
 @dataclass
 class OptimConfig:
     steps: int = _opt(1_000_000, "training steps")
@@ -218,6 +222,17 @@ class TrainConfig:
     @classmethod
     def from_file(cls, path: str | Path) -> TrainConfig:
         return cls.from_dict(read_config_file(path), source=str(path))
+
+    @classmethod
+    def from_saved(cls, data: dict[str, Any], source: str = "saved run") -> TrainConfig:
+        """The settings a run saved (checkpoint or ``config.json``). A setting added after the
+        run was saved takes the value that reproduces how the run trained
+        (:data:`SAVED_BEFORE`), not today's default, so a resumed old run keeps its recipe."""
+        data = {section: dict(values) for section, values in data.items()}
+        for (section, name), value in SAVED_BEFORE.items():
+            if isinstance(data.get(section), dict):
+                data[section].setdefault(name, value)
+        return cls.from_dict(data, source=source)
 
     def override(self, dotted: dict[str, Any]) -> TrainConfig:
         """A copy with ``{"section.key": value}`` overrides applied (validated like a file)."""

@@ -28,7 +28,7 @@ from ..recon.base import NetworkReconstructor, fast_precision
 from ..recon.design import design_pattern
 from ..recon.networks import build_network
 from . import checkpoint as ckpt_io
-from .config import ConfigError, TrainConfig
+from .config import ConfigError, TrainConfig, read_config_file
 from .guard import DivergenceGuard
 from .schedule import learning_rate
 from .schedule import progress as progress_of
@@ -404,8 +404,9 @@ def resume_config(run_dir: str | Path) -> TrainConfig:
     if ckpt_path.exists():
         loaded = ckpt_io.load(ckpt_path)
         ckpt_io.require(loaded, "config", purpose="its run cannot be resumed")
-        return TrainConfig.from_dict(loaded.meta["config"], source=str(ckpt_path))
-    return TrainConfig.from_file(run_dir / "config.json")
+        return TrainConfig.from_saved(loaded.meta["config"], source=str(ckpt_path))
+    path = run_dir / "config.json"
+    return TrainConfig.from_saved(read_config_file(path), source=str(path))
 
 
 def _lock_run(run_dir: Path) -> Any:
@@ -448,7 +449,7 @@ def _train(
         ckpt_io.require(
             loaded, "config", "step", "start_pattern", "optimizer", purpose="it cannot be resumed"
         )
-        saved = TrainConfig.from_dict(loaded.meta["config"], source=str(ckpt_path))
+        saved = TrainConfig.from_saved(loaded.meta["config"], source=str(ckpt_path))
         _check_resume_compatible(saved, config)
         changes = _changed_settings(saved, config)
     elif ckpt_path.exists():
