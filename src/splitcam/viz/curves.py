@@ -169,8 +169,11 @@ def compare_runs(runs: list[str | os.PathLike], out: str | os.PathLike) -> Path:
     for ax in (ax1, ax2):
         ax.set_ylabel("validation PSNR (dB)")
         ax.grid(alpha=0.3)
-    ax1.legend(fontsize=8)
-    fig.tight_layout()
+    # Below both panels, one column per run: long run names never cover the curves.
+    handles, labels = ax1.get_legend_handles_labels()
+    fig.legend(handles, labels, fontsize=8, loc="lower center", ncol=1, frameon=False)
+    fig.set_size_inches(11, 4 + 0.17 * len(labels))
+    fig.tight_layout(rect=(0, 0.17 * len(labels) / (4 + 0.17 * len(labels)) + 0.02, 1, 1))
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=120)
