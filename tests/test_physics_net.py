@@ -29,7 +29,7 @@ def test_untrained_network_outputs_the_lmmse_estimate(name: str) -> None:
     expected = closed_form_lmmse(name).reconstruct(raw, 5.0)
     torch.testing.assert_close(out, expected, rtol=1e-5, atol=1e-5)
     # Through the reconstruction interface likewise.
-    method = NetworkReconstructor(net, sensor.to_pattern(name), "net", tile=48)
+    method = NetworkReconstructor(net, sensor.to_pattern(name), "net", tile=48, precision="fp32")
     torch.testing.assert_close(method.reconstruct(raw, 5.0), expected, rtol=1e-5, atol=1e-5)
 
 
@@ -42,7 +42,7 @@ def test_tiles_equal_the_whole_image_after_training_changes_the_weights() -> Non
     kernels = pattern_pixel_kernels("D")
     with torch.no_grad():
         whole = net(raw, 10.0, kernels)
-    method = NetworkReconstructor(net, SplitterSensor("D").to_pattern("D"), "net", tile=40)
+    method = NetworkReconstructor(net, SplitterSensor("D").to_pattern("D"), "net", tile=40, precision="fp32")
     torch.testing.assert_close(method.reconstruct(raw, 10.0), whole, rtol=1e-5, atol=1e-5)
 
 
