@@ -42,7 +42,9 @@ def test_tiles_equal_the_whole_image_after_training_changes_the_weights() -> Non
     kernels = pattern_pixel_kernels("D")
     with torch.no_grad():
         whole = net(raw, 10.0, kernels)
-    method = NetworkReconstructor(net, SplitterSensor("D").to_pattern("D"), "net", tile=40, precision="fp32")
+    method = NetworkReconstructor(
+        net, SplitterSensor("D").to_pattern("D"), "net", tile=40, precision="fp32"
+    )
     torch.testing.assert_close(method.reconstruct(raw, 10.0), whole, rtol=1e-5, atol=1e-5)
 
 

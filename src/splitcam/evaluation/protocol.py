@@ -106,33 +106,50 @@ def mean_psnr(
 
 @dataclass(frozen=True)
 class Zoom:
-    """An image to draw side-by-side zoomed crops of, and the region (``None``: the most
-    detailed one)."""
+    """An image to draw side-by-side zoomed crops of, the region (``None``: the most detailed
+    one) and the noise level (``None``: every level evaluated)."""
 
     image: str
     region: tuple[int, int, int] | None = None
+    sigma: float | None = None
+
+
+_ZOOM_SYNTAX = "expected a zoom as IMAGE[:TOP,LEFT,SIZE][@SIGMA]"
 
 
 def parse_zoom(spec: str) -> Zoom:
-    """``"name"`` or ``"name:top,left,size"``."""
-    name, _, region = spec.partition(":")
+    """``"name"``, ``"name:top,left,size"``, either followed by ``"@sigma"`` (the paper's
+    Fig. 4: ``"kodim05@10"``)."""
+    head, at, level = spec.partition("@")
+    sigma = None
+    if at:
+        try:
+            sigma = float(level)
+        except ValueError:
+            raise ValueError(f"{_ZOOM_SYNTAX}, got {spec!r}") from None
+        if not sigma >= 0:
+            raise ValueError(f"expected a zoom noise level >= 0, got {spec!r}")
+    name, _, region = head.partition(":")
     if not name:
-        raise ValueError(f"expected a zoom as IMAGE or IMAGE:TOP,LEFT,SIZE, got {spec!r}")
+        raise ValueError(f"{_ZOOM_SYNTAX}, got {spec!r}")
     if not region:
-        return Zoom(name)
+        return Zoom(name, None, sigma)
     try:
         top, left, size = (int(v) for v in region.split(","))
     except ValueError:
-        raise ValueError(f"expected a zoom as IMAGE or IMAGE:TOP,LEFT,SIZE, got {spec!r}") from None
+        raise ValueError(f"{_ZOOM_SYNTAX}, got {spec!r}") from None
     if top < 0 or left < 0 or size < 1:
         raise ValueError(f"expected a zoom region with TOP, LEFT >= 0 and SIZE >= 1, got {spec!r}")
-    return Zoom(name, (top, left, size))
+    return Zoom(name, (top, left, size), sigma)
 
 
-def _check_zooms(zooms: Sequence[Zoom], datasets: Sequence[tuple[str, Images]]) -> dict[str, Zoom]:
-    """Every zoom names an image of the datasets and its region lies inside it."""
+def _check_zooms(
+    zooms: Sequence[Zoom], datasets: Sequence[tuple[str, Images]]
+) -> dict[str, list[Zoom]]:
+    """Every zoom names an image of the datasets and its region lies inside it; the zooms of
+    each image."""
     shapes = {name: tuple(rgb.shape[1:]) for _, images in datasets for name, rgb in images}
-    out = {}
+    out: dict[str, list[Zoom]] = {}
     for zoom in zooms:
         if zoom.image not in shapes:
             known = ", ".join(list(shapes)[:8]) + (", ..." if len(shapes) > 8 else "")
@@ -142,8 +159,15 @@ def _check_zooms(zooms: Sequence[Zoom], datasets: Sequence[tuple[str, Images]]) 
             )
         if zoom.region is not None:
             check_region(zoom.region, shapes[zoom.image])
-        out[zoom.image] = zoom
+        out.setdefault(zoom.image, []).append(zoom)
     return out
+
+
+def _zoom_at(zooms: list[Zoom], sigma: float | Exposure) -> Zoom | None:
+    """The zoom of an image at one noise level: one naming that level, else one naming none."""
+    level = None if isinstance(sigma, Exposure) else float(sigma)
+    exact = [z for z in zooms if z.sigma is not None and level is not None and z.sigma == level]
+    return (exact or [z for z in zooms if z.sigma is None] or [None])[0]
 
 
 def _fingerprint(method: Reconstructor, crop: int) -> str:
@@ -189,9 +213,10 @@ def evaluate(
     each image in ``zoom_images`` (default: the first image of each dataset), a side-by-side
     zoom of all methods (the paper's Figs. 4, 5, 7, 8) under ``zoom/``: ``"kodim05:200,300,96"``
     zooms on the 96-pixel square at row 200, column 300; a bare name on the image's most
-    detailed region. ``crop`` removes that many border pixels before scoring (0, the paper's
-    convention, by default). ``zoom_only`` draws the zoom figures without writing every
-    reconstruction; ``zoom_sigmas`` limits the zoom figures to those noise levels.
+    detailed region; ``"kodim05@10"`` only at sigma 10 (default: at every level). ``crop``
+    removes that many border pixels before scoring (0, the paper's convention, by default).
+    ``zoom_only`` draws the zoom figures without writing every reconstruction; ``zoom_sigmas``
+    limits the zoom figures to those noise levels.
 
     With ``resume`` (default), results already in ``out/per_image.csv`` for the same method (same
     pattern kernels), image, sigma and crop are kept and not recomputed: an interrupted
@@ -257,9 +282,10 @@ def evaluate(
     rows: list[EvalRow] = []
     try:
         for dataset, image_name, rgb, sigma in jobs:
+            this_zoom = _zoom_at(zoom.get(image_name, []), sigma)
             zoomed = (
                 (save_images or zoom_only)
-                and image_name in zoom
+                and this_zoom is not None
                 and (zoom_sigmas is None or sigma in zoom_sigmas)
             )
             outputs = {}
@@ -303,7 +329,7 @@ def evaluate(
                     sigma,
                     rgb,
                     outputs if save_images else {},
-                    zoom.get(image_name) if zoomed else None,
+                    this_zoom if zoomed else None,
                     zoom_outputs=outputs,
                 )
     finally:

@@ -377,8 +377,13 @@ def _end_distributed(destroy: bool) -> None:
     ("terminate called without an active exception") after the work is done."""
     if not _distributed_initialized():
         return
+    import gc
+
     import torch.distributed as dist
 
+    # DistributedDataParallel's reducer holds the process group; collect it (it can sit in a
+    # reference cycle) so the group is torn down here, not at interpreter exit.
+    gc.collect()
     dist.barrier()
     if destroy:
         dist.destroy_process_group()
