@@ -22,6 +22,10 @@ Recipes (``--recipes``; dotted config overrides on top of the defaults):
 - ``physics``: the physics-informed network with warm-up and cosine decay (the new default);
 - ``physics-joint``: the same, learning the pattern from the start pattern's support, first
   designed for the closed-form LMMSE (``pattern.design_steps``, 300 steps, seconds).
+
+``physics+pattern.name=FILE`` trains on a pattern file instead of ``--pattern`` (e.g. one that
+``splitcam design`` wrote: design first, then train the network for the fixed designed pattern);
+the LMMSE row stays that of ``--pattern``.
 """
 
 from __future__ import annotations
@@ -105,8 +109,8 @@ def train(name: str, args: argparse.Namespace) -> tuple[Path, float]:
     run = Path(args.out) / (run_name(name) + args.tag)
     overrides = {
         **COMMON,
+        "pattern.name": args.pattern,  # a recipe may name its own (e.g. a designed pattern file)
         **recipe(name),
-        "pattern.name": args.pattern,
         "data.train": str(args.train),
         "data.val_split": args.held_out,
         "data.val_max_images": 4,  # a cheap curve during training; the scores come after

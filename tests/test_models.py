@@ -400,3 +400,35 @@ def test_provenance_records_each_thread_count_of_a_resumed_run(image_folder, tmp
     assert segment["threads"] == [[0, 1], [2, 2]]
     assert "1 thread, 2 from step 2)" in segment["device"]
     assert meta["provenance"]["total_steps"] == 4
+
+
+@pytest.mark.parametrize("name", model_names())
+def test_every_shipped_model_loads_matches_its_json_and_beats_its_lmmse(name, shared_data):
+    """The models inside the package itself (not a fixture's): at most 2 MB, the JSON's pattern
+    and architecture are what loads, deterministic, and better than the training-free closed-form
+    LMMSE of the same kernels on a crop of a held-out training image (one the models never saw)."""
+    import numpy as np
+    from splitcam.data.imageio import read_image
+    from splitcam.data.patches import list_images
+    from splitcam.patterns import Pattern
+    from splitcam.recon.closed_form import closed_form_lmmse
+
+    weights = models_module.MODELS_DIR / f"{name}.safetensors"
+    stored = json.loads((models_module.MODELS_DIR / f"{name}.json").read_text())
+    assert weights.stat().st_size <= 2 * 1024**2
+    system, meta = load_model(name)
+    assert meta["name"] == name and meta["network"] == stored["network"]
+    pattern = Pattern.from_dict(stored["pattern"])
+    np.testing.assert_allclose(system.sensor.weights().double().numpy(), pattern.kernels, atol=1e-6)
+    assert meta["provenance"]["total_steps"] == stored["config"]["optim"]["steps"]
+
+    # The last training image by name is held out of every shipped run's training set.
+    image = read_image(list_images(shared_data / "train")[-1])[100:196, 100:196]
+    crop = [("crop", torch.from_numpy(np.ascontiguousarray(image)).permute(2, 0, 1))]
+    method = build_method(name, precision="fp32")
+    raw = torch.rand(1, 1, 24, 24, generator=torch.Generator().manual_seed(1))
+    with torch.no_grad():
+        assert torch.equal(method.reconstruct(raw, 5.0), method.reconstruct(raw, 5.0))
+    net = mean_psnr(method, crop, [0.0, 15.0])
+    lmmse = mean_psnr(closed_form_lmmse(pattern), crop, [0.0, 15.0])
+    assert net[0.0] > lmmse[0.0] + 1.0 and net[15.0] > lmmse[15.0] + 1.0, (net, lmmse)
