@@ -100,7 +100,7 @@ def recipe(name: str) -> dict[str, object]:
 
 def run_name(name: str) -> str:
     """A folder name for a recipe name (``physics+optim.lr=1e-3`` → ``physics_optim-lr-1e-3``)."""
-    for a, b in (("+", "_"), ("=", "-"), (",", "_"), (".", "-")):
+    for a, b in (("+", "_"), ("=", "-"), (",", "_"), (".", "-"), ("/", "-")):
         name = name.replace(a, b)
     return name
 
