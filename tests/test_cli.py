@@ -150,3 +150,31 @@ def test_evaluate_draws_the_sigma_chart(tmp_path):
     assert main(args) == 0
     assert (out / "sigma_curves.png").stat().st_size > 0
     assert not (out / "zoom").exists()  # a named method draws crops only with --save-images
+
+
+def test_max_size_scores_the_centre_of_each_image(tmp_path):
+    """--max-size cuts every image to its centre (even sizes, whole 2x2 periods); the scores are
+    those of the cropped image itself, and the dataset name keeps them apart from whole images."""
+    import csv
+
+    from splitcam.cli import centre_crop, load_datasets
+    from splitcam.data.testsets import default_images
+
+    rgb = torch.arange(3 * 7 * 9, dtype=torch.float32).reshape(3, 7, 9)
+    assert torch.equal(centre_crop(rgb, 4), rgb[:, 1:5, 2:6])
+    assert torch.equal(centre_crop(rgb, 100), rgb[:, :6, :8])  # at most the image, even sizes
+    (name, images), = load_datasets("default", 1, 64)
+    assert name == "skimage-64px" and images[0][1].shape == (3, 64, 64)
+    whole = default_images()[0][1]
+    h, w = whole.shape[-2:]
+    top, left = (h - 64) // 2, (w - 64) // 2
+    assert torch.equal(images[0][1], whole[:, top : top + 64, left : left + 64])
+
+    out = tmp_path / "e"
+    args = ["evaluate", "--method", "bilinear", "--max-images", "1", "--max-size", "64",
+            "--sigmas", "0", "--out", str(out), "--quiet"]
+    assert main(args) == 0
+    rows = list(csv.DictReader((out / "per_image.csv").open()))
+    assert {r["dataset"] for r in rows} == {"skimage-64px"}
+    with pytest.raises(SystemExit, match="at least 2"):
+        load_datasets("default", 1, 1)

@@ -408,6 +408,7 @@ def test_every_shipped_model_loads_matches_its_json_and_beats_its_lmmse(name, sh
     and architecture are what loads, deterministic, and better than the training-free closed-form
     LMMSE of the same kernels on a crop of a held-out training image (one the models never saw)."""
     import numpy as np
+
     from splitcam.data.imageio import read_image
     from splitcam.data.patches import list_images
     from splitcam.patterns import Pattern
