@@ -157,8 +157,8 @@ def test_max_size_scores_the_centre_of_each_image(tmp_path):
     those of the cropped image itself, and the dataset name keeps them apart from whole images."""
     import csv
 
-    from splitcam.cli import centre_crop, load_datasets
-    from splitcam.data.testsets import default_images
+    from splitcam.cli import load_datasets
+    from splitcam.data.testsets import centre_crop, default_images
 
     rgb = torch.arange(3 * 7 * 9, dtype=torch.float32).reshape(3, 7, 9)
     assert torch.equal(centre_crop(rgb, 4), rgb[:, 1:5, 2:6])

@@ -433,3 +433,22 @@ def test_every_shipped_model_loads_matches_its_json_and_beats_its_lmmse(name, sh
     net = mean_psnr(method, crop, [0.0, 15.0])
     lmmse = mean_psnr(closed_form_lmmse(pattern), crop, [0.0, 15.0])
     assert net[0.0] > lmmse[0.0] + 1.0 and net[15.0] > lmmse[15.0] + 1.0, (net, lmmse)
+
+
+def test_the_main_job_scores_every_shipped_model_on_crops(trained_run, tmp_path, monkeypatch):
+    """`splitcam evaluate` with no method named: every shipped model and the baselines, on
+    MAIN_JOB_MAX_SIZE centre crops of the built-in photos; `--max-size 0` scores them whole."""
+    import csv
+
+    from splitcam.cli import MAIN_JOB_MAX_SIZE
+
+    monkeypatch.setattr(models_module, "MODELS_DIR", tmp_path / "shipped")
+    export_model(trained_run, tmp_path / "shipped" / "D", name="D")
+    common = ["--max-images", "1", "--sigmas", "0", "--quiet"]
+    assert main(["evaluate", *common, "--out", str(tmp_path / "crops")]) == 0
+    rows = list(csv.DictReader((tmp_path / "crops" / "per_image.csv").open()))
+    assert {r["dataset"] for r in rows} == {f"skimage-{MAIN_JOB_MAX_SIZE}px"}
+    assert {"net-D", "lmmse-D", "bayer+malvar2004"} <= {r["method"] for r in rows}
+    assert main(["evaluate", *common, "--max-size", "0", "--out", str(tmp_path / "whole")]) == 0
+    rows = list(csv.DictReader((tmp_path / "whole" / "per_image.csv").open()))
+    assert {r["dataset"] for r in rows} == {"skimage"}

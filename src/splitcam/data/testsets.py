@@ -83,6 +83,7 @@ __all__ = [
     "ChecksumError",
     "DownloadError",
     "add_cli",
+    "centre_crop",
     "cmd_data",
     "data_root",
     "default_images",
@@ -395,6 +396,17 @@ def _skimage_data_dir() -> Path:
             "the default test images come with scikit-image; install it with "
             "`pip install scikit-image`, or give a dataset or folder of images"
         ) from None
+
+
+def centre_crop(rgb: torch.Tensor, max_size: int, multiple: int = 2) -> torch.Tensor:
+    """The centre of a ``(..., H, W)`` image, at most ``max_size`` pixels a side, each side cut
+    down to a multiple of ``multiple`` (2: whole periods of every built-in pattern, so no image
+    edge ends part-way through a period)."""
+    h, w = rgb.shape[-2:]
+    ch = min(h, max_size) // multiple * multiple
+    cw = min(w, max_size) // multiple * multiple
+    top, left = (h - ch) // 2, (w - cw) // 2
+    return rgb[..., top : top + ch, left : left + cw].contiguous()
 
 
 def default_images(names: Sequence[str] | None = None) -> list[tuple[str, torch.Tensor]]:
