@@ -4,6 +4,7 @@ and the sweep runner (skip finished experiments, resume interrupted ones)."""
 from __future__ import annotations
 
 import json
+import math
 import re
 
 import pytest
@@ -179,6 +180,53 @@ def test_training_from_a_model_continues_its_weights_and_provenance(
             _config(
                 image_folder, tmp_path / "y", **{"run.init_from": str(model), "network.features": 4}
             ),
+            progress=False,
+        )
+
+
+def _logged_lr(run_dir):
+    rows = [json.loads(line) for line in (run_dir / "metrics.jsonl").read_text().splitlines()]
+    return {r["step"]: r["lr"] for r in rows if "lr" in r}
+
+
+def test_continue_schedule_ends_a_snapshot_on_the_schedule_and_budget_of_one_run(
+    image_folder, tmp_path
+):
+    """A run whose folder was lost goes on from its exported weights: steps, schedule and
+    budget are those of one straight run; only the Adam moments restart, under a new warm-up.
+    Resuming the continued run keeps its starting step."""
+    whole = {"optim.steps": 8, "optim.warmup_steps": 2, "run.val_every": 2}
+    straight = tmp_path / "straight"
+    train(_config(image_folder, straight, **whole), progress=False)
+    first = tmp_path / "first"
+    train(_config(image_folder, first, **{**whole, "optim.steps": 4}), progress=False)
+    snapshot = export_model(first, tmp_path / "snap", storage="float32")
+    cont = tmp_path / "cont"
+    settings = {**whole, "run.init_from": str(snapshot), "run.continue_schedule": True}
+    train(_config(image_folder, cont, **{**settings, "optim.steps": 6}), progress=False)
+    train(_config(image_folder, cont, **settings), resume=True, progress=False)
+
+    def cosine(step, steps, warm=1.0):  # logged after step s: the rate of step s - 1
+        return 1e-3 * warm * 0.5 * (1 + math.cos(math.pi * (step - 1) / steps))
+
+    want, got = _logged_lr(straight), _logged_lr(cont)
+    assert sorted(got) == [5, 6, 7, 8]  # steps of the whole, from the snapshot's on
+    # Steps 5 and 6 ran on a 6-step budget, the first of them warming up the fresh moments.
+    assert got[5] == pytest.approx(cosine(5, 6, warm=0.5), rel=1e-12)
+    assert got[6] == pytest.approx(cosine(6, 6), rel=1e-12)
+    for step in (7, 8):  # resumed: the straight run's cosine at the same step
+        assert got[step] == pytest.approx(want[step], rel=1e-12)
+        assert got[step] == pytest.approx(cosine(step, 8), rel=1e-12)
+    prov = json.loads(export_model(cont, tmp_path / "whole").read_text())["provenance"]
+    assert prov["total_steps"] == 8
+    assert [s["steps"] for s in prov["segments"]] == [4, 4]
+    assert [r["step"] for r in prov["validation"]] == [0, 2, 4, 6, 8]
+
+    with pytest.raises(ConfigError, match="needs run.init_from"):
+        _config(image_folder, tmp_path / "x", **{"run.continue_schedule": True}).validate()
+    with pytest.raises(ConfigError, match="between 0 and optim.steps"):
+        train(
+            _config(image_folder, tmp_path / "y", **{**settings, "optim.steps": 4}),
             progress=False,
         )
 

@@ -182,6 +182,13 @@ class RunConfig:
         "a checkpoint: the network's weights, and the learned kernels for --learn-pattern "
         "(optimiser state starts afresh; its provenance carries over)",
     )
+    continue_schedule: bool = _opt(
+        False,
+        "with init_from: begin at the source's total steps on this run's schedule, optim.steps "
+        "being the whole budget, so a run continued from a weights snapshot (a run folder that "
+        "did not survive) ends on the same schedule and budget as one straight run; the Adam "
+        "moments restart under a new warm-up, the divergence guard's scale carries over",
+    )
     device: str = _opt("auto", "auto, cpu, cuda, cuda:N or mps")
     log_every: int = _opt(10, "log every N steps")
     val_every: int = _opt(500, "validate every N steps")
@@ -296,6 +303,10 @@ class TrainConfig:
             (
                 self.data.val_split is None or self.data.val_split >= 0,
                 "data.val_split must be >= 0",
+            ),
+            (
+                not self.run.continue_schedule or bool(self.run.init_from),
+                "run.continue_schedule needs run.init_from (the snapshot to continue)",
             ),
         ]
         checks.append(

@@ -143,7 +143,7 @@ def provenance_of(loaded: ckpt_io.Checkpoint, run_dir: Path | None = None) -> di
     segment = {
         "run": run_dir.name if run_dir else Path(loaded.path).parent.name,
         "init_from": previous.get("name"),
-        "steps": int(meta.get("step", 0)),
+        "steps": int(meta.get("step", 0)) - int(meta.get("start_step", 0)),
         "batch_size": data.get("batch_size"),
         "patch_size": data.get("patch_size"),
         "train_seconds": round(float(meta.get("train_seconds", 0.0)), 1),
@@ -179,7 +179,8 @@ def provenance_of(loaded: ckpt_io.Checkpoint, run_dir: Path | None = None) -> di
     segments = [*before.get("segments", []), segment]
     curve = list(before.get("validation", []))
     if run_dir is not None:
-        curve += _validation_curve(run_dir, done)
+        # A continued run (start_step > 0) already logs the steps of the whole.
+        curve += _validation_curve(run_dir, done - int(meta.get("start_step", 0)))
     return {
         "total_steps": done + segment["steps"],
         "train_seconds": round(sum(float(s.get("train_seconds") or 0) for s in segments), 1),

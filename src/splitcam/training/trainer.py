@@ -210,6 +210,20 @@ def _start_from(system: ImagingSystem, spec: str) -> dict[str, Any]:
     return record
 
 
+def _continue_point(init_from: dict[str, Any], config: TrainConfig) -> tuple[int, float]:
+    """Where a ``run.continue_schedule`` run begins: the source's total steps and the divergence
+    guard's learning-rate scale at its end (from its provenance)."""
+    provenance = init_from.get("provenance") or {}
+    done = int(provenance.get("total_steps", 0))
+    if not 0 < done < config.optim.steps:
+        raise ConfigError(
+            f"run.continue_schedule: {init_from['name']} has {done} steps of training; it must be "
+            f"between 0 and optim.steps ({config.optim.steps}), the budget of the whole"
+        )
+    segments = provenance.get("segments") or [{}]
+    return done, float(segments[-1].get("lr_scale", 1.0))
+
+
 def val_split(config: TrainConfig) -> int:
     """How many images (the last, sorted by name) the training folder holds out: the set
     ``data.val_split``, none with a ``data.val`` folder, else ``min(32, max(1, n // 10))`` of
@@ -488,6 +502,16 @@ def _train(
         groups.append({"params": sensor_params, "lr": pattern_lr, "peak_lr": pattern_lr})
     optimizer = torch.optim.Adam(groups, lr=config.optim.lr, betas=tuple(config.optim.betas))
 
+    init_from = loaded.meta.get("init_from") if loaded is not None else None
+    if loaded is None and config.run.init_from:
+        init_from = _start_from(system, config.run.init_from)
+    # A run continued from a weights snapshot (run.continue_schedule) starts where the
+    # snapshot's run stopped: step numbers, the schedule and the budget are those of the whole.
+    start_step = int(loaded.meta.get("start_step", 0)) if loaded is not None else 0
+    lr_scale = float(loaded.meta.get("lr_scale", 1.0)) if loaded is not None else 1.0
+    if loaded is None and config.run.continue_schedule:
+        start_step, lr_scale = _continue_point(init_from, config)
+
     cache = ImageCache(
         train_source,
         min_size=config.data.patch_size,
@@ -497,13 +521,13 @@ def _train(
     sampler = PatchSampler(
         cache,
         patch_size=config.data.patch_size,
-        seed=config.run.seed,
+        seed=config.run.seed + start_step,  # a continued run must not replay the first patches
         rank=dist_info.rank,
         world_size=dist_info.world_size,
         partial=config.data.partial_periods,
         period=system.sensor.period,
     )
-    noise_seed = config.run.seed * 7919 + 1 + 104729 * dist_info.rank
+    noise_seed = (config.run.seed + start_step) * 7919 + 1 + 104729 * dist_info.rank
     if config.noise.model == "photon":
         noise: GaussianNoise | PhotonNoise = PhotonNoise(
             tuple(config.noise.photons),
@@ -522,11 +546,8 @@ def _train(
     if config.noise.model == "photon":
         val_levels = [Exposure(n, **config.noise.sensor()) for n in config.noise.val_photons]
 
-    step = 0
+    step = start_step
     train_seconds = 0.0  # training time of the run so far, all processes (not validation)
-    init_from = loaded.meta.get("init_from") if loaded is not None else None
-    if loaded is None and config.run.init_from:
-        init_from = _start_from(system, config.run.init_from)
     if loaded is not None:
         ckpt_io.load_module(system, loaded)
         ckpt_io.load_optimizer(optimizer, loaded)
@@ -538,10 +559,7 @@ def _train(
             group["peak_lr"] = peak
             group["betas"] = tuple(config.optim.betas)
 
-    guard = DivergenceGuard(
-        config.optim.divergence_factor,
-        lr_scale=float(loaded.meta.get("lr_scale", 1.0)) if loaded is not None else 1.0,
-    )
+    guard = DivergenceGuard(config.optim.divergence_factor, lr_scale=lr_scale)
 
     model: torch.nn.Module = system
     if dist_info.world_size > 1:
@@ -590,6 +608,7 @@ def _train(
         meta = {
             "config": config.to_dict(),
             "step": step,
+            "start_step": start_step,
             "network": system.network.config(),
             "pattern": system.sensor.to_pattern().to_dict(),
             "start_pattern": start_pattern,
@@ -649,7 +668,7 @@ def _train(
                 group["lr"] = learning_rate(
                     config.optim.schedule,
                     group["peak_lr"] * guard.lr_scale,
-                    step,
+                    step - start_step,  # fresh Adam moments warm up again
                     config.optim.warmup_steps,
                     run_progress,
                 )
