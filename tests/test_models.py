@@ -301,6 +301,54 @@ def test_sweep_runs_skips_finished_and_resumes_interrupted(image_folder, tmp_pat
     assert all("done already" in s for s in said) and len(said) == 2
 
 
+def test_sweep_snapshots_carry_an_unfinished_run_to_a_machine_without_its_folder(
+    image_folder, tmp_path, monkeypatch
+):
+    """--snapshots: an interrupted sweep exports its unfinished runs; with the run folder gone,
+    the same sweep continues from the snapshot on the schedule of one straight run and ends at
+    the whole budget, its provenance joining both segments."""
+    from splitcam.training import sweep as sweep_module
+
+    exps = tmp_path / "experiments"
+    exps.mkdir()
+    settings = {k: v for k, v in SMALL.items() if k != "run.threads"}
+    f = _experiment(exps, "c", **settings)
+    runs, snaps = tmp_path / "runs", tmp_path / "snapshots"
+    experiments = load_experiments([f], runs, data=str(image_folder))
+
+    def interrupted(todo, jobs, threads, say):  # the sweep is stopped at step 2 of 4
+        cfg = todo[0].config.override({"optim.steps": 2, "run.threads": None})
+        train(cfg, progress=False)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(sweep_module, "_run_local", interrupted)
+    said: list[str] = []
+    with pytest.raises(KeyboardInterrupt):
+        run_sweep(experiments, jobs=1, threads=1, say=said.append, snapshots=snaps)
+    assert any("[c] snapshot at step 2" in s for s in said), said
+    snap = json.loads((snaps / "c.json").read_text())
+    assert snap["provenance"]["total_steps"] == 2 and (snaps / "c.safetensors").is_file()
+    monkeypatch.undo()
+
+    # A new machine: no run folder, only the snapshot (as committed to git).
+    import shutil
+
+    shutil.rmtree(runs)
+    experiments = load_experiments([f], runs, data=str(image_folder))
+    said.clear()
+    result = run_sweep(experiments, jobs=1, threads=1, say=said.append, snapshots=snaps)
+    assert result == {"c": "done"}, (said, (runs / "c" / "sweep.log").read_text())
+    assert any("continues from the snapshot" in s for s in said)
+    assert any("can go once the model ships" in s for s in said)
+    assert sorted(_logged_lr(runs / "c")) == [3, 4]  # only the missing steps ran
+    prov = json.loads(export_model(runs / "c", tmp_path / "whole").read_text())["provenance"]
+    assert prov["total_steps"] == 4 and [s["steps"] for s in prov["segments"]] == [2, 2]
+    # The run's own folder wins over the snapshot once it exists: nothing more to do.
+    said.clear()
+    assert run_sweep(experiments, jobs=1, threads=1, say=said.append, snapshots=snaps) == result
+    assert any("done already" in s for s in said)
+
+
 def test_sweep_refuses_bad_input(image_folder, tmp_path):
     exps = tmp_path / "e"
     exps.mkdir()

@@ -386,7 +386,7 @@ def cmd_models(args: argparse.Namespace) -> int:
 
 def cmd_sweep(args: argparse.Namespace) -> int:
     from .training.config import read_config_value
-    from .training.sweep import load_experiments, run_sweep, status
+    from .training.sweep import continue_from_snapshots, load_experiments, run_sweep, status
 
     overrides = {}
     for item in args.set or ():
@@ -396,6 +396,8 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         overrides[key.strip()] = read_config_value(value)
     experiments = load_experiments(args.experiments, args.out, data=args.data, overrides=overrides)
     if args.dry_run:
+        if args.snapshots:
+            experiments = continue_from_snapshots(experiments, args.snapshots)
         for e in experiments:
             print(f"{e.name}: {status(e)} ({e.run_dir})")
         return 0
@@ -407,7 +409,12 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         "wait": not args.no_wait,
     }
     result = run_sweep(
-        experiments, executor=args.executor, jobs=args.jobs, threads=args.threads, slurm=slurm
+        experiments,
+        executor=args.executor,
+        jobs=args.jobs,
+        threads=args.threads,
+        slurm=slurm,
+        snapshots=args.snapshots,
     )
     print("; ".join(f"{k}: {v}" for k, v in result.items()))
     return 0 if all(v in ("done", "partial") for v in result.values()) else 1
@@ -927,6 +934,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--gpus", type=int, help="slurm GPUs per job")
     p.add_argument("--cpus", type=int, help="slurm CPUs per job")
     p.add_argument("--no-wait", action="store_true", help="slurm: submit and return")
+    p.add_argument(
+        "--snapshots",
+        metavar="DIR",
+        help="weights snapshots: when the sweep stops (Ctrl-C included), each unfinished run is "
+        "exported to DIR/<name> (float16, small enough for git); a run with no folder continues "
+        "from its snapshot on the schedule of one straight run",
+    )
     p.add_argument("--dry-run", action="store_true", help="show what each experiment needs")
     p.set_defaults(handler=cmd_sweep)
 

@@ -15,6 +15,14 @@ Executors:
   time, GPUs and CPUs per job; a job that hits its time limit has saved a checkpoint, and the
   next sweep resumes it. One training over several GPUs stays ``torchrun``.
 
+Weights snapshots (``snapshots=DIR``, ``splitcam sweep --snapshots DIR``) carry an unfinished run
+across machines whose run folders do not survive (a checkpoint with its optimiser state is too big
+for a repository; a 16-bit snapshot is a sixth of it): when the sweep stops, finished or
+interrupted, every unfinished run is exported to ``DIR/<name>.json`` + ``.safetensors``; an
+experiment with no run folder but a snapshot starts from it with ``run.continue_schedule`` (the
+schedule and budget of one straight run; only the Adam moments restart). So the same command
+continues a sweep whether or not ``OUT`` is still there.
+
 The sweep itself decides nothing about the recipe: each file is the whole configuration of its
 run, so a table that compares runs compares exactly what the files say.
 """
@@ -34,7 +42,14 @@ from typing import Any
 from . import checkpoint as ckpt_io
 from .config import ConfigError, TrainConfig
 
-__all__ = ["Experiment", "load_experiments", "run_sweep", "status"]
+__all__ = [
+    "Experiment",
+    "continue_from_snapshots",
+    "load_experiments",
+    "run_sweep",
+    "save_snapshots",
+    "status",
+]
 
 EXECUTORS = ("local", "slurm")
 
@@ -87,6 +102,61 @@ def load_experiments(
             raise ConfigError(f"{path}: no training images (data.train); give --data DIR")
         experiments.append(Experiment(path.stem, path, config, run_dir))
     return experiments
+
+
+def snapshot_path(exp: Experiment, snapshots: str | os.PathLike[str]) -> Path:
+    """Where the weights snapshot of ``exp`` lives in ``snapshots`` (its JSON file)."""
+    return Path(snapshots) / f"{exp.name}.json"
+
+
+def continue_from_snapshots(
+    experiments: Sequence[Experiment],
+    snapshots: str | os.PathLike[str],
+    say: Callable[[str], None] = print,
+) -> list[Experiment]:
+    """The experiments, those with no run folder but a snapshot set to continue from it.
+
+    An experiment that names its own ``run.init_from`` keeps it: a snapshot never replaces a
+    start the experiment file chose.
+    """
+    out = []
+    for exp in experiments:
+        snap = snapshot_path(exp, snapshots)
+        if status(exp) == "new" and snap.is_file() and not exp.config.run.init_from:
+            settings = {"run.init_from": str(snap), "run.continue_schedule": True}
+            exp = dataclasses.replace(exp, config=exp.config.override(settings))
+            say(f"[{exp.name}] no run folder: continues from the snapshot {snap}")
+        out.append(exp)
+    return out
+
+
+def save_snapshots(
+    experiments: Sequence[Experiment],
+    snapshots: str | os.PathLike[str],
+    say: Callable[[str], None] = print,
+) -> dict[str, Path]:
+    """Export every unfinished run (a checkpoint short of its budget) as a float16 snapshot in
+    ``snapshots``; returns ``{name: JSON path}``. A finished run's old snapshot is left where it
+    is, with a line saying it can go once the model ships."""
+    from .models import export_model
+
+    written = {}
+    for exp in experiments:
+        state = status(exp)
+        snap = snapshot_path(exp, snapshots)
+        if state == "partial":
+            step = int(ckpt_io.load(exp.run_dir / ckpt_io.CHECKPOINT_NAME).meta.get("step", 0))
+            written[exp.name] = export_model(
+                exp.run_dir,
+                snap,
+                name=exp.name,
+                description=f"snapshot of the unfinished run {exp.name} "
+                f"(step {step} of {exp.config.optim.steps})",
+            )
+            say(f"[{exp.name}] snapshot at step {step}: {snap}")
+        elif state == "done" and snap.is_file():
+            say(f"[{exp.name}] done: its snapshot {snap} can go once the model ships")
+    return written
 
 
 def status(exp: Experiment) -> str:
@@ -237,6 +307,7 @@ def run_sweep(
     slurm: dict[str, Any] | None = None,
     say: Callable[[str], None] = print,
     cluster: str | None = None,
+    snapshots: str | os.PathLike[str] | None = None,
 ) -> dict[str, str]:
     """Train every experiment that is not done; resume the interrupted ones.
 
@@ -248,6 +319,9 @@ def run_sweep(
         slurm: ``partition``, ``time`` (minutes), ``gpus``, ``cpus``, ``wait`` for ``slurm``.
         say: Where progress lines go.
         cluster: submitit's cluster override (``debug`` runs the jobs in this process: tests).
+        snapshots: Folder of weights snapshots: a run with no folder continues from its
+            snapshot; when the sweep stops (finished, failed or interrupted), every unfinished
+            run is exported there (not for a slurm sweep that does not wait).
 
     Returns:
         ``{name: status}`` after the sweep (``done``, ``partial``, ``new``, or ``failed``).
@@ -258,19 +332,25 @@ def run_sweep(
         raise ConfigError(f"jobs must be an integer >= 1, got {jobs!r}")
     if threads is None and executor == "local":
         threads = os.cpu_count() or 1
+    if snapshots is not None:
+        experiments = continue_from_snapshots(experiments, snapshots, say)
     before = {e.name: status(e) for e in experiments}
     todo = [e for e in experiments if before[e.name] != "done"]
     for e in experiments:
         if before[e.name] == "done":
             say(f"[{e.name}] done already: skipped ({e.run_dir})")
-    if todo:
-        if executor == "local":
+    waits = executor == "local" or (slurm or {}).get("wait", True)
+    try:
+        if todo and executor == "local":
             codes = _run_local(todo, min(jobs, len(todo)), threads, say)
-        else:
+        elif todo:
             root = Path(todo[0].run_dir).parent / ".submitit"
             codes = _run_slurm(todo, root, {**(slurm or {}), "jobs": jobs}, say, cluster)
-    else:
-        codes = {}
+        else:
+            codes = {}
+    finally:  # interrupted too: the checkpoints the jobs saved become snapshots
+        if snapshots is not None and waits:
+            save_snapshots(experiments, snapshots, say)
     result = {}
     for e in experiments:
         result[e.name] = "failed" if codes.get(e.name, 0) != 0 else status(e)
