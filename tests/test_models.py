@@ -3,6 +3,7 @@ and the sweep runner (skip finished experiments, resume interrupted ones)."""
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 import re
@@ -80,6 +81,25 @@ def test_export_round_trip_matches_the_run(trained_run, tmp_path, storage):
             path.with_suffix(".safetensors").stat().st_size
             < full.with_suffix(".safetensors").stat().st_size
         )
+
+
+def test_export_is_byte_for_byte_repeatable(trained_run, tmp_path):
+    """The same weights give the same file: safetensors writes its metadata map in hash order
+    (before the header was made canonical, 8 exports of one run gave files with different bytes
+    about every other time), so shipped checksums moved with every re-export."""
+    from safetensors.torch import load_file
+
+    blobs = set()
+    for i in range(8):
+        meta = json.loads(export_model(trained_run, tmp_path / f"m{i}").read_text())
+        blob = (tmp_path / f"m{i}.safetensors").read_bytes()
+        assert hashlib.sha256(blob).hexdigest() == meta["sha256"]
+        blobs.add(blob)
+    assert len(blobs) == 1
+    loaded = load_file(str(tmp_path / "m0.safetensors"))  # still plain safetensors
+    system, _ = load_model(tmp_path / "m0")
+    for key, value in system.network.state_dict().items():
+        torch.testing.assert_close(loaded[key].to(value.dtype), value, rtol=0, atol=0)
 
 
 def test_shipped_names_resolve_and_unknown_names_list_them(trained_run, tmp_path, monkeypatch):

@@ -37,16 +37,20 @@ def save_pair(
     version: int,
     meta: dict[str, Any],
 ) -> Path:
-    """Write ``tensors`` and ``meta`` (JSON-serialisable) as a pair; returns the JSON path."""
-    from safetensors.torch import save_file
+    """Write ``tensors`` and ``meta`` (JSON-serialisable) as a pair; returns the JSON path.
+
+    The tensor file's bytes depend only on the tensors (see :func:`_canonical`), so exporting
+    the same weights twice gives the same file and the same recorded checksum.
+    """
+    from safetensors.torch import save
 
     tensors_path, meta_path = paired_paths(path)
     tensors_path.parent.mkdir(parents=True, exist_ok=True)
-    save_file(
+    blob = save(
         {k: v.detach().cpu().contiguous() for k, v in tensors.items()},
-        str(tensors_path),
         metadata={"format": fmt, "version": str(version)},
     )
+    tensors_path.write_bytes(_canonical(blob))
     header = {
         "format": fmt,
         "version": version,
@@ -56,6 +60,22 @@ def save_pair(
     }
     meta_path.write_text(json.dumps(header, indent=1) + "\n")
     return meta_path
+
+
+def _canonical(blob: bytes) -> bytes:
+    """The safetensors bytes with the JSON header's keys sorted.
+
+    safetensors writes its ``__metadata__`` map in hash order, which changes from one process to
+    the next: the same tensors gave files with different bytes (and checksums). The header is
+    rewritten with sorted keys, in the same compact form and padded with spaces to its original
+    length, so offsets and the data are untouched and any safetensors reader loads it as before.
+    """
+    size = int.from_bytes(blob[:8], "little")
+    header = json.loads(blob[8 : 8 + size])
+    text = json.dumps(header, sort_keys=True, separators=(",", ":")).encode()
+    if len(text) > size:  # never expected: sorting keeps every character; keep the original
+        return blob
+    return blob[:8] + text.ljust(size, b" ") + blob[8 + size :]
 
 
 def load_pair(
