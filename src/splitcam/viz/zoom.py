@@ -54,6 +54,7 @@ def zoom_figure(
     path: str | os.PathLike,
     title: str = "",
     region: tuple[int, int, int] | None = None,
+    columns: int = 6,
 ) -> Path:
     """Ground truth and each method's output, zoomed on ``region`` (top, left, size), by
     default the most detailed region of the scene (:func:`detail_region`).
@@ -65,6 +66,8 @@ def zoom_figure(
         path: PNG to write.
         title: Figure title.
         region: ``(top, left, size)``.
+        columns: Panels per row: many methods wrap onto several rows, so each crop stays large
+            enough to compare (one row of 18 was a strip too thin to read).
     """
     from matplotlib.figure import Figure
     from matplotlib.patches import Rectangle
@@ -73,8 +76,14 @@ def zoom_figure(
         detail_region(rgb) if region is None else check_region(region, tuple(rgb.shape[1:]))
     )
     panels = [("ground truth", rgb, None), *((n, p, s) for n, (p, s) in outputs.items())]
-    fig = Figure(figsize=(2.6 * (len(panels) + 1), 3.1))
-    axes = fig.subplots(1, len(panels) + 1)
+    cells = len(panels) + 1
+    cols = max(1, min(columns, cells))
+    rows = -(-cells // cols)
+    fig = Figure(figsize=(2.6 * cols, 3.1 * rows))
+    axes = list(np.atleast_1d(fig.subplots(rows, cols)).ravel())
+    for ax in axes[cells:]:
+        ax.set_visible(False)
+    axes = axes[:cells]
     axes[0].imshow(rgb.permute(1, 2, 0).numpy())
     axes[0].add_patch(Rectangle((left, top), w, h, fill=False, ec="yellow", lw=1.5))
     axes[0].set_title("scene (region in yellow)", fontsize=8)
