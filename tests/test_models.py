@@ -515,7 +515,13 @@ def test_provenance_records_each_thread_count_of_a_resumed_run(image_folder, tmp
     segment = meta["provenance"]["segments"][-1]
     assert segment["threads"] == [[0, 1], [2, 2]]
     assert "1 thread, 2 from step 2)" in segment["device"]
+    assert torch.backends.cpu.get_cpu_capability() in segment["device"]
     assert meta["provenance"]["total_steps"] == 4
+    # One thread count all along: said once, in the singular.
+    once = tmp_path / "once"
+    train(_config(image_folder, once, **{"optim.steps": 2, "run.threads": 1}), progress=False)
+    meta = json.loads(export_model(once, tmp_path / "o").read_text())
+    assert meta["provenance"]["segments"][-1]["device"].endswith("; 1 thread)")
 
 
 @pytest.mark.parametrize("name", model_names())

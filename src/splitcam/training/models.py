@@ -175,6 +175,7 @@ def provenance_of(loaded: ckpt_io.Checkpoint, run_dir: Path | None = None) -> di
     history = _thread_history(folder, run.get("threads"), segment["steps"])
     if len(history) > 1:
         segment["threads"] = history
+    if str(segment["device"]).startswith("cpu") and all(isinstance(t, int) for _, t in history):
         segment["device"] = _device_with_threads(segment["device"], history)
     segments = [*before.get("segments", []), segment]
     curve = list(before.get("validation", []))
