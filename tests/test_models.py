@@ -369,6 +369,55 @@ def test_sweep_snapshots_carry_an_unfinished_run_to_a_machine_without_its_folder
     assert any("done already" in s for s in said)
 
 
+def test_a_background_sweep_ended_by_sigterm_stops_its_jobs_and_writes_snapshots(
+    image_folder, tmp_path
+):
+    """A sweep started as `nohup splitcam sweep ... &` (SIGINT ignored) and ended by SIGTERM (a
+    scheduler, a session's end) stops its job, which saves a checkpoint, and exports it as a
+    snapshot, instead of dying at once with its job still training."""
+    import contextlib
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    exps = tmp_path / "experiments"
+    exps.mkdir()
+    settings = {k: v for k, v in SMALL.items() if k != "run.threads"}
+    f = _experiment(exps, "long", **{**settings, "optim.steps": 100000, "run.val_every": 1000})
+    runs, snaps = tmp_path / "runs", tmp_path / "snapshots"
+    cmd = [sys.executable, "-m", "splitcam", "sweep", str(f), "--out", str(runs), "--data"]
+    cmd += [str(image_folder), "--threads", "1", "--snapshots", str(snaps)]
+    proc = subprocess.Popen(
+        cmd,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN),  # as `cmd &` does
+        start_new_session=True,  # its own process group: nothing outlives the test
+    )
+    try:
+        checkpoint = runs / "long" / "checkpoint.json"
+        deadline = time.monotonic() + 120
+        while not checkpoint.is_file() and time.monotonic() < deadline and proc.poll() is None:
+            time.sleep(0.2)
+        assert checkpoint.is_file(), proc.communicate()[0] if proc.poll() is not None else "slow"
+        os.kill(proc.pid, signal.SIGTERM)
+        out, _ = proc.communicate(timeout=120)
+    finally:
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(proc.pid, signal.SIGKILL)
+    assert proc.returncode == 130, out
+    assert "[long] snapshot at step" in out, out
+    step = json.loads((snaps / "long.json").read_text())["provenance"]["total_steps"]
+    assert 0 < step < 100000
+    assert ckpt_io.load(runs / "long").meta["step"] == step  # the job saved where it stopped
+    lines = (runs / "long" / "metrics.jsonl").read_text().splitlines()
+    time.sleep(1.0)  # no job is left training
+    assert (runs / "long" / "metrics.jsonl").read_text().splitlines() == lines
+
+
 def test_sweep_refuses_bad_input(image_folder, tmp_path):
     exps = tmp_path / "e"
     exps.mkdir()

@@ -29,13 +29,15 @@ run, so a table that compares runs compares exactly what the files say.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import os
 import signal
 import subprocess
 import sys
+import threading
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -248,6 +250,27 @@ def _run_local(
     return codes
 
 
+@contextlib.contextmanager
+def _stopped_by_signals() -> Iterator[None]:
+    """SIGINT and SIGTERM stop a local sweep the way Ctrl-C does (its jobs save their
+    checkpoints, snapshots are written). Without this, a sweep started in the background
+    (``nohup ... &``: SIGINT ignored) or ended by a scheduler or a session's end (SIGTERM)
+    died at once, leaving its jobs running and no snapshots."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def interrupt(signum: int, frame: object) -> None:
+        raise KeyboardInterrupt
+
+    previous = {sig: signal.signal(sig, interrupt) for sig in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+
+
 def _train_job(config_dict: dict[str, Any], resume: bool) -> int:
     """What one cluster job runs (in-process ``train``); module level so submitit can pickle
     a reference to it."""
@@ -342,7 +365,8 @@ def run_sweep(
     waits = executor == "local" or (slurm or {}).get("wait", True)
     try:
         if todo and executor == "local":
-            codes = _run_local(todo, min(jobs, len(todo)), threads, say)
+            with _stopped_by_signals():
+                codes = _run_local(todo, min(jobs, len(todo)), threads, say)
         elif todo:
             root = Path(todo[0].run_dir).parent / ".submitit"
             codes = _run_slurm(todo, root, {**(slurm or {}), "jobs": jobs}, say, cluster)
