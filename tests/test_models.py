@@ -418,6 +418,37 @@ def test_a_background_sweep_ended_by_sigterm_stops_its_jobs_and_writes_snapshots
     assert (runs / "long" / "metrics.jsonl").read_text().splitlines() == lines
 
 
+def test_a_job_stopped_by_a_signal_reads_as_partial_not_failed(image_folder, tmp_path, monkeypatch):
+    """A job that exits 130 (train's status when a signal stopped it after its checkpoint) is
+    reported as stopped and its run as partial; any other non-zero status is a failure."""
+    import sys
+
+    from splitcam.training import sweep as sweep_module
+
+    exps = tmp_path / "experiments"
+    exps.mkdir()
+    settings = {k: v for k, v in SMALL.items() if k != "run.threads"}
+    f = _experiment(exps, "s", **settings)
+    runs = tmp_path / "runs"
+    train(
+        _config(image_folder, runs / "s", **{"optim.steps": 2, "run.threads": None}), progress=False
+    )
+    experiments = load_experiments([f], runs, data=str(image_folder))
+    for code, state, said_word in ((130, "partial", "stopped"), (3, "failed", "failed (3)")):
+        monkeypatch.setattr(
+            sweep_module,
+            "train_command",
+            lambda exp, threads, resume, code=code: [
+                sys.executable,
+                "-c",
+                f"raise SystemExit({code})",
+            ],
+        )
+        said: list[str] = []
+        assert run_sweep(experiments, jobs=1, threads=1, say=said.append) == {"s": state}
+        assert any(said_word in line for line in said), said
+
+
 def test_sweep_refuses_bad_input(image_folder, tmp_path):
     exps = tmp_path / "e"
     exps.mkdir()

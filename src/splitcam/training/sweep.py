@@ -181,6 +181,8 @@ def status(exp: Experiment) -> str:
 
 
 SWEEP_CONFIG = "sweep_config.json"
+#: Exit status of a `train` stopped by SIGINT/SIGTERM after saving its checkpoint (not a failure).
+STOPPED = 130
 
 
 def train_command(exp: Experiment, threads: int | None, resume: bool) -> list[str]:
@@ -230,7 +232,13 @@ def _run_local(
                 del running[name]
                 codes[name] = proc.returncode
                 minutes = (time.monotonic() - began) / 60
-                state = "finished" if proc.returncode == 0 else f"failed ({proc.returncode})"
+                state = (
+                    "finished"
+                    if proc.returncode == 0
+                    else "stopped (checkpoint saved)"
+                    if proc.returncode == STOPPED
+                    else f"failed ({proc.returncode})"
+                )
                 say(f"[{name}] {state} after {minutes:.1f} min")
     except KeyboardInterrupt:
         say(
@@ -377,5 +385,5 @@ def run_sweep(
             save_snapshots(experiments, snapshots, say)
     result = {}
     for e in experiments:
-        result[e.name] = "failed" if codes.get(e.name, 0) != 0 else status(e)
+        result[e.name] = "failed" if codes.get(e.name, 0) not in (0, STOPPED) else status(e)
     return result
