@@ -3,10 +3,17 @@ and the sweep runner (skip finished experiments, resume interrupted ones)."""
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import math
+import os
 import re
+import shutil
+import signal
+import subprocess
+import sys
+import time
 
 import pytest
 import torch
@@ -34,6 +41,10 @@ SMALL = {
     "run.val_every": 2,
     "run.checkpoint_every": 2,
 }
+
+
+#: An experiment file's settings: SMALL without the thread count (the sweep sets it).
+SWEEP_SMALL = {k: v for k, v in SMALL.items() if k != "run.threads"}
 
 
 def _config(folder, out, **changes) -> TrainConfig:
@@ -292,11 +303,11 @@ def test_sweep_runs_skips_finished_and_resumes_interrupted(image_folder, tmp_pat
     exps = tmp_path / "experiments"
     exps.mkdir()
     files = [
-        _experiment(exps, "a", **{k: v for k, v in SMALL.items() if k != "run.threads"}),
+        _experiment(exps, "a", **SWEEP_SMALL),
         _experiment(
             exps,
             "b",
-            **{**{k: v for k, v in SMALL.items() if k != "run.threads"}, "pattern.name": "A"},
+            **{**SWEEP_SMALL, "pattern.name": "A"},
         ),
     ]
     runs = tmp_path / "runs"
@@ -331,8 +342,7 @@ def test_sweep_snapshots_carry_an_unfinished_run_to_a_machine_without_its_folder
 
     exps = tmp_path / "experiments"
     exps.mkdir()
-    settings = {k: v for k, v in SMALL.items() if k != "run.threads"}
-    f = _experiment(exps, "c", **settings)
+    f = _experiment(exps, "c", **SWEEP_SMALL)
     runs, snaps = tmp_path / "runs", tmp_path / "snapshots"
     experiments = load_experiments([f], runs, data=str(image_folder))
 
@@ -351,8 +361,6 @@ def test_sweep_snapshots_carry_an_unfinished_run_to_a_machine_without_its_folder
     monkeypatch.undo()
 
     # A new machine: no run folder, only the snapshot (as committed to git).
-    import shutil
-
     shutil.rmtree(runs)
     experiments = load_experiments([f], runs, data=str(image_folder))
     said.clear()
@@ -375,17 +383,9 @@ def test_a_background_sweep_ended_by_sigterm_stops_its_jobs_and_writes_snapshots
     """A sweep started as `nohup splitcam sweep ... &` (SIGINT ignored) and ended by SIGTERM (a
     scheduler, a session's end) stops its job, which saves a checkpoint, and exports it as a
     snapshot, instead of dying at once with its job still training."""
-    import contextlib
-    import os
-    import signal
-    import subprocess
-    import sys
-    import time
-
     exps = tmp_path / "experiments"
     exps.mkdir()
-    settings = {k: v for k, v in SMALL.items() if k != "run.threads"}
-    f = _experiment(exps, "long", **{**settings, "optim.steps": 100000, "run.val_every": 1000})
+    f = _experiment(exps, "long", **{**SWEEP_SMALL, "optim.steps": 100000, "run.val_every": 1000})
     runs, snaps = tmp_path / "runs", tmp_path / "snapshots"
     cmd = [sys.executable, "-m", "splitcam", "sweep", str(f), "--out", str(runs), "--data"]
     cmd += [str(image_folder), "--threads", "1", "--snapshots", str(snaps)]
@@ -421,29 +421,19 @@ def test_a_background_sweep_ended_by_sigterm_stops_its_jobs_and_writes_snapshots
 def test_a_job_stopped_by_a_signal_reads_as_partial_not_failed(image_folder, tmp_path, monkeypatch):
     """A job that exits 130 (train's status when a signal stopped it after its checkpoint) is
     reported as stopped and its run as partial; any other non-zero status is a failure."""
-    import sys
-
     from splitcam.training import sweep as sweep_module
 
     exps = tmp_path / "experiments"
     exps.mkdir()
-    settings = {k: v for k, v in SMALL.items() if k != "run.threads"}
-    f = _experiment(exps, "s", **settings)
+    f = _experiment(exps, "s", **SWEEP_SMALL)
     runs = tmp_path / "runs"
     train(
         _config(image_folder, runs / "s", **{"optim.steps": 2, "run.threads": None}), progress=False
     )
     experiments = load_experiments([f], runs, data=str(image_folder))
     for code, state, said_word in ((130, "partial", "stopped"), (3, "failed", "failed (3)")):
-        monkeypatch.setattr(
-            sweep_module,
-            "train_command",
-            lambda exp, threads, resume, code=code: [
-                sys.executable,
-                "-c",
-                f"raise SystemExit({code})",
-            ],
-        )
+        exits = [sys.executable, "-c", f"raise SystemExit({code})"]
+        monkeypatch.setattr(sweep_module, "train_command", lambda *_, cmd=exits: cmd)
         said: list[str] = []
         assert run_sweep(experiments, jobs=1, threads=1, say=said.append) == {"s": state}
         assert any(said_word in line for line in said), said
@@ -473,7 +463,7 @@ def test_sweep_slurm_path_through_submitit(image_folder, tmp_path):
     pytest.importorskip("submitit")
     exps = tmp_path / "e"
     exps.mkdir()
-    f = _experiment(exps, "s", **{k: v for k, v in SMALL.items() if k != "run.threads"})
+    f = _experiment(exps, "s", **SWEEP_SMALL)
     experiments = load_experiments([f], tmp_path / "runs", data=str(image_folder))
     said: list[str] = []
     result = run_sweep(

@@ -181,8 +181,18 @@ def status(exp: Experiment) -> str:
 
 
 SWEEP_CONFIG = "sweep_config.json"
-#: Exit status of a `train` stopped by SIGINT/SIGTERM after saving its checkpoint (not a failure).
+#: Exit status of a `train` stopped by SIGINT/SIGTERM after saving its checkpoint (`splitcam
+#: train` returns it for an interrupted run): not a failure, the run resumes.
 STOPPED = 130
+
+
+def _ended(code: int) -> str:
+    """How a job's exit status reads in the sweep's log."""
+    if code == 0:
+        return "finished"
+    if code == STOPPED:
+        return "stopped (checkpoint saved)"
+    return f"failed ({code})"
 
 
 def train_command(exp: Experiment, threads: int | None, resume: bool) -> list[str]:
@@ -232,14 +242,7 @@ def _run_local(
                 del running[name]
                 codes[name] = proc.returncode
                 minutes = (time.monotonic() - began) / 60
-                state = (
-                    "finished"
-                    if proc.returncode == 0
-                    else "stopped (checkpoint saved)"
-                    if proc.returncode == STOPPED
-                    else f"failed ({proc.returncode})"
-                )
-                say(f"[{name}] {state} after {minutes:.1f} min")
+                say(f"[{name}] {_ended(proc.returncode)} after {minutes:.1f} min")
     except KeyboardInterrupt:
         say(
             "interrupted: stopping the jobs (each saves a checkpoint; run the sweep again to "
