@@ -319,3 +319,34 @@ def test_validation_psnr_equals_what_evaluate_reports(tmp_path):
     summary = json.loads((tmp_path / "ev/summary.json").read_text())["run"]["all"]
     assert summary["0"]["psnr"] == pytest.approx(last["val_psnr_0"], abs=1e-9)
     assert summary["15"]["psnr"] == pytest.approx(last["val_psnr_15"], abs=1e-9)
+
+
+def _table1_summary(psnr: dict[str, list[float]], sigmas: list[str]) -> dict:
+    return {
+        k: {"all": {s: {"psnr": v} for s, v in zip(sigmas, vals, strict=True)}}
+        for k, vals in psnr.items()
+    }
+
+
+def test_table1_checks_rank_b_and_c_among_the_patterns_evaluated():
+    """'B and C last' ranks among the patterns there are (E may not be trained yet), and fails
+    when either is ahead of another pattern at one sigma, or when E is there and behind them."""
+    from splitcam.evaluation.report import checks
+
+    sigmas = ["0", "20"]
+    rows = {k: k for k in "ABCDE"}
+
+    def verdicts(psnr):
+        return {stmt: ok for stmt, ok, _ in checks(_table1_summary(psnr, sigmas), rows, sigmas)}
+
+    four = {"A": [40, 33], "B": [34, 32], "C": [33, 31.5], "D": [41, 34]}
+    got = verdicts(four)
+    last4 = "B and C last at every σ (among A, B, C, D)"
+    assert got[last4] is True
+    assert got["B and C nearly flat in σ (drop smaller than A's and D's)"] is True  # 2, 1.5 < 7
+    assert verdicts({**four, "B": [34, 33.5]})[last4] is False
+    assert verdicts({**four, "C": [39, 31.5]})[
+        "B and C nearly flat in σ (drop smaller than A's and D's)"] is False  # C drops 7.5 > 7
+    assert verdicts({**four, "E": [35, 32.5]})["B and C last at every σ"] is True
+    assert verdicts({**four, "E": [33.5, 31]})["B and C last at every σ"] is False
+    assert not any("B and C" in s for s in verdicts({"A": [40, 33], "D": [41, 34]}))
