@@ -439,6 +439,30 @@ def test_a_job_stopped_by_a_signal_reads_as_partial_not_failed(image_folder, tmp
         assert any(said_word in line for line in said), said
 
 
+def test_sweep_skips_an_experiment_whose_model_ships_with_its_budget(
+    trained_run, image_folder, tmp_path, monkeypatch, capsys
+):
+    """A shipped model of the experiment's name with the whole budget, and no run folder or
+    snapshot: the sweep skips it instead of training it again from scratch; a bigger budget,
+    or --retrain-shipped, trains it."""
+    monkeypatch.setattr(models_module, "MODELS_DIR", tmp_path / "shipped")
+    export_model(trained_run, tmp_path / "shipped" / "d", name="d")  # 4 steps
+    exps = tmp_path / "experiments"
+    exps.mkdir()
+    same = _experiment(exps, "d", **SWEEP_SMALL)
+    runs = tmp_path / "runs"
+    common = ["--out", str(runs), "--data", str(image_folder), "--threads", "1"]
+    assert main(["sweep", str(same), *common, "--dry-run"]) == 0
+    assert "d: skipped, ships with its whole budget" in capsys.readouterr().out
+    assert main(["sweep", str(same), *common]) == 0
+    assert "d: skipped" in capsys.readouterr().out and not (runs / "d").exists()
+    bigger = ["--set", "optim.steps=6"]
+    assert main(["sweep", str(same), *common, *bigger, "--dry-run"]) == 0
+    assert "d: new" in capsys.readouterr().out
+    assert main(["sweep", str(same), *common, "--retrain-shipped"]) == 0
+    assert ckpt_io.load(runs / "d").meta["step"] == 4
+
+
 def test_sweep_refuses_bad_input(image_folder, tmp_path):
     exps = tmp_path / "e"
     exps.mkdir()

@@ -386,7 +386,13 @@ def cmd_models(args: argparse.Namespace) -> int:
 
 def cmd_sweep(args: argparse.Namespace) -> int:
     from .training.config import read_config_value
-    from .training.sweep import continue_from_snapshots, load_experiments, run_sweep, status
+    from .training.sweep import (
+        continue_from_snapshots,
+        load_experiments,
+        run_sweep,
+        shipped_already,
+        status,
+    )
 
     overrides = {}
     for item in args.set or ():
@@ -395,6 +401,18 @@ def cmd_sweep(args: argparse.Namespace) -> int:
             raise ValueError(f"--set expects KEY=VALUE (e.g. optim.steps=2000), got {item!r}")
         overrides[key.strip()] = read_config_value(value)
     experiments = load_experiments(args.experiments, args.out, data=args.data, overrides=overrides)
+    if not args.retrain_shipped:
+        kept = []
+        for e in experiments:
+            model = shipped_already(e, args.snapshots)
+            if model is None:
+                kept.append(e)
+            else:
+                print(
+                    f"{e.name}: skipped, ships with its whole budget ({model}); "
+                    "--retrain-shipped trains it again from scratch"
+                )
+        experiments = kept
     if args.dry_run:
         if args.snapshots:
             experiments = continue_from_snapshots(experiments, args.snapshots)
@@ -940,6 +958,12 @@ def build_parser() -> argparse.ArgumentParser:
         help="weights snapshots: when the sweep stops (Ctrl-C included), each unfinished run is "
         "exported to DIR/<name> (float16, small enough for git); a run with no folder continues "
         "from its snapshot on the schedule of one straight run",
+    )
+    p.add_argument(
+        "--retrain-shipped",
+        action="store_true",
+        help="train experiments whose shipped model (same name) already has their budget; "
+        "without it they are skipped unless their run folder or snapshot is there",
     )
     p.add_argument("--dry-run", action="store_true", help="show what each experiment needs")
     p.set_defaults(handler=cmd_sweep)

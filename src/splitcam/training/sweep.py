@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import json
 import os
 import signal
 import subprocess
@@ -159,6 +160,28 @@ def save_snapshots(
         elif state == "done" and snap.is_file():
             say(f"[{exp.name}] done: its snapshot {snap} can go once the model ships")
     return written
+
+
+def shipped_already(
+    exp: Experiment, snapshots: str | os.PathLike[str] | None = None
+) -> Path | None:
+    """The JSON of the shipped model of ``exp``'s name when that model already has the
+    experiment's whole budget and the experiment has nothing of its own to continue (no run
+    folder, no snapshot, no ``run.init_from``); else None. A sweep skips such an experiment:
+    without this, naming a shipped model's file on a machine without its run folder would
+    train it again from scratch."""
+    from .models import MODELS_DIR, model_names
+
+    if status(exp) != "new" or exp.config.run.init_from or exp.name not in model_names():
+        return None
+    if snapshots is not None and snapshot_path(exp, snapshots).is_file():
+        return None
+    path = MODELS_DIR / f"{exp.name}.json"
+    try:
+        steps = int(json.loads(path.read_text())["provenance"]["total_steps"])
+    except (OSError, ValueError, KeyError, TypeError):
+        return None  # a model without readable provenance is not vouched for: train
+    return path if steps >= exp.config.optim.steps else None
 
 
 def status(exp: Experiment) -> str:
