@@ -390,8 +390,8 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         continue_from_snapshots,
         load_experiments,
         run_sweep,
-        shipped_already,
         status,
+        without_shipped,
     )
 
     overrides = {}
@@ -402,17 +402,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         overrides[key.strip()] = read_config_value(value)
     experiments = load_experiments(args.experiments, args.out, data=args.data, overrides=overrides)
     if not args.retrain_shipped:
-        kept = []
-        for e in experiments:
-            model = shipped_already(e, args.snapshots)
-            if model is None:
-                kept.append(e)
-            else:
-                print(
-                    f"{e.name}: skipped, ships with its whole budget ({model}); "
-                    "--retrain-shipped trains it again from scratch"
-                )
-        experiments = kept
+        experiments = without_shipped(experiments, args.snapshots)
     if args.dry_run:
         if args.snapshots:
             experiments = continue_from_snapshots(experiments, args.snapshots)

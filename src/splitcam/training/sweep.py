@@ -184,6 +184,25 @@ def shipped_already(
     return path if steps >= exp.config.optim.steps else None
 
 
+def without_shipped(
+    experiments: Sequence[Experiment],
+    snapshots: str | os.PathLike[str] | None = None,
+    say: Callable[[str], None] = print,
+) -> list[Experiment]:
+    """The experiments less those :func:`shipped_already` vouches for, each skip said."""
+    out = []
+    for exp in experiments:
+        model = shipped_already(exp, snapshots)
+        if model is None:
+            out.append(exp)
+        else:
+            say(
+                f"{exp.name}: skipped, ships with its whole budget ({model}); "
+                "--retrain-shipped trains it again from scratch"
+            )
+    return out
+
+
 def status(exp: Experiment) -> str:
     """``new`` (no checkpoint), ``partial`` (a checkpoint short of the budget) or ``done``.
 
