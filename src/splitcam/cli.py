@@ -88,6 +88,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 def cmd_train(args: argparse.Namespace) -> int:
     from .training import TrainConfig, train
     from .training.config import train_flags
+    from .training.sweep import STOPPED
     from .training.trainer import resume_config
 
     if args.resume and not args.config:
@@ -114,7 +115,7 @@ def cmd_train(args: argparse.Namespace) -> int:
     )
     state = "interrupted at" if result.interrupted else "finished at"
     print(f"{state} step {result.step}: {summary}; run folder {result.run_dir}")
-    return 130 if result.interrupted else 0
+    return STOPPED if result.interrupted else 0
 
 
 def cmd_design(args: argparse.Namespace) -> int:
