@@ -281,8 +281,9 @@ def test_partial_periods_cut_batches_part_way_through_a_period(coordinate_cache)
         batch = cut.sample(4)
         h, w = batch.shape[-2:]
         shapes.add((h, w))
-        # Rows end part-way through a period of 2, columns of 3 (1 or 2 cut), or not at all.
-        assert h in (16, 15) and w in (16, 15, 14)
+        # Rows end part-way through a period of 2, columns of 3 (1 or 2 cut from the 5 whole
+        # periods of 3 in 16), or not at all.
+        assert h in (16, 15) and w in (15, 14, 13)
         # What is left is the top-left of a plain window of that image.
         levels = np.rint(batch.numpy() * 65535).astype(np.int64)
         for patch in levels:
@@ -290,10 +291,16 @@ def test_partial_periods_cut_batches_part_way_through_a_period(coordinate_cache)
             image = images[int(patch[2, 0, 0])].transpose(2, 0, 1)
             assert np.array_equal(patch, image[:, top : top + h, left : left + w])
     # Every combination turns up, whole batches included.
-    assert shapes == {(a, b) for a in (16, 15) for b in (16, 15, 14)}
+    assert shapes == {(a, b) for a in (16, 15) for b in (15, 14, 13)}
     # partial=0 draws nothing extra: the plain sequence is unchanged.
     again = PatchSampler(cache, patch_size=16, seed=7, augment=False, partial=0.0, period=(2, 2))
     assert torch.equal(again.sample(4), plain.sample(4))
+    # ... and a period that does not divide the patch gives whole periods only: the same
+    # windows, less the column that would end part-way through a period of 3.
+    whole = PatchSampler(cache, patch_size=16, seed=7, augment=False, partial=0.0, period=(1, 3))
+    reference = PatchSampler(cache, patch_size=16, seed=7, augment=False)
+    for _ in range(3):
+        assert torch.equal(whole.sample(4), reference.sample(4)[..., :15])
     with pytest.raises(ValueError, match="partial"):
         PatchSampler(cache, patch_size=16, partial=1.5)
     with pytest.raises(ValueError, match="period"):
