@@ -400,8 +400,9 @@ def _skimage_data_dir() -> Path:
 
 def centre_crop(rgb: torch.Tensor, max_size: int, multiple: int = 2) -> torch.Tensor:
     """The centre of a ``(..., H, W)`` image, at most ``max_size`` pixels a side, each side cut
-    down to a multiple of ``multiple`` (2: whole periods of every built-in pattern, so no image
-    edge ends part-way through a period)."""
+    down to a multiple of ``multiple`` (2: whole periods of the 2x2 patterns A, B, D and bayer,
+    so no image edge ends part-way through one of their periods; the 1x3 patterns C and E
+    would need 6, and a 256-pixel crop ends one column into their period)."""
     h, w = rgb.shape[-2:]
     ch = min(h, max_size) // multiple * multiple
     cw = min(w, max_size) // multiple * multiple
