@@ -1,0 +1,29 @@
+"""net-C and net-E on Kodak24: the whole images against the same images one or two columns
+narrower, so that every row ends as the networks' training patches did (width = 1 mod 3) or on
+a whole period (docs/results/edges/README.md). Needs SPLITCAM_DATA."""
+
+import torch
+
+from splitcam.data.testsets import load_images
+from splitcam.evaluation.protocol import mean_psnr
+from splitcam.methods import build_method
+
+torch.set_num_threads(1)
+images = load_images("kodak24")
+
+
+def narrow(x: torch.Tensor, rem: int) -> torch.Tensor:
+    w = x.shape[-1]
+    return x[..., : w - (w - rem) % 3].contiguous()
+
+
+variants = {
+    "whole": lambda x: x,
+    "w=1 mod 3": lambda x: narrow(x, 1),
+    "w=0 mod 3": lambda x: narrow(x, 0),
+}
+for name in ["C", "E"]:
+    net = build_method(name, precision="fp32")
+    for label, cut in variants.items():
+        psnr = mean_psnr(net, [(n, cut(x)) for n, x in images], [0.0, 15.0])
+        print(name, label, {s: round(v, 3) for s, v in psnr.items()}, flush=True)
