@@ -20,6 +20,7 @@ import torch.nn.functional as F
 
 from .. import patterns
 from ..data.patches import ImageCache, PatchSampler, list_images
+from ..data.testsets import centre_crop
 from ..evaluation.protocol import mean_psnr
 from ..physics.noise import Exposure, GaussianNoise, PhotonNoise
 from ..physics.sensor import LearnableSplitterSensor, SplitterSensor
@@ -256,10 +257,7 @@ def _val_images(config: TrainConfig) -> list[tuple[str, torch.Tensor]]:
     for i, name in enumerate(cache.names):
         img = cache.image(i)
         if data.val_crop:
-            h, w = img.shape[-2:]
-            c = data.val_crop
-            top, left = max(0, (h - c) // 2), max(0, (w - c) // 2)
-            img = img[:, top : top + c, left : left + c]
+            img = centre_crop(img, data.val_crop, multiple=1)
         images.append((name, img.contiguous()))
     return images
 
