@@ -146,12 +146,17 @@ def test_damaged_and_foreign_checkpoints_are_refused(image_folder, tmp_path):
     train(tiny(image_folder, tmp_path / "r", **{"optim.steps": 2}), progress=False)
     path = tmp_path / "r" / ckpt_io.CHECKPOINT_NAME
     data = path.read_bytes()
+    # The header alone gives the same meta as the whole file (what sweep status reads).
+    assert ckpt_io.read_meta(path) == ckpt_io.load(path).meta
+    assert ckpt_io.read_meta(path)["step"] == 2
     path.write_bytes(data[: len(data) // 2])
     with pytest.raises(CheckpointError, match="damaged"):
         ckpt_io.load(path)
     with pytest.raises(CheckpointError, match="damaged"):
         train(tiny(image_folder, tmp_path / "r"), resume=True, progress=False)
     path.write_bytes(b"\x00" * 64)
+    with pytest.raises(CheckpointError, match="damaged"):
+        ckpt_io.read_meta(path)
     with pytest.raises(CheckpointError, match="damaged"):
         load_system(tmp_path / "r")
     path.write_bytes(data)

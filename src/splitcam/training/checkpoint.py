@@ -101,26 +101,8 @@ def save(path: str | os.PathLike, meta: dict[str, Any], tensors: dict[str, torch
     return path
 
 
-def load(path: str | os.PathLike) -> Checkpoint:
-    """Read a checkpoint file (or the one in a run folder).
-
-    Raises:
-        CheckpointError: Missing, truncated or otherwise damaged file, or not a splitcam
-            checkpoint.
-    """
-    from safetensors import safe_open
-
-    path = resolve(path)
-    if not path.is_file():
-        raise CheckpointError(f"no checkpoint at {str(path)!r}")
-    try:
-        with safe_open(str(path), framework="pt") as fh:
-            header = fh.metadata() or {}
-            tensors = {k: fh.get_tensor(k) for k in fh.keys()}  # noqa: SIM118 - not a dict
-    except Exception as exc:  # safetensors raises its own error types for damaged files
-        raise CheckpointError(
-            f"checkpoint {str(path)!r} is damaged or not a safetensors file ({exc})"
-        ) from None
+def _parse_header(path: Path, header: dict[str, str]) -> dict[str, Any]:
+    """The splitcam meta of a safetensors header, or CheckpointError naming ``path``."""
     try:
         meta = json.loads(header["splitcam"])
     except (KeyError, json.JSONDecodeError):
@@ -132,13 +114,51 @@ def load(path: str | os.PathLike) -> Checkpoint:
             f"{str(path)!r}: expected {FORMAT} version {VERSION}, got "
             f"{meta.get('format')} version {meta.get('version')}"
         )
-    for key, tensor in tensors.items():
+    return meta
+
+
+def _open(path: str | os.PathLike, tensors: bool) -> Checkpoint:
+    from safetensors import safe_open
+
+    path = resolve(path)
+    if not path.is_file():
+        raise CheckpointError(f"no checkpoint at {str(path)!r}")
+    try:
+        with safe_open(str(path), framework="pt") as fh:
+            header = fh.metadata() or {}
+            values = {k: fh.get_tensor(k) for k in fh.keys()} if tensors else {}  # noqa: SIM118 - not a dict
+    except Exception as exc:  # safetensors raises its own error types for damaged files
+        raise CheckpointError(
+            f"checkpoint {str(path)!r} is damaged or not a safetensors file ({exc})"
+        ) from None
+    return Checkpoint(meta=_parse_header(path, header), tensors=values, path=str(path))
+
+
+def read_meta(path: str | os.PathLike) -> dict[str, Any]:
+    """The header of a checkpoint (step, config, ...) without reading its tensors: what a
+    sweep's ``status`` needs, at the cost of a few kilobytes instead of the whole file.
+
+    Raises:
+        CheckpointError: as :func:`load`, except that damage past the header goes unnoticed.
+    """
+    return _open(path, tensors=False).meta
+
+
+def load(path: str | os.PathLike) -> Checkpoint:
+    """Read a checkpoint file (or the one in a run folder).
+
+    Raises:
+        CheckpointError: Missing, truncated or otherwise damaged file, or not a splitcam
+            checkpoint.
+    """
+    ckpt = _open(path, tensors=True)
+    for key, tensor in ckpt.tensors.items():
         if tensor.is_floating_point() and not bool(torch.isfinite(tensor).all()):
             raise CheckpointError(
-                f"checkpoint {str(path)!r} holds NaN or infinite values in {key!r} (the run "
+                f"checkpoint {ckpt.path!r} holds NaN or infinite values in {key!r} (the run "
                 f"diverged, or the file is damaged); use an earlier checkpoint"
             )
-    return Checkpoint(meta=meta, tensors=tensors, path=str(path))
+    return ckpt
 
 
 def require(ckpt: Checkpoint, *keys: str, purpose: str = "") -> None:

@@ -148,7 +148,7 @@ def save_snapshots(
         state = status(exp)
         snap = snapshot_path(exp, snapshots)
         if state == "partial":
-            step = int(ckpt_io.load(exp.run_dir / ckpt_io.CHECKPOINT_NAME).meta.get("step", 0))
+            step = int(ckpt_io.read_meta(exp.run_dir / ckpt_io.CHECKPOINT_NAME).get("step", 0))
             written[exp.name] = export_model(
                 exp.run_dir,
                 snap,
@@ -213,7 +213,7 @@ def status(exp: Experiment) -> str:
     if not path.is_file():
         return "new"
     try:
-        meta = ckpt_io.load(path).meta
+        meta = ckpt_io.read_meta(path)
     except ckpt_io.CheckpointError:
         return "partial"  # let `train --resume` say what is wrong with it
     steps_done = int(meta.get("step", 0)) >= exp.config.optim.steps
