@@ -183,7 +183,9 @@ def main() -> None:
     parser.add_argument("--minutes", type=float, default=30.0)
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument(
-        "--recipes", nargs="+", default=["packed", "physics"],
+        "--recipes",
+        nargs="+",
+        default=["packed", "physics"],
         help=f"recipes: {', '.join(RECIPES)}, or BASE+key=value,... (default: packed physics)",
     )
     parser.add_argument("--pattern", default="D")

@@ -34,8 +34,10 @@ def main() -> None:
     start = time.perf_counter()
     cache = ImageCache(args.data, min_size=PATCH, progress=False)
     cache_time = time.perf_counter() - start
-    print(f"decode-once cache: {len(cache)} images, {cache.nbytes / 2**20:.0f} MiB "
-          f"{cache.dtype}, {cache_time:.2f} s ({cache_time / len(cache) * 1e3:.1f} ms/image)")
+    print(
+        f"decode-once cache: {len(cache)} images, {cache.nbytes / 2**20:.0f} MiB "
+        f"{cache.dtype}, {cache_time:.2f} s ({cache_time / len(cache) * 1e3:.1f} ms/image)"
+    )
 
     sampler = PatchSampler(cache, patch_size=PATCH, seed=0)
     data = timeit(lambda: sampler.sample(BATCH), repeat=args.batches, warmup=5)
@@ -45,8 +47,10 @@ def main() -> None:
         step, _ = train_step_time("paper", batch, args.steps, **options)
         ratio = data / step
         verdict = "meets" if ratio < 0.10 else "MISSES"
-        print(f"paper network step ({label}): {step:.2f} s; data / step = {ratio * 100:.3f}% "
-              f"({verdict} the 10% target)")
+        print(
+            f"paper network step ({label}): {step:.2f} s; data / step = {ratio * 100:.3f}% "
+            f"({verdict} the 10% target)"
+        )
 
 
 if __name__ == "__main__":

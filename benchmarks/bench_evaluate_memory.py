@@ -62,8 +62,16 @@ def run_variant(variant: str, h: int, w: int, pattern: str, sigma: float) -> dic
         xq, yq = quantize(pred), quantize(rgb)
         mse = float(np.mean((xq - yq) ** 2))
         ssim = structural_similarity(
-            xq, yq, win_size=SSIM_WINDOW, gaussian_weights=True, sigma=SSIM_SIGMA,
-            use_sample_covariance=False, data_range=255.0, channel_axis=0, K1=SSIM_K1, K2=SSIM_K2,
+            xq,
+            yq,
+            win_size=SSIM_WINDOW,
+            gaussian_weights=True,
+            sigma=SSIM_SIGMA,
+            use_sample_covariance=False,
+            data_range=255.0,
+            channel_axis=0,
+            K1=SSIM_K1,
+            K2=SSIM_K2,
         )
         lab_x = srgb_to_lab(np.moveaxis(xq, 0, -1))
         lab_y = srgb_to_lab(np.moveaxis(yq, 0, -1))
@@ -74,8 +82,12 @@ def run_variant(variant: str, h: int, w: int, pattern: str, sigma: float) -> dic
         }
     seconds = time.perf_counter() - t0
     peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
-    return {"variant": variant, "seconds": seconds, "peak_mb": peak_mb,
-            **{k: float(v) for k, v in values.items()}}
+    return {
+        "variant": variant,
+        "seconds": seconds,
+        "peak_mb": peak_mb,
+        **{k: float(v) for k, v in values.items()},
+    }
 
 
 def main() -> None:
@@ -94,25 +106,45 @@ def main() -> None:
     results = {}
     for variant in ("untiled", "current"):
         out = subprocess.run(
-            [sys.executable, __file__, "--variant", variant, "--size", args.size,
-             "--pattern", args.pattern, "--sigma", str(args.sigma),
-             "--threads", str(args.threads)],
-            capture_output=True, text=True, check=True,
+            [
+                sys.executable,
+                __file__,
+                "--variant",
+                variant,
+                "--size",
+                args.size,
+                "--pattern",
+                args.pattern,
+                "--sigma",
+                str(args.sigma),
+                "--threads",
+                str(args.threads),
+            ],
+            capture_output=True,
+            text=True,
+            check=True,
         )
         results[variant] = json.loads(out.stdout.strip().splitlines()[-1])
     old, new = results["untiled"], results["current"]
     print(f"machine: {machine()}")
-    print(f"one {w}x{h} image, LMMSE of {args.pattern}, sigma {args.sigma:g}, "
-          f"{args.threads} threads, each variant in a fresh process")
+    print(
+        f"one {w}x{h} image, LMMSE of {args.pattern}, sigma {args.sigma:g}, "
+        f"{args.threads} threads, each variant in a fresh process"
+    )
     print("| variant | peak memory | time | PSNR | SSIM | CIEDE2000 |")
     print("|---|---|---|---|---|---|")
     for r in (old, new):
-        print(f"| {r['variant']} | {r['peak_mb'] / 1024:.2f} GiB | {r['seconds']:.1f} s "
-              f"| {r['psnr']:.4f} | {r['ssim']:.5f} | {r['ciede2000']:.4f} |")
-    print(f"ratio untiled / current: memory {old['peak_mb'] / new['peak_mb']:.1f}x, "
-          f"time {old['seconds'] / new['seconds']:.2f}x")
-    same = all(abs(old[k] - new[k]) < 1e-6 * max(1, abs(old[k]))
-               for k in ("psnr", "ssim", "ciede2000"))
+        print(
+            f"| {r['variant']} | {r['peak_mb'] / 1024:.2f} GiB | {r['seconds']:.1f} s "
+            f"| {r['psnr']:.4f} | {r['ssim']:.5f} | {r['ciede2000']:.4f} |"
+        )
+    print(
+        f"ratio untiled / current: memory {old['peak_mb'] / new['peak_mb']:.1f}x, "
+        f"time {old['seconds'] / new['seconds']:.2f}x"
+    )
+    same = all(
+        abs(old[k] - new[k]) < 1e-6 * max(1, abs(old[k])) for k in ("psnr", "ssim", "ciede2000")
+    )
     print("scores identical: " + ("yes" if same else "NO"))
 
 

@@ -58,8 +58,9 @@ def _means(rows: list[dict[str, Any]], sets: dict[str, str], keys: tuple[str, ..
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--max-images", type=int, default=None,
-                        help="use only the first N images of each test set")
+    parser.add_argument(
+        "--max-images", type=int, default=None, help="use only the first N images of each test set"
+    )
     parser.add_argument("--sigmas", type=float, nargs="+", default=[0.0, 10.0])
     parser.add_argument("--patches", type=int, default=DEFAULT_PATCHES)
     parser.add_argument("--radius", type=int, default=DEFAULT_RADIUS)
@@ -75,15 +76,22 @@ def main() -> None:
             tests.append((stem, img))
             sets[stem] = name
     counts = {s: sum(v == s for v in sets.values()) for s in SETS}
-    print(f"test images: {counts}; sigmas {args.sigmas}; LMMSE radius {args.radius}, "
-          f"{args.patches} patches of 48x48 from data/train")
+    print(
+        f"test images: {counts}; sigmas {args.sigmas}; LMMSE radius {args.radius}, "
+        f"{args.patches} patches of 48x48 from data/train"
+    )
 
     t0 = time.perf_counter()
     cache = ImageCache(SHARED_DATA / "train", min_size=48, progress=False)
     decode = time.perf_counter() - t0
     keys = ("psnr", "ssim", "ciede2000", f"psnr_crop{CROP}")
     screen = screen_patterns(
-        PATTERNS, cache, tests, args.sigmas, radius=args.radius, patches=args.patches,
+        PATTERNS,
+        cache,
+        tests,
+        args.sigmas,
+        radius=args.radius,
+        patches=args.patches,
         psnr_crops=(CROP,),
     )
     entries = []  # (pattern, method, sigma, means, per-image rows)
@@ -101,30 +109,40 @@ def main() -> None:
     for sigma in args.sigmas:
         group = sorted((e for e in entries if e[2] == sigma), key=lambda e: -e[3]["all"]["psnr"])
         print(f"\nsigma = {sigma:g}  (no crop; mean over images; rank by PSNR over all images)")
-        print(f"{'pattern':8} {'method':11} {'Kodak':>6} {'McM':>6} {'all':>6} {'SSIM':>7} "
-              f"{'dE00':>5} {'rank':>4} {'Kodak/c10':>9} {'McM/c10':>8} {'paper net':>9}")
+        print(
+            f"{'pattern':8} {'method':11} {'Kodak':>6} {'McM':>6} {'all':>6} {'SSIM':>7} "
+            f"{'dE00':>5} {'rank':>4} {'Kodak/c10':>9} {'McM/c10':>8} {'paper net':>9}"
+        )
         for place, (pattern, method_name, _, means, _rows) in enumerate(group, start=1):
             paper = PAPER_NET.get(pattern, {}).get(int(sigma)) if method_name == "lmmse" else None
             nan = {k: float("nan") for k in keys}
             kodak = means.get("kodak24", nan)
             mcm = means.get("mcmaster", nan)
             crop_key = f"psnr_crop{CROP}"
-            print(f"{pattern:8} {method_name:11} {kodak['psnr']:6.2f} {mcm['psnr']:6.2f} "
-                  f"{means['all']['psnr']:6.2f} {means['all']['ssim']:7.4f} "
-                  f"{means['all']['ciede2000']:5.2f} {place:4d} {kodak[crop_key]:9.2f} "
-                  f"{mcm[crop_key]:8.2f} {'' if paper is None else f'{paper:.2f}':>9}")
+            print(
+                f"{pattern:8} {method_name:11} {kodak['psnr']:6.2f} {mcm['psnr']:6.2f} "
+                f"{means['all']['psnr']:6.2f} {means['all']['ssim']:7.4f} "
+                f"{means['all']['ciede2000']:5.2f} {place:4d} {kodak[crop_key]:9.2f} "
+                f"{mcm[crop_key]:8.2f} {'' if paper is None else f'{paper:.2f}':>9}"
+            )
         if sigma == 0:
-            print(f"published Malvar 2004 (crop {CROP}): Kodak {MALVAR_PUBLISHED['kodak24']:.2f}, "
-                  f"McMaster {MALVAR_PUBLISHED['mcmaster']:.2f}")
+            print(
+                f"published Malvar 2004 (crop {CROP}): Kodak {MALVAR_PUBLISHED['kodak24']:.2f}, "
+                f"McMaster {MALVAR_PUBLISHED['mcmaster']:.2f}"
+            )
 
-    print("\ntimes (s): decode data/train once "
-          f"{decode:.1f}; per pattern LMMSE fit (incl. solving the filters) / evaluation "
-          "(all sigmas; of which sensor+noise+reconstruction)")
+    print(
+        "\ntimes (s): decode data/train once "
+        f"{decode:.1f}; per pattern LMMSE fit (incl. solving the filters) / evaluation "
+        "(all sigmas; of which sensor+noise+reconstruction)"
+    )
     for pattern in PATTERNS:
         rows = [r for r in screen.rows if r["pattern"] == pattern]
         recon = sum(r["seconds"] for r in screen.per_image if r["pattern"] == pattern)
-        print(f"  {pattern:6} fit {rows[0]['fit_seconds']:5.1f}  eval "
-              f"{sum(r['eval_seconds'] for r in rows):6.1f} (recon {recon:5.1f})")
+        print(
+            f"  {pattern:6} fit {rows[0]['fit_seconds']:5.1f}  eval "
+            f"{sum(r['eval_seconds'] for r in rows):6.1f} (recon {recon:5.1f})"
+        )
     for method_name, seconds in classical_seconds.items():
         recon = sum(r["seconds"] for e in entries if e[1] == method_name for r in e[4])
         print(f"  bayer {method_name:10} eval {seconds:6.1f} (recon {recon:5.1f})")
@@ -133,16 +151,24 @@ def main() -> None:
 
     if args.json:
         with open(args.json, "w") as fh:
-            json.dump({
-                "machine": machine(), "images": counts, "sigmas": args.sigmas,
-                "patches": args.patches, "radius": args.radius, "total_seconds": total,
-                "decode_seconds": decode,
-                "results": [
-                    {"pattern": p, "method": m, "sigma": s, "means": means, "per_image": rows}
-                    for p, m, s, means, rows in entries
-                ],
-                "lmmse_rows": screen.rows,
-            }, fh, indent=1)
+            json.dump(
+                {
+                    "machine": machine(),
+                    "images": counts,
+                    "sigmas": args.sigmas,
+                    "patches": args.patches,
+                    "radius": args.radius,
+                    "total_seconds": total,
+                    "decode_seconds": decode,
+                    "results": [
+                        {"pattern": p, "method": m, "sigma": s, "means": means, "per_image": rows}
+                        for p, m, s, means, rows in entries
+                    ],
+                    "lmmse_rows": screen.rows,
+                },
+                fh,
+                indent=1,
+            )
 
 
 if __name__ == "__main__":

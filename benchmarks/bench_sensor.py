@@ -40,6 +40,7 @@ def main() -> None:
                 results = {}
                 for label, fn in [("naive", naive_splitter_forward), ("fast", splitter_forward)]:
                     if kind == "forward":
+
                         def run(fn=fn, f=f, w=w, layout=p.layout):
                             with torch.no_grad():
                                 fn(f, w, layout)
@@ -49,12 +50,15 @@ def main() -> None:
 
                         def run(fn=fn, fg=fg, wg=wg, layout=p.layout):
                             fn(fg, wg, layout).square().sum().backward()
+
                     results[label] = timeit(run, repeat=args.repeat)
                 ratio = results["naive"] / results["fast"]
                 worst = min(worst, ratio)
                 size = "x".join(map(str, shape))
-                print(f"{name:8} {size:12} {kind:9} {results['naive'] * 1e3:9.2f} "
-                      f"{results['fast'] * 1e3:8.2f} {ratio:6.1f}x")
+                print(
+                    f"{name:8} {size:12} {kind:9} {results['naive'] * 1e3:9.2f} "
+                    f"{results['fast'] * 1e3:8.2f} {ratio:6.1f}x"
+                )
     print(f"smallest ratio over all patterns and sizes: {worst:.1f}x")
 
 

@@ -62,8 +62,15 @@ def make_system(arch: str, channels_last: bool) -> ImagingSystem:
     return system
 
 
-def train_step_time(arch: str, batch: torch.Tensor, steps: int, channels_last=False, bf16=False,
-                    foreach=None, compile_=False) -> tuple[float, float]:
+def train_step_time(
+    arch: str,
+    batch: torch.Tensor,
+    steps: int,
+    channels_last=False,
+    bf16=False,
+    foreach=None,
+    compile_=False,
+) -> tuple[float, float]:
     torch.manual_seed(0)
     system = make_system(arch, channels_last)
     if compile_:
@@ -124,17 +131,25 @@ def accuracy(steps: int) -> dict:
     with tempfile.TemporaryDirectory() as tmp:
         for label, extra in [("float32", {}), ("optimised", OPTIMISED)]:
             settings = {
-                "data.train": str(SHARED_DATA / "train"), "data.val_split": 32,
-                "data.val_max_images": 8, "data.val_crop": 128, "data.batch_size": 16,
-                "optim.steps": steps, "run.val_every": steps, "run.log_every": steps,
-                "run.checkpoint_every": steps, "run.out": f"{tmp}/{label}", "run.seed": 0,
+                "data.train": str(SHARED_DATA / "train"),
+                "data.val_split": 32,
+                "data.val_max_images": 8,
+                "data.val_crop": 128,
+                "data.batch_size": 16,
+                "optim.steps": steps,
+                "run.val_every": steps,
+                "run.log_every": steps,
+                "run.checkpoint_every": steps,
+                "run.out": f"{tmp}/{label}",
+                "run.seed": 0,
                 **{f"run.{k}": v for k, v in extra.items()},
             }
             t = time.perf_counter()
             result = train(TrainConfig().override(settings), progress=False)
-            results[label] = {**{k: v for k, v in result.last_metrics.items()
-                                 if k.startswith("val_psnr")},
-                              "seconds": time.perf_counter() - t}
+            results[label] = {
+                **{k: v for k, v in result.last_metrics.items() if k.startswith("val_psnr")},
+                "seconds": time.perf_counter() - t,
+            }
     return results
 
 
@@ -143,10 +158,17 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=3, help="timed training steps per setting")
     parser.add_argument("--batch-size", type=int, default=80)
     parser.add_argument("--skip-large", action="store_true", help="skip the 4000x3000 run")
-    parser.add_argument("--only", choices=["train", "inference", "large", "accuracy", "compile"],
-                        help="run one part only")
-    parser.add_argument("--accuracy-steps", type=int, default=0,
-                        help="also train float32 vs optimised for N steps and compare PSNR")
+    parser.add_argument(
+        "--only",
+        choices=["train", "inference", "large", "accuracy", "compile"],
+        help="run one part only",
+    )
+    parser.add_argument(
+        "--accuracy-steps",
+        type=int,
+        default=0,
+        help="also train float32 vs optimised for N steps and compare PSNR",
+    )
     args = parser.parse_args()
     print(machine())
     fp32_peak, bf16_peak, note = cpu_peak_gflops()
@@ -165,19 +187,23 @@ def main() -> None:
         base, flops = train_step_time(arch, batch, args.steps)
         fast, _ = train_step_time(arch, batch, args.steps, **OPTIMISED)
         b = args.batch_size
-        print(f"train {arch:6}: baseline {1 / base:.3f} steps/s ({b / base:.1f} patches/s), "
-              f"optimised {1 / fast:.3f} steps/s ({b / fast:.1f} patches/s), "
-              f"ratio {base / fast:.2f}x; {flops / 1e9:.0f} GFLOP/step -> "
-              f"{flops / base / 1e9:.0f} GFLOP/s fp32 ({100 * flops / base / 1e9 / fp32_peak:.0f}%"
-              f" of peak), {flops / fast / 1e9:.0f} GFLOP/s optimised "
-              f"({100 * flops / fast / 1e9 / bf16_peak:.0f}% of bf16 peak); data "
-              f"{100 * data_s / fast:.2f}% of an optimised step")
+        print(
+            f"train {arch:6}: baseline {1 / base:.3f} steps/s ({b / base:.1f} patches/s), "
+            f"optimised {1 / fast:.3f} steps/s ({b / fast:.1f} patches/s), "
+            f"ratio {base / fast:.2f}x; {flops / 1e9:.0f} GFLOP/step -> "
+            f"{flops / base / 1e9:.0f} GFLOP/s fp32 ({100 * flops / base / 1e9 / fp32_peak:.0f}%"
+            f" of peak), {flops / fast / 1e9:.0f} GFLOP/s optimised "
+            f"({100 * flops / fast / 1e9 / bf16_peak:.0f}% of bf16 peak); data "
+            f"{100 * data_s / fast:.2f}% of an optimised step"
+        )
 
     if args.only == "compile":
         base, _ = train_step_time("paper", batch, args.steps, **OPTIMISED)
         comp, _ = train_step_time("paper", batch, args.steps, **OPTIMISED, compile_=True)
-        print(f"torch.compile (paper, optimised settings): {1 / base:.3f} -> {1 / comp:.3f} "
-              f"steps/s, ratio {base / comp:.2f}x")
+        print(
+            f"torch.compile (paper, optimised settings): {1 / base:.3f} -> {1 / comp:.3f} "
+            f"steps/s, ratio {base / comp:.2f}x"
+        )
 
     torch.manual_seed(0)
     for arch in ["paper", "packed"] if want("inference") else []:
@@ -193,22 +219,32 @@ def main() -> None:
 
         tb = timeit(baseline, repeat=3)
         to = timeit(optimised, repeat=3)
-        print(f"inference {arch:6} 768x512: baseline {tb:.2f} s, optimised {to:.2f} s, "
-              f"ratio {tb / to:.2f}x")
+        print(
+            f"inference {arch:6} 768x512: baseline {tb:.2f} s, optimised {to:.2f} s, "
+            f"ratio {tb / to:.2f}x"
+        )
 
     if not args.skip_large and want("large"):
         for arch in ["paper"]:
             r = large_image_memory(arch)
-            print(f"tiled 4000x3000 ({arch}, optimised, tile 512): {r['seconds']:.1f} s, "
-                  f"peak RSS {r['peak_rss_mib']:.0f} MiB (process start {r['rss_before_mib']:.0f}"
-                  f" MiB)")
+            print(
+                f"tiled 4000x3000 ({arch}, optimised, tile 512): {r['seconds']:.1f} s, "
+                f"peak RSS {r['peak_rss_mib']:.0f} MiB (process start {r['rss_before_mib']:.0f}"
+                f" MiB)"
+            )
     if args.accuracy_steps and want("accuracy"):
         acc = accuracy(args.accuracy_steps)
         a, o = acc["float32"], acc["optimised"]
-        print(f"accuracy after {args.accuracy_steps} steps (batch 16, seed 0, 8 held-out "
-              f"images): " + ", ".join(
-                  f"{k}: float32 {a[k]:.3f} dB, optimised {o[k]:.3f} dB, "
-                  f"difference {o[k] - a[k]:+.3f} dB" for k in a if k.startswith("val")))
+        print(
+            f"accuracy after {args.accuracy_steps} steps (batch 16, seed 0, 8 held-out "
+            f"images): "
+            + ", ".join(
+                f"{k}: float32 {a[k]:.3f} dB, optimised {o[k]:.3f} dB, "
+                f"difference {o[k] - a[k]:+.3f} dB"
+                for k in a
+                if k.startswith("val")
+            )
+        )
         print(f"  wall time: float32 {a['seconds']:.0f} s, optimised {o['seconds']:.0f} s")
 
 

@@ -33,8 +33,9 @@ def machine() -> str:
     )
 
 
-def timeit(fn: Callable[[], object], *, repeat: int = 5, warmup: int = 1,
-           min_time: float = 0.0) -> float:
+def timeit(
+    fn: Callable[[], object], *, repeat: int = 5, warmup: int = 1, min_time: float = 0.0
+) -> float:
     """Median seconds per call over ``repeat`` calls (more if ``min_time`` is not reached)."""
     for _ in range(warmup):
         fn()

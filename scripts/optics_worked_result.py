@@ -109,9 +109,7 @@ def main() -> int:
         max_height=[o.max_height for *_, o in heights],
     )
 
-    images = [
-        (dataset, load_images(dataset)[: args.images]) for dataset in ("kodak24", "mcmaster")
-    ]
+    images = [(dataset, load_images(dataset)[: args.images]) for dataset in ("kodak24", "mcmaster")]
     methods = []
     for spec in ("A", "bayer", *files):
         method = closed_form_lmmse(patterns.get(spec))
@@ -215,9 +213,7 @@ def _write_readme(out: Path, rows: list[dict], summary: dict, study: dict, info:
     lines.append("| sensor | " + " | ".join(f"N={n:.3g}" for n in photons) + " |")
     lines.append("|---|" + "---|" * len(photons))
     for label, per in study.items():
-        lines.append(
-            f"| {label} | " + " | ".join(f"{per[n]['psnr']:.2f}" for n in photons) + " |"
-        )
+        lines.append(f"| {label} | " + " | ".join(f"{per[n]['psnr']:.2f}" for n in photons) + " |")
     (out / "README.md").write_text("\n".join(lines) + "\n", encoding="utf-8")
 
 

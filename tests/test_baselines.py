@@ -27,8 +27,14 @@ def _smooth_images(n: int, h: int, w: int, seed: int) -> torch.Tensor:
     return torch.nn.functional.avg_pool2d(x, 3, stride=1)
 
 
-def _design(pattern: patterns.Pattern, images: torch.Tensor, radius: int, noise: float = 0.0,
-            repeats: int = 1, seed: int = 0):
+def _design(
+    pattern: patterns.Pattern,
+    images: torch.Tensor,
+    radius: int,
+    noise: float = 0.0,
+    repeats: int = 1,
+    seed: int = 0,
+):
     """Explicit neighbourhood design matrices per phase, by plain loops (the independent path).
 
     Valid centres: at least ``radius`` + the pattern kernel's half size from every edge.
@@ -72,11 +78,14 @@ def test_classical_demosaic_equals_the_package(method):
     raw = SplitterSensor("bayer")(rgb)
     demosaic = ClassicalDemosaic(method)
     out = demosaic.reconstruct(raw, 0.0)
-    function = getattr(cd, {
-        "bilinear": "demosaicing_CFA_Bayer_bilinear",
-        "malvar2004": "demosaicing_CFA_Bayer_Malvar2004",
-        "menon2007": "demosaicing_CFA_Bayer_Menon2007",
-    }[method])
+    function = getattr(
+        cd,
+        {
+            "bilinear": "demosaicing_CFA_Bayer_bilinear",
+            "malvar2004": "demosaicing_CFA_Bayer_Malvar2004",
+            "menon2007": "demosaicing_CFA_Bayer_Menon2007",
+        }[method],
+    )
     for n in range(2):
         mosaic = cd.mosaicing_CFA_Bayer(rgb[n].permute(1, 2, 0).numpy(), "RGGB")
         expected = torch.from_numpy(function(mosaic, "RGGB")).permute(2, 0, 1)
@@ -90,11 +99,13 @@ def test_classical_demosaic_equals_the_package(method):
 
 def test_bilinear_on_a_smooth_image():
     yy, xx = torch.meshgrid(torch.arange(64.0), torch.arange(64.0), indexing="ij")
-    rgb = torch.stack([
-        0.5 + 0.3 * torch.sin(2 * math.pi * xx / 40),
-        0.5 + 0.3 * torch.cos(2 * math.pi * yy / 50),
-        0.5 + 0.2 * torch.sin(2 * math.pi * (xx + yy) / 60),
-    ]).double()
+    rgb = torch.stack(
+        [
+            0.5 + 0.3 * torch.sin(2 * math.pi * xx / 40),
+            0.5 + 0.3 * torch.cos(2 * math.pi * yy / 50),
+            0.5 + 0.2 * torch.sin(2 * math.pi * (xx + yy) / 60),
+        ]
+    ).double()
     out = ClassicalDemosaic("bilinear").reconstruct(SplitterSensor("bayer")(rgb[None]), 0)
     # The package's reflective border handling mixes the mosaic's zeros into the outermost
     # pixels (errors up to 0.6 there), so only the interior is held to a tight bound.

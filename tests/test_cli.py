@@ -63,8 +63,10 @@ def test_simulate_writes_the_raw_image(photo, tmp_path):
     [
         (["simulate", "{tmp}/missing.png", "--out", "{tmp}/r.png"], "file not found"),
         (["simulate", "{tmp}/text.png", "--out", "{tmp}/r.png"], "not an image file"),
-        (["simulate", "{photo}", "--pattern", "Z", "--out", "{tmp}/r.png"],
-         "unknown pattern 'Z'; valid names"),
+        (
+            ["simulate", "{photo}", "--pattern", "Z", "--out", "{tmp}/r.png"],
+            "unknown pattern 'Z'; valid names",
+        ),
         (["simulate", "{photo}", "--out", "{tmp}/r.jpg"], "--out must end in .png or .npy"),
         (["patterns", "show", "Q"], "unknown pattern 'Q'"),
     ],
@@ -90,20 +92,81 @@ def test_reconstruct_goes_through_the_registry_and_the_protocol(tmp_path, capsys
     folder.mkdir()
     Image.fromarray((rng.random((40, 48, 3)) * 255).astype(np.uint8)).save(folder / "im.png")
     out = tmp_path / "rec.png"
-    assert main(["reconstruct", "--method", "lmmse", "--pattern", "D", "--image",
-                 str(folder / "im.png"), "--sigma", "10", "--out", str(out)]) == 0
+    assert (
+        main(
+            [
+                "reconstruct",
+                "--method",
+                "lmmse",
+                "--pattern",
+                "D",
+                "--image",
+                str(folder / "im.png"),
+                "--sigma",
+                "10",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     assert "lmmse-D: wrote" in capsys.readouterr().out
-    ours = psnr(torch.from_numpy(read_image(out)).permute(2, 0, 1),
-                torch.from_numpy(read_image(folder / "im.png")).permute(2, 0, 1))
-    assert main(["evaluate", "--method", "lmmse", "--patterns", "D", "--datasets", str(folder),
-                 "--sigmas", "10", "--out", str(tmp_path / "ev"), "--quiet"]) == 0
+    ours = psnr(
+        torch.from_numpy(read_image(out)).permute(2, 0, 1),
+        torch.from_numpy(read_image(folder / "im.png")).permute(2, 0, 1),
+    )
+    assert (
+        main(
+            [
+                "evaluate",
+                "--method",
+                "lmmse",
+                "--patterns",
+                "D",
+                "--datasets",
+                str(folder),
+                "--sigmas",
+                "10",
+                "--out",
+                str(tmp_path / "ev"),
+                "--quiet",
+            ]
+        )
+        == 0
+    )
     summary = json.loads((tmp_path / "ev/summary.json").read_text())
     assert summary["lmmse-D"]["all"]["10"]["psnr"] == pytest.approx(ours, abs=1e-9)
-    assert main(["reconstruct", "--method", "lmmse", "--image", str(folder / "im.png"),
-                 "--out", str(out)]) == 1
+    assert (
+        main(
+            [
+                "reconstruct",
+                "--method",
+                "lmmse",
+                "--image",
+                str(folder / "im.png"),
+                "--out",
+                str(out),
+            ]
+        )
+        == 1
+    )
     assert "needs a pattern" in capsys.readouterr().err
-    assert main(["reconstruct", "--method", "malvar2004", "--pattern", "D", "--image",
-                 str(folder / "im.png"), "--out", str(out)]) == 1
+    assert (
+        main(
+            [
+                "reconstruct",
+                "--method",
+                "malvar2004",
+                "--pattern",
+                "D",
+                "--image",
+                str(folder / "im.png"),
+                "--out",
+                str(out),
+            ]
+        )
+        == 1
+    )
     assert "differs from the pattern" in capsys.readouterr().err
 
 
@@ -115,23 +178,50 @@ def test_reconstruct_fast_matches_float32(tmp_path):
     folder = tmp_path / "photos"
     folder.mkdir()
     for i in range(3):
-        Image.fromarray((rng.random((32, 32, 3)) * 255).astype(np.uint8)).save(
-            folder / f"p{i}.png")
-    train(TrainConfig().override({
-        "data.train": str(folder), "data.val_split": 0, "data.patch_size": 16,
-        "data.batch_size": 2, "network.features": 8, "network.blocks": 1, "optim.steps": 2,
-        "run.out": str(tmp_path / "run"), "run.threads": 1}), progress=False)
+        Image.fromarray((rng.random((32, 32, 3)) * 255).astype(np.uint8)).save(folder / f"p{i}.png")
+    train(
+        TrainConfig().override(
+            {
+                "data.train": str(folder),
+                "data.val_split": 0,
+                "data.patch_size": 16,
+                "data.batch_size": 2,
+                "network.features": 8,
+                "network.blocks": 1,
+                "optim.steps": 2,
+                "run.out": str(tmp_path / "run"),
+                "run.threads": 1,
+            }
+        ),
+        progress=False,
+    )
     from splitcam.recon.base import fast_precision
 
     outs = {}
     flags = {
-        "fp32": ["--precision", "fp32"], "bf16": ["--precision", "bf16"], "fast": ["--fast"],
+        "fp32": ["--precision", "fp32"],
+        "bf16": ["--precision", "bf16"],
+        "fast": ["--fast"],
         "auto": [],
     }
     for key, flag in flags.items():
         path = tmp_path / f"rec-{key}.png"
-        assert main(["reconstruct", "--checkpoint", str(tmp_path / "run"), "--image",
-                     str(folder / "p0.png"), "--out", str(path), "--quiet", *flag]) == 0
+        assert (
+            main(
+                [
+                    "reconstruct",
+                    "--checkpoint",
+                    str(tmp_path / "run"),
+                    "--image",
+                    str(folder / "p0.png"),
+                    "--out",
+                    str(path),
+                    "--quiet",
+                    *flag,
+                ]
+            )
+            == 0
+        )
         outs[key] = read_image(path)
     difference = np.abs(outs["fp32"] - outs["bf16"])
     assert 0 < difference.max() <= 4 / 255  # bfloat16 moves 8-bit values by a few levels at most
@@ -145,8 +235,19 @@ def test_evaluate_draws_the_sigma_chart(tmp_path):
     from splitcam.cli import main
 
     out = tmp_path / "e"
-    args = ["evaluate", "--method", "malvar2004", "--max-images", "1", "--sigmas", "0", "10",
-            "--out", str(out), "--quiet"]
+    args = [
+        "evaluate",
+        "--method",
+        "malvar2004",
+        "--max-images",
+        "1",
+        "--sigmas",
+        "0",
+        "10",
+        "--out",
+        str(out),
+        "--quiet",
+    ]
     assert main(args) == 0
     assert (out / "sigma_curves.png").stat().st_size > 0
     assert not (out / "zoom").exists()  # a named method draws crops only with --save-images
@@ -163,7 +264,7 @@ def test_max_size_scores_the_centre_of_each_image(tmp_path):
     rgb = torch.arange(3 * 7 * 9, dtype=torch.float32).reshape(3, 7, 9)
     assert torch.equal(centre_crop(rgb, 4), rgb[:, 1:5, 2:6])
     assert torch.equal(centre_crop(rgb, 100), rgb[:, :6, :8])  # at most the image, even sizes
-    (name, images), = load_datasets("default", 1, 64)
+    ((name, images),) = load_datasets("default", 1, 64)
     assert name == "skimage-64px" and images[0][1].shape == (3, 64, 64)
     whole = default_images()[0][1]
     h, w = whole.shape[-2:]
@@ -171,8 +272,20 @@ def test_max_size_scores_the_centre_of_each_image(tmp_path):
     assert torch.equal(images[0][1], whole[:, top : top + 64, left : left + 64])
 
     out = tmp_path / "e"
-    args = ["evaluate", "--method", "bilinear", "--max-images", "1", "--max-size", "64",
-            "--sigmas", "0", "--out", str(out), "--quiet"]
+    args = [
+        "evaluate",
+        "--method",
+        "bilinear",
+        "--max-images",
+        "1",
+        "--max-size",
+        "64",
+        "--sigmas",
+        "0",
+        "--out",
+        str(out),
+        "--quiet",
+    ]
     assert main(args) == 0
     rows = list(csv.DictReader((out / "per_image.csv").open()))
     assert {r["dataset"] for r in rows} == {"skimage-64px"}

@@ -70,7 +70,8 @@ class _Server:
         self.log: list[str] = []
         self.cut_once: set[str] = set()
         handler = type(
-            "Handler", (_Handler,),
+            "Handler",
+            (_Handler,),
             {"root": root.resolve(), "cut_once": self.cut_once, "log": self.log},
         )
         self.httpd = http.server.ThreadingHTTPServer(("127.0.0.1", 0), handler)
@@ -136,8 +137,14 @@ def _registry_rows() -> list[dict[str, str]]:
 
 def test_registry_lists_every_file_with_well_formed_hashes() -> None:
     rows = _registry_rows()
-    assert list(rows[0]) == ["dataset", "file", "source_path", "sha256", "git_blob",
-                             "pixels_sha256"]
+    assert list(rows[0]) == [
+        "dataset",
+        "file",
+        "source_path",
+        "sha256",
+        "git_blob",
+        "pixels_sha256",
+    ]
     kodak = [row for row in rows if row["dataset"] == "kodak24"]
     mcmaster = [row for row in rows if row["dataset"] == "mcmaster"]
     assert len(kodak) + len(mcmaster) == len(rows)
@@ -160,8 +167,10 @@ def test_registry_lists_every_file_with_well_formed_hashes() -> None:
     # The module serves exactly these rows, and keeps no hashes of its own.
     assert datasets.DATASET_NAMES == ("kodak24", "mcmaster")
     loaded = [(d.name, f) for d in datasets._DATASETS.values() for f in d.files]
-    assert [(name, f.name, f.source_path, f.sha256, f.git_blob, f.pixels_sha256 or "-")
-            for name, f in loaded] == [tuple(row.values()) for row in rows]
+    assert [
+        (name, f.name, f.source_path, f.sha256, f.git_blob, f.pixels_sha256 or "-")
+        for name, f in loaded
+    ] == [tuple(row.values()) for row in rows]
     assert all(f.converted for f in datasets._DATASETS["mcmaster"].files)
     assert not any(f.converted for f in datasets._DATASETS["kodak24"].files)
     source = Path(datasets.__file__).read_text()
@@ -179,15 +188,15 @@ def test_registry_matches_shared_data(shared_data: Path) -> None:
         dataset = datasets._DATASETS[name]
         assert {f.name for f in dataset.files} == set(sources)
         assert {f.name for f in dataset.files} == set(manifest) - {"SOURCES.tsv"}
-        ((repo, commit),) = {(row["source_repo"], row["source_commit"])
-                             for row in sources.values()}
+        ((repo, commit),) = {(row["source_repo"], row["source_commit"]) for row in sources.values()}
         assert dataset.base_url == f"https://raw.githubusercontent.com/{repo}/{commit}/"
         for entry in dataset.files:
             row = sources[entry.name]
             assert entry.sha256 == manifest[entry.name]
             assert entry.source_path == row["source_path"]
-            assert entry.git_blob == (row.get("git_blob_sha1") or
-                                      row["git_blob_sha1_of_source_tif"])
+            assert entry.git_blob == (
+                row.get("git_blob_sha1") or row["git_blob_sha1_of_source_tif"]
+            )
             data = (folder / entry.name).read_bytes()
             assert hashlib.sha256(data).hexdigest() == entry.sha256
             if entry.converted:
@@ -223,12 +232,18 @@ def test_download_from_http_mirror(shared_data: Path, serve, tmp_path: Path) -> 
     paths = datasets.download(
         ["kodak24", "mcmaster"], tmp_path, mirror=server.url + "/", progress=False, files=wanted
     )
-    assert paths == [tmp_path / "kodak24" / "kodim01.png", tmp_path / "kodak24" / "kodim19.png",
-                     tmp_path / "mcmaster" / "07.png"]
+    assert paths == [
+        tmp_path / "kodak24" / "kodim01.png",
+        tmp_path / "kodak24" / "kodim19.png",
+        tmp_path / "mcmaster" / "07.png",
+    ]
     for path in paths:
         assert path.read_bytes() == (shared_data / path.parent.name / path.name).read_bytes()
-    assert sorted(server.log) == ["/kodak24/kodim01.png", "/kodak24/kodim19.png",
-                                  "/mcmaster/07.png"]
+    assert sorted(server.log) == [
+        "/kodak24/kodim01.png",
+        "/kodak24/kodim19.png",
+        "/mcmaster/07.png",
+    ]
     assert _contents(tmp_path / "kodak24") == ["kodim01.png", "kodim19.png"]
     assert _contents(tmp_path / "mcmaster") == ["07.png"]
     names = [name for name, _ in datasets.resolve("kodak24", root=tmp_path)]
@@ -264,11 +279,11 @@ def test_download_from_public_source_layout(
 ) -> None:
     server = serve(_public_layout(tmp_path, shared_data))
     monkeypatch.setitem(
-        datasets._DATASETS, "kodak24",
+        datasets._DATASETS,
+        "kodak24",
         dataclasses.replace(datasets._DATASETS["kodak24"], base_url=server.url + "/"),
     )
-    (path,) = datasets.download("kodak24", tmp_path / "data", progress=False,
-                                files=["kodim03.png"])
+    (path,) = datasets.download("kodak24", tmp_path / "data", progress=False, files=["kodim03.png"])
     assert path.read_bytes() == (shared_data / "kodak24" / "kodim03.png").read_bytes()
     assert server.log == ["/testsets/Set24/kodim03.png"]
     assert _contents(tmp_path / "data" / "kodak24") == ["kodim03.png"]
@@ -280,11 +295,15 @@ def _serve_mcmaster_tiff(
     """Serve the folder above ``testsets/McMaster/`` as McMaster's source, with ``name``'s git
     blob id registered as ``blob``."""
     dataset = datasets._DATASETS["mcmaster"]
-    files = tuple(dataclasses.replace(f, git_blob=blob) if f.name == name else f
-                  for f in dataset.files)
+    files = tuple(
+        dataclasses.replace(f, git_blob=blob) if f.name == name else f for f in dataset.files
+    )
     server = serve(tiff.parents[2])
-    monkeypatch.setitem(datasets._DATASETS, "mcmaster",
-                        dataclasses.replace(dataset, base_url=server.url + "/", files=files))
+    monkeypatch.setitem(
+        datasets._DATASETS,
+        "mcmaster",
+        dataclasses.replace(dataset, base_url=server.url + "/", files=files),
+    )
     return server
 
 
@@ -297,8 +316,7 @@ def test_mcmaster_tiff_is_verified_and_converted(
     tiff.parent.mkdir(parents=True)
     reference = np.asarray(Image.open(shared_data / "mcmaster" / "02.png").convert("RGB"))
     Image.fromarray(reference).save(tiff, compression="packbits")
-    server = _serve_mcmaster_tiff(tiff, "02.png", _git_blob(tiff.read_bytes()), serve,
-                                  monkeypatch)
+    server = _serve_mcmaster_tiff(tiff, "02.png", _git_blob(tiff.read_bytes()), serve, monkeypatch)
     out = tmp_path / "data"
     (path,) = datasets.download("mcmaster", out, progress=False, files=["02.png"])
     assert path == out / "mcmaster" / "02.png"
@@ -370,8 +388,7 @@ def test_present_files_are_skipped_and_bad_ones_replaced(
     assert server.log == []
 
     (tmp_path / "kodak24" / "kodim08.png").write_bytes(b"not the image")
-    paths = datasets.download("kodak24", tmp_path, mirror=server.url, progress=False,
-                              files=wanted)
+    paths = datasets.download("kodak24", tmp_path, mirror=server.url, progress=False, files=wanted)
     assert server.log == ["/kodak24/kodim08.png"]
     assert paths[1].read_bytes() == (shared_data / "kodak24" / "kodim08.png").read_bytes()
     assert _contents(tmp_path / "kodak24") == wanted
@@ -384,12 +401,12 @@ def test_broken_connection_leaves_nothing_and_retry_starts_over(
     server.cut_once.add("/kodak24/kodim02.png")
     out = tmp_path / "data"
     with pytest.raises(DownloadError, match="kodak24/kodim02.png"):
-        datasets.download("kodak24", out, mirror=server.url, progress=False,
-                          files=["kodim02.png"])
+        datasets.download("kodak24", out, mirror=server.url, progress=False, files=["kodim02.png"])
     assert _contents(out / "kodak24") == []
 
-    (path,) = datasets.download("kodak24", out, mirror=server.url, progress=False,
-                                files=["kodim02.png"])
+    (path,) = datasets.download(
+        "kodak24", out, mirror=server.url, progress=False, files=["kodim02.png"]
+    )
     assert path.read_bytes() == (shared_data / "kodak24" / "kodim02.png").read_bytes()
     assert server.log == ["/kodak24/kodim02.png"] * 2
 
@@ -403,8 +420,9 @@ def test_progress_bars_without_pooch_log(
     logger = pooch.get_logger()
     # As after an earlier pooch download: the logger has cached that INFO messages go out.
     assert logger.isEnabledFor(logging.INFO)
-    (path,) = datasets.download("kodak24", tmp_path, mirror=server.url, progress=True,
-                                files=["kodim09.png"])
+    (path,) = datasets.download(
+        "kodak24", tmp_path, mirror=server.url, progress=True, files=["kodim09.png"]
+    )
     assert path.read_bytes() == (shared_data / "kodak24" / "kodim09.png").read_bytes()
     err = capfd.readouterr().err
     assert "download" in err and "kodak24/kodim09.png" in err
@@ -418,8 +436,14 @@ def test_network_error_leaves_no_final_file(tmp_path: Path) -> None:
         port = sock.getsockname()[1]
     # Nothing listens on the port any more: the connection is refused.
     with pytest.raises(DownloadError, match="kodak24/kodim01.png") as info:
-        datasets.download("kodak24", tmp_path, mirror=f"http://127.0.0.1:{port}",
-                          progress=False, timeout=5, files=["kodim01.png"])
+        datasets.download(
+            "kodak24",
+            tmp_path,
+            mirror=f"http://127.0.0.1:{port}",
+            progress=False,
+            timeout=5,
+            files=["kodim01.png"],
+        )
     assert not isinstance(info.value, ChecksumError)
     assert _contents(tmp_path / "kodak24") == []
 
@@ -428,15 +452,21 @@ def test_http_error_is_reported(serve, tmp_path: Path) -> None:
     (tmp_path / "empty").mkdir()
     server = serve(tmp_path / "empty")
     with pytest.raises(DownloadError, match="kodak24/kodim01.png .*HTTP 404"):
-        datasets.download("kodak24", tmp_path, mirror=server.url, progress=False,
-                          files=["kodim01.png"])
+        datasets.download(
+            "kodak24", tmp_path, mirror=server.url, progress=False, files=["kodim01.png"]
+        )
 
 
 def test_missing_file_in_local_mirror_is_reported(tmp_path: Path) -> None:
     (tmp_path / "mirror").mkdir()
     with pytest.raises(DownloadError, match="kodak24/kodim01.png"):
-        datasets.download("kodak24", tmp_path / "data", mirror=str(tmp_path / "mirror"),
-                          progress=False, files=["kodim01.png"])
+        datasets.download(
+            "kodak24",
+            tmp_path / "data",
+            mirror=str(tmp_path / "mirror"),
+            progress=False,
+            files=["kodim01.png"],
+        )
     assert _contents(tmp_path / "data" / "kodak24") == []
 
 
@@ -517,8 +547,12 @@ def test_resolve_folders(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Non
     _write_png(folder / ".hidden.png", 1)
     (folder / "sub").mkdir()
     _write_png(folder / "sub" / "e.png", 2)
-    expected = [("a", folder / "a.JPG"), ("b", folder / "b.png"), ("c", folder / "c.tiff"),
-                ("d", folder / "d.bmp")]
+    expected = [
+        ("a", folder / "a.JPG"),
+        ("b", folder / "b.png"),
+        ("c", folder / "c.tiff"),
+        ("d", folder / "d.bmp"),
+    ]
     assert datasets.resolve(str(folder)) == expected
     assert datasets.resolve(folder) == expected
     monkeypatch.chdir(tmp_path)

@@ -19,18 +19,36 @@ def photos(tmp_path):
     folder.mkdir()
     rng = np.random.default_rng(0)
     for i in range(3):
-        Image.fromarray((rng.random((64, 64, 3)) * 255).astype(np.uint8)).save(
-            folder / f"p{i}.png")
+        Image.fromarray((rng.random((64, 64, 3)) * 255).astype(np.uint8)).save(folder / f"p{i}.png")
     return folder
 
 
 def test_lmmse_of_a_pattern_that_collects_no_light(tmp_path, photos, capsys):
-    dark = dataclasses.replace(patterns.get("D"), name="dark",
-                               kernels=np.zeros_like(patterns.get("D").kernels))
+    dark = dataclasses.replace(
+        patterns.get("D"), name="dark", kernels=np.zeros_like(patterns.get("D").kernels)
+    )
     patterns.save(dark, tmp_path / "dark.toml")
-    assert main(["evaluate", "--method", "lmmse", "--patterns", str(tmp_path / "dark.toml"),
-                 "--lmmse-train", str(photos), "--datasets", str(photos), "--sigmas", "0",
-                 "--out", str(tmp_path / "o"), "--quiet"]) == 1
+    assert (
+        main(
+            [
+                "evaluate",
+                "--method",
+                "lmmse",
+                "--patterns",
+                str(tmp_path / "dark.toml"),
+                "--lmmse-train",
+                str(photos),
+                "--datasets",
+                str(photos),
+                "--sigmas",
+                "0",
+                "--out",
+                str(tmp_path / "o"),
+                "--quiet",
+            ]
+        )
+        == 1
+    )
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "receive no light" in err and "'dark'" in err
 
@@ -41,7 +59,8 @@ def test_plot_skips_damaged_metrics_lines_and_names_them(tmp_path, capsys):
     (run / "metrics.jsonl").write_text(
         '{"step": 1, "loss": 0.1, "train_psnr": 10.0}\n5\n{"step": "x"}\n'
         '{"step": 2, "loss": "NaN?", "train_psnr": 11}\n{"step": 3, "loss": 0.05, '
-        '"train_psnr": 13.0}\n{"step": 4, "lo')
+        '"train_psnr": 13.0}\n{"step": 4, "lo'
+    )
     with pytest.warns(UserWarning, match=r"skipped 4 damaged line\(s\): 2, 3, 4, 6"):
         assert main(["plot", str(run)]) == 0
     assert (run / "curves.png").stat().st_size > 1000
@@ -65,9 +84,18 @@ def test_report_on_damaged_summary_names_the_file(tmp_path, capsys):
 
 @pytest.mark.parametrize("command", ["simulate", "reconstruct"])
 def test_nan_sigma_is_blamed_on_sigma(tmp_path, photos, capsys, command):
-    args = {"simulate": ["simulate", str(photos / "p0.png"), "--out", str(tmp_path / "r.png")],
-            "reconstruct": ["reconstruct", "--method", "malvar2004", "--image",
-                            str(photos / "p0.png"), "--out", str(tmp_path / "r.png")]}[command]
+    args = {
+        "simulate": ["simulate", str(photos / "p0.png"), "--out", str(tmp_path / "r.png")],
+        "reconstruct": [
+            "reconstruct",
+            "--method",
+            "malvar2004",
+            "--image",
+            str(photos / "p0.png"),
+            "--out",
+            str(tmp_path / "r.png"),
+        ],
+    }[command]
     assert main([*args, "--sigma", "nan"]) == 1
     err = capsys.readouterr().err
     assert "finite sigma" in err and "image" not in err

@@ -70,8 +70,9 @@ def test_every_method_sees_the_same_noise():
 
 def test_results_files_and_infinite_psnr(tmp_path):
     images = _images()
-    rows = evaluate([Oracle(images), Spy("spy")], [("set", images)], [0, 5], tmp_path,
-                    progress=False)
+    rows = evaluate(
+        [Oracle(images), Spy("spy")], [("set", images)], [0, 5], tmp_path, progress=False
+    )
     assert all(r.psnr == float("inf") for r in rows if r.method == "oracle")
     summary = json.loads((tmp_path / "summary.json").read_text())
     oracle = summary["oracle"]["all"]["5"]
@@ -104,17 +105,26 @@ def test_tiny_checkpoint_evaluates_reproducibly(tmp_path):
     for i in range(4):
         img = np.kron(rng.random((5, 5, 3)), np.ones((8, 8, 1)))
         Image.fromarray((img * 255).astype(np.uint8)).save(folder / f"t{i}.png")
-    cfg = TrainConfig().override({
-        "data.train": str(folder), "data.patch_size": 16, "data.batch_size": 2,
-        "network.features": 4, "network.blocks": 1, "optim.steps": 2,
-        "run.out": str(tmp_path / "run"), "run.threads": 1,
-    })
+    cfg = TrainConfig().override(
+        {
+            "data.train": str(folder),
+            "data.patch_size": 16,
+            "data.batch_size": 2,
+            "network.features": 4,
+            "network.blocks": 1,
+            "optim.steps": 2,
+            "run.out": str(tmp_path / "run"),
+            "run.threads": 1,
+        }
+    )
     train(cfg, progress=False)
     images = _images(2, size=(16, 18))
-    first = evaluate([build_method(tmp_path / "run")], [("s", images)], [0, 10],
-                     tmp_path / "e1", progress=False)
-    second = evaluate([build_method(tmp_path / "run")], [("s", images)],
-                      [0, 10], tmp_path / "e2", progress=False)
+    first = evaluate(
+        [build_method(tmp_path / "run")], [("s", images)], [0, 10], tmp_path / "e1", progress=False
+    )
+    second = evaluate(
+        [build_method(tmp_path / "run")], [("s", images)], [0, 10], tmp_path / "e2", progress=False
+    )
     assert first == second
     assert (tmp_path / "e1/summary.json").read_text() == (tmp_path / "e2/summary.json").read_text()
     assert summarise(first)["run"]["pattern"] == "D"
@@ -147,32 +157,125 @@ def test_evaluate_cli_with_images_and_zoom(tmp_path, capsys):
     folder.mkdir()
     for name, img in _images(2, size=(40, 44)):
         Image.fromarray((img.permute(1, 2, 0).numpy() * 255).astype(np.uint8)).save(
-            folder / f"{name}.png")
+            folder / f"{name}.png"
+        )
     out = tmp_path / "out"
-    assert main(["evaluate", "--method", "bilinear", "--method", "lmmse", "--patterns", "D",
-                 "--datasets", str(folder), "--sigmas", "0", "10", "--out", str(out),
-                 "--save-images", "--quiet"]) == 0
+    assert (
+        main(
+            [
+                "evaluate",
+                "--method",
+                "bilinear",
+                "--method",
+                "lmmse",
+                "--patterns",
+                "D",
+                "--datasets",
+                str(folder),
+                "--sigmas",
+                "0",
+                "10",
+                "--out",
+                str(out),
+                "--save-images",
+                "--quiet",
+            ]
+        )
+        == 0
+    )
     printed = capsys.readouterr().out
     assert "| bayer+bilinear | bayer |" in printed and "| lmmse-D | D |" in printed
     assert (out / "images/lmmse-D/photos/img0_sigma10.png").is_file()
     assert (out / "zoom/photos_img0_sigma0.png").is_file()
-    assert main(["evaluate", "--method", "bilinear", "--datasets", str(folder), "--sigmas", "0",
-                 "--out", str(tmp_path / "o2"), "--save-images", "--zoom", "img1:4,6,20",
-                 "--quiet"]) == 0
+    assert (
+        main(
+            [
+                "evaluate",
+                "--method",
+                "bilinear",
+                "--datasets",
+                str(folder),
+                "--sigmas",
+                "0",
+                "--out",
+                str(tmp_path / "o2"),
+                "--save-images",
+                "--zoom",
+                "img1:4,6,20",
+                "--quiet",
+            ]
+        )
+        == 0
+    )
     assert (tmp_path / "o2/zoom/photos_img1_sigma0.png").is_file()
     assert not (tmp_path / "o2/zoom/photos_img0_sigma0.png").exists()
     # A zoom with its own noise level (the paper's kodim05 at sigma 10, kodim24 at sigma 5):
     # drawn at that level only, each image at its own.
-    assert main(["evaluate", "--method", "bilinear", "--datasets", str(folder), "--sigmas", "0",
-                 "5", "10", "--out", str(tmp_path / "o4"), "--save-images", "--zoom", "img0@10",
-                 "--zoom", "img1:4,6,20@5", "--quiet"]) == 0
+    assert (
+        main(
+            [
+                "evaluate",
+                "--method",
+                "bilinear",
+                "--datasets",
+                str(folder),
+                "--sigmas",
+                "0",
+                "5",
+                "10",
+                "--out",
+                str(tmp_path / "o4"),
+                "--save-images",
+                "--zoom",
+                "img0@10",
+                "--zoom",
+                "img1:4,6,20@5",
+                "--quiet",
+            ]
+        )
+        == 0
+    )
     drawn = sorted(p.name for p in (tmp_path / "o4/zoom").glob("*.png"))
     assert drawn == ["photos_img0_sigma10.png", "photos_img1_sigma5.png"]
-    assert main(["evaluate", "--method", "bilinear", "--datasets", str(folder), "--sigmas", "0",
-                 "--out", str(tmp_path / "o5"), "--save-images", "--zoom", "img1@x"]) == 1
+    assert (
+        main(
+            [
+                "evaluate",
+                "--method",
+                "bilinear",
+                "--datasets",
+                str(folder),
+                "--sigmas",
+                "0",
+                "--out",
+                str(tmp_path / "o5"),
+                "--save-images",
+                "--zoom",
+                "img1@x",
+            ]
+        )
+        == 1
+    )
     assert "expected a zoom as IMAGE[:TOP,LEFT,SIZE][@SIGMA]" in capsys.readouterr().err
-    assert main(["evaluate", "--method", "bilinear", "--datasets", str(folder), "--sigmas", "0",
-                 "--out", str(tmp_path / "o3"), "--save-images", "--zoom", "img1:4,x"]) == 1
+    assert (
+        main(
+            [
+                "evaluate",
+                "--method",
+                "bilinear",
+                "--datasets",
+                str(folder),
+                "--sigmas",
+                "0",
+                "--out",
+                str(tmp_path / "o3"),
+                "--save-images",
+                "--zoom",
+                "img1:4,x",
+            ]
+        )
+        == 1
+    )
     assert "expected a zoom as IMAGE[:TOP,LEFT,SIZE][@SIGMA]" in capsys.readouterr().err
     assert main(["evaluate", "--method", "nonsense", "--datasets", str(folder)]) == 1
     assert "unknown method 'nonsense'" in capsys.readouterr().err
@@ -184,8 +287,13 @@ def test_report_puts_results_beside_the_paper(tmp_path, capsys):
 
     learned = Spy("learned")
     learned.pattern = LearnableSplitterSensor("A", init="random").to_pattern("A-opt")
-    evaluate([Spy("plain-D"), learned, Spy("bayerish", pattern="bayer")],
-             [("set", _images(1))], [0, 10], tmp_path / "res", progress=False)
+    evaluate(
+        [Spy("plain-D"), learned, Spy("bayerish", pattern="bayer")],
+        [("set", _images(1))],
+        [0, 10],
+        tmp_path / "res",
+        progress=False,
+    )
     report = make_report([tmp_path / "res"], tmp_path / "rep").read_text()
     summary = json.loads((tmp_path / "res/summary.json").read_text())
     ours = summary["plain-D"]["all"]["0"]["psnr"]
@@ -214,8 +322,9 @@ def _interrupting(name: str, stop_at: int) -> Spy:
 
 def test_interrupted_evaluation_keeps_its_rows_and_resumes(tmp_path):
     images = _images(3)
-    whole = evaluate([Spy("a"), Spy("b")], [("set", images)], [0, 10], tmp_path / "whole",
-                     progress=False)
+    whole = evaluate(
+        [Spy("a"), Spy("b")], [("set", images)], [0, 10], tmp_path / "whole", progress=False
+    )
     out = tmp_path / "part"
     a, b = Spy("a"), _interrupting("b", stop_at=4)
     with pytest.raises(KeyboardInterrupt):
@@ -242,11 +351,25 @@ def test_zoom_arguments_are_checked_before_any_work(tmp_path):
     images = _images(2)
     spy = Spy("a")
     with pytest.raises(ValueError, match="not among the images evaluated"):
-        evaluate([spy], [("set", images)], [0], tmp_path, save_images=True,
-                 zoom_images=["kodim05"], progress=False)
+        evaluate(
+            [spy],
+            [("set", images)],
+            [0],
+            tmp_path,
+            save_images=True,
+            zoom_images=["kodim05"],
+            progress=False,
+        )
     with pytest.raises(ValueError, match="lies outside"):
-        evaluate([spy], [("set", images)], [0], tmp_path, save_images=True,
-                 zoom_images=["img1:30,2,8"], progress=False)
+        evaluate(
+            [spy],
+            [("set", images)],
+            [0],
+            tmp_path,
+            save_images=True,
+            zoom_images=["img1:30,2,8"],
+            progress=False,
+        )
     with pytest.raises(ValueError, match="finite sigma"):
         evaluate([spy], [("set", images)], [0, float("nan")], tmp_path, progress=False)
     assert spy.seen == []
@@ -256,7 +379,8 @@ def _write_photos(folder, n=2, size=(40, 44)):
     folder.mkdir()
     for name, img in _images(n, size=size):
         Image.fromarray((img.permute(1, 2, 0).numpy() * 255).astype(np.uint8)).save(
-            folder / f"{name}.png")
+            folder / f"{name}.png"
+        )
 
 
 def test_pattern_file_named_like_a_builtin_is_not_the_builtin(tmp_path, capsys):
@@ -285,8 +409,25 @@ def test_pattern_file_named_like_a_builtin_is_not_the_builtin(tmp_path, capsys):
     torch.testing.assert_close(closed.statistics.filters(0.0)[0], w_edited)
     assert not torch.allclose(w_edited, w_builtin, atol=1e-3)
     capsys.readouterr()
-    assert main(["evaluate", "--method", "lmmse", "--patterns", str(mine), "--datasets",
-                 str(photos), "--sigmas", "0", "--out", str(tmp_path / "o"), "--quiet"]) == 0
+    assert (
+        main(
+            [
+                "evaluate",
+                "--method",
+                "lmmse",
+                "--patterns",
+                str(mine),
+                "--datasets",
+                str(photos),
+                "--sigmas",
+                "0",
+                "--out",
+                str(tmp_path / "o"),
+                "--quiet",
+            ]
+        )
+        == 0
+    )
     fitted = build_method("lmmse", pattern=mine, lmmse_train=photos)
     assert fitted.name == "lmmse-mine.toml"
     assert np.array_equal(fitted.pattern.kernels, kernels)
@@ -303,19 +444,46 @@ def test_validation_psnr_equals_what_evaluate_reports(tmp_path):
     train_dir, val_dir = tmp_path / "train", tmp_path / "val"
     _write_photos(train_dir, n=3, size=(32, 32))
     _write_photos(val_dir, n=2, size=(36, 40))
-    cfg = TrainConfig().override({
-        "data.train": str(train_dir), "data.val": str(val_dir), "data.val_crop": None,
-        "data.val_sigmas": [0.0, 15.0], "data.patch_size": 16, "data.batch_size": 2,
-        "network.features": 4, "network.blocks": 1, "optim.steps": 3, "run.val_every": 3,
-        "run.out": str(tmp_path / "run"), "run.threads": 1,
-    })
+    cfg = TrainConfig().override(
+        {
+            "data.train": str(train_dir),
+            "data.val": str(val_dir),
+            "data.val_crop": None,
+            "data.val_sigmas": [0.0, 15.0],
+            "data.patch_size": 16,
+            "data.batch_size": 2,
+            "network.features": 4,
+            "network.blocks": 1,
+            "optim.steps": 3,
+            "run.val_every": 3,
+            "run.out": str(tmp_path / "run"),
+            "run.threads": 1,
+        }
+    )
     train(cfg, progress=False)
-    logged = [json.loads(line) for line in (tmp_path / "run/metrics.jsonl").read_text()
-              .splitlines()]
+    logged = [
+        json.loads(line) for line in (tmp_path / "run/metrics.jsonl").read_text().splitlines()
+    ]
     last = [r for r in logged if "val_psnr_0" in r][-1]
     assert last["step"] == 3
-    assert main(["evaluate", "--checkpoint", str(tmp_path / "run"), "--datasets", str(val_dir),
-                 "--sigmas", "0", "15", "--out", str(tmp_path / "ev"), "--quiet"]) == 0
+    assert (
+        main(
+            [
+                "evaluate",
+                "--checkpoint",
+                str(tmp_path / "run"),
+                "--datasets",
+                str(val_dir),
+                "--sigmas",
+                "0",
+                "15",
+                "--out",
+                str(tmp_path / "ev"),
+                "--quiet",
+            ]
+        )
+        == 0
+    )
     summary = json.loads((tmp_path / "ev/summary.json").read_text())["run"]["all"]
     assert summary["0"]["psnr"] == pytest.approx(last["val_psnr_0"], abs=1e-9)
     assert summary["15"]["psnr"] == pytest.approx(last["val_psnr_15"], abs=1e-9)
@@ -345,8 +513,12 @@ def test_table1_checks_rank_b_and_c_among_the_patterns_evaluated():
     assert got[last4] is True
     assert got["B and C nearly flat in σ (drop smaller than A's and D's)"] is True  # 2, 1.5 < 7
     assert verdicts({**four, "B": [34, 33.5]})[last4] is False
-    assert verdicts({**four, "C": [39, 31.5]})[
-        "B and C nearly flat in σ (drop smaller than A's and D's)"] is False  # C drops 7.5 > 7
+    assert (
+        verdicts({**four, "C": [39, 31.5]})[
+            "B and C nearly flat in σ (drop smaller than A's and D's)"
+        ]
+        is False
+    )  # C drops 7.5 > 7
     assert verdicts({**four, "E": [35, 32.5]})["B and C last at every σ"] is True
     assert verdicts({**four, "E": [33.5, 31]})["B and C last at every σ"] is False
     assert not any("B and C" in s for s in verdicts({"A": [40, 33], "D": [41, 34]}))

@@ -11,8 +11,18 @@ from pathlib import Path
 
 import splitcam
 
-LAYERS = ["patterns", "physics", "optics", "data", "recon", "viz", "evaluation", "training",
-          "methods", "cli"]
+LAYERS = [
+    "patterns",
+    "physics",
+    "optics",
+    "data",
+    "recon",
+    "viz",
+    "evaluation",
+    "training",
+    "methods",
+    "cli",
+]
 PACKAGE = Path(splitcam.__file__).parent
 
 
@@ -56,8 +66,11 @@ def test_dependencies_point_one_way():
 
 
 def test_every_module_belongs_to_a_layer():
-    tops = {p.name.removesuffix(".py") for p in PACKAGE.iterdir()
-            if (p.suffix == ".py" or (p / "__init__.py").is_file()) and p.name != "__pycache__"}
+    tops = {
+        p.name.removesuffix(".py")
+        for p in PACKAGE.iterdir()
+        if (p.suffix == ".py" or (p / "__init__.py").is_file()) and p.name != "__pycache__"
+    }
     assert tops - {"__init__", "__main__", "weights"} == set(LAYERS)
 
 
@@ -67,7 +80,7 @@ def test_the_checker_sees_a_wrong_way_import(tmp_path):
     (fake / "physics").mkdir(parents=True)
     (fake / "physics" / "bad.py").write_text(
         "import splitcam.patterns\n\ndef f():\n    from ..training import train\n"
-        "    from .. import methods\n")
+        "    from .. import methods\n"
+    )
     found = _imports(fake / "physics" / "bad.py", root=fake)
-    assert found == [(1, "splitcam.patterns"), (4, "splitcam.training"),
-                     (5, "splitcam.methods")]
+    assert found == [(1, "splitcam.patterns"), (4, "splitcam.training"), (5, "splitcam.methods")]

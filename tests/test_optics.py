@@ -254,8 +254,24 @@ def test_routing_design_raises_the_rggb_collection(tmp_path, capsys) -> None:
         design_metasurface((1, 3), small, steps=1, objective="routing")
     with pytest.raises(ValueError, match="lmmse or routing"):
         design_metasurface((2, 2), small, steps=1, objective="colour")
-    args = ["optics", "--profile", "lens", "--pitch", "0.5", "--samples", "4", "--distance", "1",
-            "--design", "--objective", "routing", "--steps", "3", "--quiet",
-            "--out", str(tmp_path / "r.toml")]
+    args = [
+        "optics",
+        "--profile",
+        "lens",
+        "--pitch",
+        "0.5",
+        "--samples",
+        "4",
+        "--distance",
+        "1",
+        "--design",
+        "--objective",
+        "routing",
+        "--steps",
+        "3",
+        "--quiet",
+        "--out",
+        str(tmp_path / "r.toml"),
+    ]
     assert main(args) == 0
     assert "collection efficiency into RGGB pixels" in capsys.readouterr().out

@@ -382,12 +382,22 @@ def test_evaluate_resumes_photon_rows_only_under_the_same_sensor(tmp_path) -> No
     evaluate([again], [("s", images)], [0.0, Exposure(100.0)], tmp_path, progress=False)
     assert again.calls == 0
     other_sensor = Counter()  # another read noise: the photon rows are recomputed, sigma 0 kept
-    evaluate([other_sensor], [("s", images)], [0.0, Exposure(100.0, read_noise=5.0)], tmp_path,
-             progress=False)
+    evaluate(
+        [other_sensor],
+        [("s", images)],
+        [0.0, Exposure(100.0, read_noise=5.0)],
+        tmp_path,
+        progress=False,
+    )
     assert other_sensor.calls == 2
     with pytest.raises(ValueError, match="share their sensor settings"):
-        evaluate([Counter()], [("s", images)], [Exposure(10.0), Exposure(100.0, read_noise=5.0)],
-                 tmp_path, progress=False)
+        evaluate(
+            [Counter()],
+            [("s", images)],
+            [Exposure(10.0), Exposure(100.0, read_noise=5.0)],
+            tmp_path,
+            progress=False,
+        )
 
 
 def test_results_written_before_the_photons_column_still_read(tmp_path) -> None:
@@ -406,8 +416,20 @@ def test_results_written_before_the_photons_column_still_read(tmp_path) -> None:
 def test_evaluate_photons_cli(tmp_path, capsys) -> None:
     from splitcam.cli import main
 
-    args = ["evaluate", "--method", "lmmse", "--method", "malvar2004", "--patterns", "A,bayer",
-            "--max-images", "1", "--quiet", "--out", str(tmp_path)]
+    args = [
+        "evaluate",
+        "--method",
+        "lmmse",
+        "--method",
+        "malvar2004",
+        "--patterns",
+        "A,bayer",
+        "--max-images",
+        "1",
+        "--quiet",
+        "--out",
+        str(tmp_path),
+    ]
     assert main([*args, "--photons", "20", "2000", "--read-noise", "1.5"]) == 0
     out = capsys.readouterr().out
     assert "N=20 e⁻" in out and "σ=" not in out  # --photons alone: no Gaussian levels

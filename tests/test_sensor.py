@@ -110,13 +110,14 @@ def test_gradcheck_image_and_kernels(name):
     f = torch.rand(1, 3, 5, 6, generator=_gen(8), dtype=torch.float64, requires_grad=True)
     # fast_mode checks the Jacobian along random directions: same power to catch a wrong
     # gradient, a fraction of the time of the full numerical Jacobian.
-    assert torch.autograd.gradcheck(lambda x, k: splitter_forward(x, k, layout), (f, w),
-                                    fast_mode=True)
-    assert torch.autograd.gradcheck(lambda x, k: pixel_gather(x, k, layout), (f, w),
-                                    fast_mode=True)
+    assert torch.autograd.gradcheck(
+        lambda x, k: splitter_forward(x, k, layout), (f, w), fast_mode=True
+    )
+    assert torch.autograd.gradcheck(lambda x, k: pixel_gather(x, k, layout), (f, w), fast_mode=True)
     g = torch.rand(1, 1, 5, 6, generator=_gen(9), dtype=torch.float64, requires_grad=True)
-    assert torch.autograd.gradcheck(lambda y, k: splitter_adjoint(y, k, layout), (g, w),
-                                    fast_mode=True)
+    assert torch.autograd.gradcheck(
+        lambda y, k: splitter_adjoint(y, k, layout), (g, w), fast_mode=True
+    )
 
 
 def test_golden_pattern_a_white_scene():
@@ -138,8 +139,10 @@ def test_golden_pattern_d_colour_scene():
     """Hand-checked: uniform (R, G, B) = (0.2, 0.4, 0.8) on a 2x4 sensor behind pattern D."""
     f = torch.tensor([0.2, 0.4, 0.8], dtype=torch.float64).view(1, 3, 1, 1).expand(1, 3, 2, 4)
     expected = torch.tensor(
-        [[1.5, 1.2, 1.6, 1.2],  # W+R: 1.4 + red halves from the deflectors; W-R: G + B
-         [0.6, 2.2, 0.6, 1.8]],  # W-B: R + G; W+B: 1.4 + blue halves (one lost at the edge)
+        [
+            [1.5, 1.2, 1.6, 1.2],  # W+R: 1.4 + red halves from the deflectors; W-R: G + B
+            [0.6, 2.2, 0.6, 1.8],
+        ],  # W-B: R + G; W+B: 1.4 + blue halves (one lost at the edge)
         dtype=torch.float64,
     )
     torch.testing.assert_close(SplitterSensor("D")(f)[0, 0], expected)
@@ -182,8 +185,12 @@ def test_dtypes_and_batch(dtype):
 
 @pytest.mark.parametrize(
     "device",
-    ["cpu", pytest.param("cuda", marks=pytest.mark.skipif(
-        not torch.cuda.is_available(), reason="no CUDA device"))],
+    [
+        "cpu",
+        pytest.param(
+            "cuda", marks=pytest.mark.skipif(not torch.cuda.is_available(), reason="no CUDA device")
+        ),
+    ],
 )
 def test_follows_the_input_device(device):
     sensor = SplitterSensor("D").to(device)
@@ -209,8 +216,10 @@ def test_state_dict_round_trip():
 @pytest.mark.parametrize(
     "bad, message",
     [
-        (torch.rand(2, 4, 8, 8),
-         r"expected an RGB image of shape \(N, 3, H, W\), got \(2, 4, 8, 8\)"),
+        (
+            torch.rand(2, 4, 8, 8),
+            r"expected an RGB image of shape \(N, 3, H, W\), got \(2, 4, 8, 8\)",
+        ),
         (torch.rand(3, 8, 8), r"expected an RGB image of shape \(N, 3, H, W\), got \(3, 8, 8\)"),
         (torch.rand(1, 3, 0, 8), r"expected an RGB image with N, H, W >= 1"),
     ],

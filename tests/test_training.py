@@ -691,17 +691,33 @@ def test_divergence_rolls_back_and_halves_the_learning_rate(image_folder, tmp_pa
     divergence: its update is not applied, the weights go back to the step-0 snapshot, and the
     learning rate is halved from there on; the checkpoint records the scale and a resumed run
     keeps it. Without divergence the rate is the schedule's."""
-    base = {"optim.steps": 25, "run.log_every": 1, "run.checkpoint_every": 100,
-            "run.val_every": 1000, "optim.warmup_steps": 0, "optim.schedule": "constant"}
-    train(tiny(image_folder, tmp_path / "g", **base, **{"optim.divergence_factor": 1e-6}),
-          progress=False)
+    base = {
+        "optim.steps": 25,
+        "run.log_every": 1,
+        "run.checkpoint_every": 100,
+        "run.val_every": 1000,
+        "optim.warmup_steps": 0,
+        "optim.schedule": "constant",
+    }
+    train(
+        tiny(image_folder, tmp_path / "g", **base, **{"optim.divergence_factor": 1e-6}),
+        progress=False,
+    )
     rows = [json.loads(x) for x in (tmp_path / "g/metrics.jsonl").read_text().splitlines()]
     by_step = {r["step"]: r for r in rows if "rollbacks" in r}
     assert [s for s, r in by_step.items() if r["rollbacks"]] == [21]
     assert by_step[20]["lr"] == pytest.approx(1e-3) and by_step[22]["lr"] == pytest.approx(5e-4)
     assert ckpt_io.load(tmp_path / "g").meta["lr_scale"] == 0.5
-    train(tiny(image_folder, tmp_path / "g", **{**base, "optim.steps": 27},
-               **{"optim.divergence_factor": None}), resume=True, progress=False)
+    train(
+        tiny(
+            image_folder,
+            tmp_path / "g",
+            **{**base, "optim.steps": 27},
+            **{"optim.divergence_factor": None},
+        ),
+        resume=True,
+        progress=False,
+    )
     rows = [json.loads(x) for x in (tmp_path / "g/metrics.jsonl").read_text().splitlines()]
     assert [r["lr"] for r in rows if r.get("step") in (26, 27)] == pytest.approx([5e-4, 5e-4])
     train(tiny(image_folder, tmp_path / "free", **base), progress=False)
@@ -732,8 +748,7 @@ def test_gradient_clipping_bounds_the_update(image_folder, tmp_path):
     """Clipping the gradient norm to 1e-12 leaves Adam's update at ~lr * 1e-12 / eps: the
     weights barely move, where an unclipped run moves them by about lr per step."""
     base = {"optim.steps": 5, "run.val_every": 1000, "optim.warmup_steps": 0}
-    train(tiny(image_folder, tmp_path / "c", **base, **{"optim.clip_grad": 1e-12}),
-          progress=False)
+    train(tiny(image_folder, tmp_path / "c", **base, **{"optim.clip_grad": 1e-12}), progress=False)
     train(tiny(image_folder, tmp_path / "f", **base), progress=False)
     train(tiny(image_folder, tmp_path / "z", **{**base, "optim.steps": 0}), progress=False)
     start, clipped, free = (_weights(tmp_path / n) for n in ("z", "c", "f"))
@@ -759,8 +774,9 @@ def test_a_run_saved_before_partial_periods_existed_resumes_without_them(image_f
     from splitcam.training.trainer import resume_config
 
     run = tmp_path / "old"
-    train(tiny(image_folder, run, **{"optim.steps": 2, "data.partial_periods": 0.0}),
-          progress=False)
+    train(
+        tiny(image_folder, run, **{"optim.steps": 2, "data.partial_periods": 0.0}), progress=False
+    )
     assert TrainConfig().data.partial_periods == 0.5  # today's default
     # Take the setting out of the checkpoint and config.json, as a run saved before it had it.
     path = run / ckpt_io.CHECKPOINT_NAME

@@ -246,9 +246,7 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
 MAIN_JOB_MAX_SIZE = 256
 
 
-def load_datasets(
-    spec: str | None, max_images: int | None, max_size: int | None = None
-) -> list:
+def load_datasets(spec: str | None, max_images: int | None, max_size: int | None = None) -> list:
     """``[(dataset name, [(image name, rgb)])]`` for a comma-separated list of names/folders;
     with ``max_size`` every image is cut to its centre (the dataset name says so, which keeps
     resumed results of whole and cropped images apart)."""

@@ -25,5 +25,13 @@ for name in ["C", "E", "B", "D"]:
     for size in (126, 127, 128):
         crops = [(n, centre_crop(x, size, multiple=1)) for n, x in images]
         ours, closed = mean_psnr(net, crops, SIGMAS), mean_psnr(lmmse, crops, SIGMAS)
-        print(name, size, f"(= {size % 3} mod 3)", "net", {s: round(ours[s], 2) for s in SIGMAS},
-              "lmmse", {s: round(closed[s], 2) for s in SIGMAS}, flush=True)
+        print(
+            name,
+            size,
+            f"(= {size % 3} mod 3)",
+            "net",
+            {s: round(ours[s], 2) for s in SIGMAS},
+            "lmmse",
+            {s: round(closed[s], 2) for s in SIGMAS},
+            flush=True,
+        )
