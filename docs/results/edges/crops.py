@@ -2,6 +2,7 @@
 part-way through one (docs/results/edges/README.md). Run from the repository root."""
 
 import json
+import sys
 
 import torch
 
@@ -18,7 +19,7 @@ SIGMAS = [0.0, 15.0]
 torch.set_num_threads(2)
 paths = list_images("../shared/data/train")[-16:]  # held out of every shipped run
 images = [(p.name, torch.from_numpy(read_image(p)).permute(2, 0, 1).contiguous()) for p in paths]
-for name in ["C", "E", "B", "D"]:
+for name in sys.argv[1:] or ["C", "E", "B", "D"]:
     net = build_method(name, precision="fp32")
     stored = json.loads((MODELS_DIR / f"{name}.json").read_text())
     lmmse = closed_form_lmmse(Pattern.from_dict(stored["pattern"]))

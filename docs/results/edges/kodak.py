@@ -2,6 +2,8 @@
 narrower, so that every row ends as the networks' training patches did (width = 1 mod 3) or on
 a whole period (docs/results/edges/README.md). Needs SPLITCAM_DATA."""
 
+import sys
+
 import torch
 
 from splitcam.data.testsets import load_images
@@ -22,7 +24,7 @@ variants = {
     "w=1 mod 3": lambda x: narrow(x, 1),
     "w=0 mod 3": lambda x: narrow(x, 0),
 }
-for name in ["C", "E"]:
+for name in sys.argv[1:] or ["C", "E"]:
     net = build_method(name, precision="fp32")
     for label, cut in variants.items():
         psnr = mean_psnr(net, [(n, cut(x)) for n, x in images], [0.0, 15.0])
