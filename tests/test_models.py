@@ -624,13 +624,11 @@ def test_every_shipped_model_loads_matches_its_json_and_beats_its_lmmse(name, sh
     and architecture are what loads, deterministic, and better than the training-free closed-form
     LMMSE of the same kernels on crops of held-out training images (ones the models never saw).
 
-    Four 128x128 centre crops, not one: on a single 96x96 crop of busy texture the C network
-    (whose pattern pools each cell's light, so fine detail is gone before any network sees it)
-    lost to its LMMSE by 0.7 dB, while over 29 held-out 256x256 crops it is 2.6 dB ahead. Over
-    these four its lead is the smallest of the shipped models, 0.64 / 0.75 dB at σ 0 / 15 (the
-    next smallest: B, 2.2 / 2.1; 2026-11-25). 128 is not a whole number of C's 1x3 periods,
-    and C was trained on 64-pixel patches, which end one column into a period, the only edge
-    it knows (docs/results/edges/)."""
+    Four 128x128 centre crops, not one: on a single 96x96 crop of busy texture the first C
+    network (whose pattern pools each cell's light, so fine detail is gone before any network
+    sees it) lost to its LMMSE by 0.7 dB. Over these four the smallest lead is B's, 2.17 / 2.10
+    dB at σ 0 / 15; C's is 4.05 / 3.86 since its retraining on every image edge (the first C,
+    which knew one edge only, led by 0.64 / 0.75; docs/results/edges/; 2026-11-25)."""
     import numpy as np
 
     from splitcam.data.imageio import read_image
