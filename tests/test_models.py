@@ -628,7 +628,8 @@ def test_every_shipped_model_loads_matches_its_json_and_beats_its_lmmse(name, sh
     network (whose pattern pools each cell's light, so fine detail is gone before any network
     sees it) lost to its LMMSE by 0.7 dB. Over these four the smallest lead is B's, 2.17 / 2.10
     dB at σ 0 / 15; C's is 4.05 / 3.86 since its retraining on every image edge (the first C,
-    which knew one edge only, led by 0.64 / 0.75; docs/results/edges/; 2026-11-25)."""
+    which knew one edge only, led by 0.64 / 0.75 and would fail the 1 dB margin asserted here;
+    docs/results/edges/; 2026-11-25)."""
     import numpy as np
 
     from splitcam.data.imageio import read_image
@@ -657,7 +658,7 @@ def test_every_shipped_model_loads_matches_its_json_and_beats_its_lmmse(name, sh
         assert torch.equal(method.reconstruct(raw, 5.0), method.reconstruct(raw, 5.0))
     net = mean_psnr(method, crops, [0.0, 15.0])
     lmmse = mean_psnr(closed_form_lmmse(pattern), crops, [0.0, 15.0])
-    assert net[0.0] > lmmse[0.0] + 0.5 and net[15.0] > lmmse[15.0] + 0.5, (net, lmmse)
+    assert net[0.0] > lmmse[0.0] + 1.0 and net[15.0] > lmmse[15.0] + 1.0, (net, lmmse)
 
 
 def test_the_main_job_scores_every_shipped_model_on_crops(trained_run, tmp_path, monkeypatch):
