@@ -213,7 +213,7 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
         )
     spec = given[0]
     method = (
-        build_model(spec, tile=args.tile, precision=args.precision)
+        build_model(spec, pattern=args.pattern, tile=args.tile, precision=args.precision)
         if args.model
         else build_method(
             spec,
@@ -269,14 +269,46 @@ def load_datasets(spec: str | None, max_images: int | None, max_size: int | None
     return out
 
 
+def _model_methods(
+    models: Sequence[str], pattern_specs: Sequence[str], *, main_job: bool, options: dict
+) -> list:
+    """The methods of ``--model`` names: a model of one pattern as itself, a model for any
+    pattern (``universal``) once per pattern of ``--patterns``. In the main job the universal
+    model reconstructs only the patterns that no shipped network serves, and says so."""
+    from . import patterns
+    from .methods import build_model
+
+    single, universal = [], []
+    for spec in models:
+        method = None
+        try:
+            method = build_model(spec, **options)
+        except ValueError as exc:
+            if "reconstructs any pattern" not in str(exc):
+                raise
+            universal.append(spec)
+        if method is not None:
+            single.append(method)
+    for spec in universal:
+        wanted = list(pattern_specs)
+        if main_job:
+            served = [m.pattern for m in single]
+            wanted = [p for p in wanted if not any(patterns.get(p).equals(s) for s in served)]
+            for p in wanted:
+                print(f"pattern {p} has no shipped network: reconstructed by the {spec} network")
+        single += [build_model(spec, pattern=p, **options) for p in wanted]
+    return single
+
+
 def cmd_evaluate(args: argparse.Namespace) -> int:
     from .evaluation.protocol import evaluate, parse_zoom
     from .evaluation.tables import markdown_tables, summarise
-    from .methods import build_methods, build_model
+    from .methods import build_methods
     from .training.models import model_names
 
     zooms = [parse_zoom(z) for z in args.zoom or ()]  # bad syntax fails before any work
     chosen = args.checkpoint or args.method or args.model
+    options = {"tile": args.tile, "precision": args.precision}
     # Built-in defaults (the main job): every shipped network, and the training-free baselines,
     # on centre crops of the built-in photos (within 3 minutes on a 2-core CPU).
     models = args.model if chosen else model_names()
@@ -287,7 +319,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
         *args.checkpoint,
         *(args.method or ([] if chosen else ["lmmse", "malvar2004"])),
     ]
-    methods = [build_model(m, tile=args.tile, precision=args.precision) for m in models]
+    methods = _model_methods(models, args.patterns, main_job=not chosen, options=options)
     methods += build_methods(
         specs,
         patterns_for_lmmse=args.patterns,
@@ -520,9 +552,10 @@ def cmd_study(args: argparse.Namespace) -> int:
     datasets = load_datasets(args.datasets, args.max_images)
     images = [img for _, imgs in datasets for img in imgs]
     names = ", ".join(f"{d} ({len(i)})" for d, i in datasets)
-    from .methods import build_method, build_model
+    from .methods import build_method
 
-    methods = [build_model(m) for m in args.model] + [build_method(c) for c in args.checkpoint]
+    methods = _model_methods(args.model, args.patterns, main_job=False, options={})
+    methods += [build_method(c) for c in args.checkpoint]
     results = exposure_study(
         images,
         patterns=args.patterns,

@@ -45,20 +45,46 @@ def method_names() -> list[str]:
 
 
 def build_model(
-    spec: str | os.PathLike, *, tile: int | None = 512, precision: str = "auto"
+    spec: str | os.PathLike,
+    *,
+    pattern: str | os.PathLike | patterns.Pattern | None = None,
+    tile: int | None = 512,
+    precision: str = "auto",
 ) -> NetworkReconstructor:
     """A shipped model (by name) or a model file as a reconstruction method, labelled
     ``net-<name>`` (the same for every command).
 
+    A model for any pattern (``universal``) needs ``pattern`` (a library name, a pattern file or
+    a :class:`~splitcam.patterns.Pattern`) and is labelled ``net-<name>-<pattern>``; a model of
+    one pattern ignores it (the CLI checks that the two agree).
+
     Raises:
         ModelError: Unknown name (the message lists the shipped ones) or a damaged file.
+        ValueError: A model for any pattern without ``pattern``.
+        PatternError: An unknown pattern name or a bad pattern file (the message names it).
     """
     system, meta = load_model(spec)
     name = meta.get("name") or Path(str(spec)).stem
+    fingerprint = f"model:{name}:{meta.get('sha256', '')}"
+    if getattr(system.network, "period", 0) is None:
+        if pattern is None:
+            raise ValueError(
+                f"model {name!r} reconstructs any pattern: name the pattern of the raw images "
+                f"(--pattern, a library name or a pattern file)"
+            )
+        resolved = patterns.get(pattern)
+        label = _pattern_label(pattern, resolved)
+        method = NetworkReconstructor(
+            system.network, resolved, f"net-{name}-{label}", tile=tile, precision=precision
+        )
+        kernels = ",".join(f"{v:.9g}" for v in resolved.kernels.reshape(-1))
+        layout = ",".join(str(v) for v in resolved.layout.reshape(-1))
+        method.fingerprint = f"{fingerprint}:{label}:{resolved.kernels.shape}:{layout}:{kernels}"
+        return method
     method = NetworkReconstructor(
         system.network, system.sensor.to_pattern(), f"net-{name}", tile=tile, precision=precision
     )
-    method.fingerprint = f"model:{name}:{meta.get('sha256', '')}"
+    method.fingerprint = fingerprint
     return method
 
 
@@ -74,16 +100,16 @@ def _is_path(spec: str | os.PathLike) -> bool:
     )
 
 
-def _lmmse_label(
+def _pattern_label(
     pattern_spec: str | os.PathLike | patterns.Pattern, pattern: patterns.Pattern
 ) -> str:
-    """``lmmse-D`` for a built-in pattern, ``lmmse-<file name>`` for a pattern file (even if the
-    file's pattern is named like a built-in, so a table never passes one off as the other)."""
+    """``D`` for a built-in pattern, the file name for a pattern file (even if the file's
+    pattern is named like a built-in, so a table never passes one off as the other)."""
     if isinstance(pattern_spec, (str, os.PathLike)) and str(pattern_spec).lower() not in (
         n.lower() for n in patterns.names()
     ):
-        return f"lmmse-{Path(pattern_spec).name}"
-    return f"lmmse-{pattern.name}"
+        return Path(pattern_spec).name
+    return pattern.name
 
 
 def build_method(
@@ -129,12 +155,12 @@ def build_method(
             except FileNotFoundError:  # not a built-in's kernels: solve its filters in closed form
                 lmmse = closed_form_lmmse(resolved)
         lmmse.pattern = resolved
-        lmmse.name = _lmmse_label(pattern, resolved)
+        lmmse.name = f"lmmse-{_pattern_label(pattern, resolved)}"
         return lmmse
     if isinstance(spec, str) and spec.strip() in model_names():
-        return build_model(spec.strip(), tile=tile, precision=precision)
+        return build_model(spec.strip(), pattern=pattern, tile=tile, precision=precision)
     if _is_path(spec) and str(spec).endswith(".json") and Path(spec).is_file():
-        return build_model(spec, tile=tile, precision=precision)
+        return build_model(spec, pattern=pattern, tile=tile, precision=precision)
     if _is_path(spec):
         path = resolve(spec)
         system = load_system(path)

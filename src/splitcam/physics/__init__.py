@@ -6,6 +6,7 @@ from .periodic import period_shuffle, period_unshuffle, phase_conv, phase_map
 from .sensor import (
     LearnableSplitterSensor,
     SplitterSensor,
+    SwitchingSensor,
     pixel_gather,
     pixel_kernels,
     splitter_adjoint,
@@ -18,6 +19,7 @@ __all__ = [
     "ImagingSystem",
     "LearnableSplitterSensor",
     "SplitterSensor",
+    "SwitchingSensor",
     "add_evaluation_noise",
     "check_sigma",
     "evaluation_noise",

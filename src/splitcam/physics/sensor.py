@@ -32,6 +32,7 @@ from .periodic import period_shuffle, period_unshuffle, phase_conv
 
 __all__ = [
     "LearnableSplitterSensor",
+    "SwitchingSensor",
     "SplitterSensor",
     "pattern_pixel_kernels",
     "pixel_gather",
@@ -372,3 +373,31 @@ class LearnableSplitterSensor(SplitterSensor):
 
     def extra_repr(self) -> str:
         return f"start={self._meta.name!r}, init={self._init!r}, period={self.period}"
+
+
+class SwitchingSensor(SplitterSensor):
+    """A fixed-pattern sensor whose pattern is replaced between training steps.
+
+    What training one network over many patterns needs (:class:`~splitcam.patterns.random.
+    PatternMix`): :meth:`set_pattern` swaps the layout and kernels, whatever their period and
+    kernel size. Neither is saved in a ``state_dict`` (the pattern of a step is recomputed from
+    the step, not restored), so checkpoints of such a run hold only the network.
+
+    Args:
+        pattern: The first pattern.
+    """
+
+    def __init__(self, pattern: Pattern | str) -> None:
+        super().__init__(pattern)
+        self.set_pattern(self._meta)
+
+    def set_pattern(self, pattern: Pattern | str) -> None:
+        """Use ``pattern`` from now on (buffers stay on the sensor's device)."""
+        pattern = get(pattern) if isinstance(pattern, str) else pattern
+        device = self.kernels.device
+        self._meta = pattern
+        self._layout = _layout_key(pattern.layout)
+        layout = torch.tensor(pattern.layout, dtype=torch.long, device=device)
+        kernels = torch.tensor(pattern.kernels, dtype=torch.float64, device=device)
+        self.register_buffer("layout", layout, persistent=False)
+        self.register_buffer("kernels", kernels, persistent=False)

@@ -32,8 +32,8 @@ class ImagingSystem(nn.Module):
 
     def __init__(self, sensor: SplitterSensor, network: nn.Module) -> None:
         super().__init__()
-        period = tuple(getattr(network, "period", sensor.period))
-        if period != sensor.period:
+        period = getattr(network, "period", sensor.period)
+        if period is not None and tuple(period) != sensor.period:  # None: any period
             raise ValueError(
                 f"expected a network for the sensor's period {sensor.period}, got {period}"
             )

@@ -22,6 +22,7 @@ needs to tile exactly) and round-trip through ``config()`` / :func:`build_networ
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from numbers import Integral
 from typing import Any
@@ -32,7 +33,7 @@ from torch import nn
 
 from ..physics.noise import Exposure
 from ..physics.periodic import as_period as _as_period
-from ..physics.periodic import period_shuffle, period_unshuffle, phase_map
+from ..physics.periodic import period_shuffle, period_unshuffle, phase_conv, phase_map
 from .base import check_raw
 from .closed_form import ImageStatistics, lmmse_estimate, shipped_image_statistics
 from .lmmse import DEFAULT_RADIUS
@@ -43,6 +44,7 @@ __all__ = [
     "PeriodicSampling",
     "PhysicsReconNet",
     "ReconNet",
+    "UniversalReconNet",
     "build_network",
 ]
 
@@ -315,6 +317,186 @@ class PhysicsReconNet(_Reconstructor):
         return {**super().config(), "radius": self.radius}
 
 
+class UniversalReconNet(nn.Module):
+    """One network for any pattern: the physics network, told each pixel's kernel (SPEC 16).
+
+    Like :class:`PhysicsReconNet` it corrects the closed-form LMMSE estimate of the pattern it is
+    given, but nothing in it depends on the period: the trunk runs on fixed 2x2 cells (half the
+    resolution per axis, as the physics network does for a 2x2 pattern) and learns what each
+    pixel measures from its inputs, all at cell resolution:
+
+    - the raw image (4 channels) and the LMMSE estimate (12), each cell packed into channels;
+    - the noise level: ``sigma / 25.5``, or for the photon model the per-pixel standard deviation
+      it implies (:func:`noise_level_map`);
+    - what the estimate leaves unexplained, ``raw - A(estimate)`` re-simulated through the
+      pattern's own Eq. 2 kernels (4 channels): the data-consistency residual an unrolled solver
+      would use, the same kind of input for every pattern;
+    - each pixel's Eq. 2 gather kernel, zero-padded to ``kernel_size`` squared, through a small
+      encoder shared by all pixels (``embed`` features per pixel, ``4 * embed`` per cell). The
+      encoder runs once per phase of the pattern and the result is tiled over the image, so it
+      costs nothing per pixel.
+
+    The first 17 trunk inputs are those of a 2x2-period :class:`PhysicsReconNet` in the same
+    order, so the trunk can start from a trained one (:meth:`load_physics_trunk`). The trunk's last
+    layer starts at zero: an untrained network outputs the LMMSE estimate of any pattern.
+
+    Called as ``net(raw, sigma, kernels)`` with pixel kernels ``(Ph, Pw, 3, kh, kw)`` of any
+    period and odd ``kh, kw <= kernel_size``. Its ``period`` is ``None``; :meth:`tiling_period`
+    gives the alignment tiling needs for one pattern.
+
+    Args:
+        features: Channels of the hidden layers.
+        blocks: Residual blocks.
+        radius: LMMSE filter radius.
+        kernel_size: Largest kernel side it accepts (kernels are zero-padded to it).
+        embed: Kernel features per pixel.
+        statistics: Image statistics of the LMMSE (default: the shipped ones).
+    """
+
+    arch = "universal"
+    uses_physics = True
+    period = None
+    #: The fixed cell the trunk packs: not a pattern's period.
+    CELL = (2, 2)
+
+    def __init__(
+        self,
+        features: int = 64,
+        blocks: int = 10,
+        radius: int = DEFAULT_RADIUS,
+        kernel_size: int = 5,
+        embed: int = 8,
+        statistics: ImageStatistics | None = None,
+    ) -> None:
+        super().__init__()
+        self.features = _as_count(features, "features", 1)
+        self.num_blocks = _as_count(blocks, "blocks", 0)
+        self.radius = _as_count(radius, "radius", 0)
+        self.kernel_size = _as_count(kernel_size, "kernel_size", 1)
+        if self.kernel_size % 2 == 0:
+            raise ValueError(f"kernel_size must be odd, got {kernel_size}")
+        self.embed = _as_count(embed, "embed", 1)
+        taps = 3 * self.kernel_size**2
+        self.encoder = nn.Sequential(nn.Linear(taps, 64), nn.ReLU(), nn.Linear(64, self.embed))
+        c = self.CELL[0] * self.CELL[1]
+        self.trunk = _Trunk(c + 3 * c + 1 + c + self.embed * c, 3 * c, self.features, blocks)
+        nn.init.zeros_(self.trunk.tail.weight)
+        nn.init.zeros_(self.trunk.tail.bias)
+        stats = statistics if statistics is not None else shipped_image_statistics()
+        self.register_buffer("stat_mean", stats.mean.clone())
+        self.register_buffer("stat_second", stats.second.clone())
+
+    def statistics(self) -> ImageStatistics:
+        return ImageStatistics(self.stat_mean.double(), self.stat_second.double(), 0)
+
+    def _check_kernels(self, kernels: torch.Tensor) -> None:
+        if kernels.ndim != 5 or kernels.shape[2] != 3:
+            raise ValueError(
+                f"expected pixel kernels of shape (Ph, Pw, 3, kh, kw), got {tuple(kernels.shape)}"
+            )
+        kh, kw = kernels.shape[-2:]
+        k = self.kernel_size
+        if kh % 2 == 0 or kw % 2 == 0 or kh > k or kw > k:
+            raise ValueError(
+                f"the universal network takes odd kernels up to {k}x{k}, got {kh}x{kw}"
+            )
+
+    def kernel_features(self, kernels: torch.Tensor) -> torch.Tensor:
+        """The encoder's features of each phase's kernel, ``(Ph, Pw, embed)``."""
+        ph, pw, _, kh, kw = kernels.shape
+        py, px = (self.kernel_size - kh) // 2, (self.kernel_size - kw) // 2
+        padded = F.pad(kernels, (px, px, py, py))
+        weight = self.encoder[0].weight
+        return self.encoder(padded.reshape(ph, pw, -1).to(weight.dtype))
+
+    def forward(
+        self,
+        raw: torch.Tensor,
+        sigma: float | torch.Tensor | None = None,
+        kernels: torch.Tensor | None = None,
+    ) -> torch.Tensor:
+        check_raw(raw)
+        if sigma is None or kernels is None:
+            raise ValueError(
+                "the universal network needs the noise level and the sensor's pixel kernels: "
+                "call net(raw, sigma, kernels)"
+            )
+        self._check_kernels(kernels)
+        ph, pw, _, kh, kw = kernels.shape
+        n, _, h, w = raw.shape
+        cell = self.CELL
+        estimate = lmmse_estimate(raw, kernels, sigma, self.statistics(), self.radius)
+        with torch.autocast(raw.device.type, enabled=False):
+            weight = kernels.to(estimate.dtype).reshape(ph * pw, 1, 3, kh, kw)
+            residual = raw.to(estimate.dtype) - phase_conv(estimate, weight, (ph, pw))
+            features = self.kernel_features(kernels)  # (Ph, Pw, E)
+        # Each pixel's features by its phase (a gather), then packed like the rest.
+        index = phase_map(h, w, (ph, pw), raw.device)
+        per_pixel = features.reshape(ph * pw, -1)[index].permute(2, 0, 1)
+        per_pixel = per_pixel.unsqueeze(0).expand(n, -1, -1, -1)
+        level = noise_level_map(raw, sigma, cell) / 25.5
+        dtype = raw.dtype
+        x = torch.cat(
+            [
+                period_unshuffle(raw, cell),
+                period_unshuffle(estimate, cell).to(dtype),
+                level.to(dtype),
+                period_unshuffle(residual, cell).to(dtype),
+                period_unshuffle(per_pixel.to(dtype), cell),
+            ],
+            1,
+        )
+        if raw.is_contiguous(memory_format=torch.channels_last):
+            x = x.contiguous(memory_format=torch.channels_last)
+        correction = period_shuffle(self.trunk(x), cell, (h, w))
+        return estimate + correction
+
+    @property
+    def receptive_radius(self) -> int:
+        """Pixels of context on each side that can influence an output pixel: the trunk's reach
+        at cell resolution (see :class:`PackedReconNet`) over the residual, which reads the
+        estimate through a kernel, which reads ``radius`` raw pixels around each pixel."""
+        return (self.trunk.reach + 1) * max(self.CELL) - 1 + self.kernel_size // 2 + self.radius
+
+    def tiling_period(self, period: tuple[int, int]) -> tuple[int, int]:
+        """The period tiles of a pattern of ``period`` must start at: a multiple of both the
+        pattern's period and the trunk's cell, so every tile sees the same phases and cells."""
+        return tuple(math.lcm(int(p), c) for p, c in zip(period, self.CELL, strict=True))
+
+    def load_physics_trunk(self, state: Mapping[str, torch.Tensor]) -> None:
+        """Start the trunk from a 2x2-period physics network's ``state_dict`` (``trunk.*``).
+
+        Every layer but the head is copied; the head's weights for the physics network's 17
+        inputs are copied and those of the extra inputs set to zero, so the trunk computes what
+        the physics network computed until training uses the new inputs.
+        """
+        own = self.trunk.state_dict()
+        source = {k[len("trunk.") :]: v for k, v in state.items() if k.startswith("trunk.")}
+        missing = sorted(set(own) - set(source))
+        if missing:
+            raise ValueError(f"not a physics network's state: missing trunk.{missing[0]}")
+        head = source["head.weight"]
+        if head.shape[1] != 17 or head.shape[0] != own["head.weight"].shape[0]:
+            raise ValueError(
+                f"expected the head of a 2x2-period physics network with {self.features} "
+                f"features (17 inputs), got {tuple(head.shape)}"
+            )
+        weight = torch.zeros_like(own["head.weight"])
+        weight[:, :17] = head
+        source["head.weight"] = weight
+        self.trunk.load_state_dict(source)
+
+    def config(self) -> dict[str, Any]:
+        return {
+            "arch": self.arch,
+            "features": self.features,
+            "blocks": self.num_blocks,
+            "radius": self.radius,
+            "kernel_size": self.kernel_size,
+            "embed": self.embed,
+        }
+
+
 def noise_level_map(
     raw: torch.Tensor, sigma: float | torch.Tensor | Exposure | list[Exposure], period
 ) -> torch.Tensor:
@@ -347,6 +529,7 @@ ARCHITECTURES: dict[str, type[nn.Module]] = {
     ReconNet.arch: ReconNet,
     PackedReconNet.arch: PackedReconNet,
     PhysicsReconNet.arch: PhysicsReconNet,
+    UniversalReconNet.arch: UniversalReconNet,
 }
 
 
@@ -370,6 +553,12 @@ def build_network(config: Mapping[str, Any]) -> nn.Module:
     if not isinstance(arch, str) or arch not in ARCHITECTURES:
         known = ", ".join(repr(a) for a in ARCHITECTURES)
         raise ValueError(f"unknown network arch {arch!r}; expected one of {known}")
+    if arch == UniversalReconNet.arch:
+        fields = {"features", "blocks", "radius", "kernel_size", "embed"}
+        unknown = sorted(set(config) - fields - {"arch", "period"})
+        if unknown:
+            raise ValueError(f"unknown network config field(s): {', '.join(map(str, unknown))}")
+        return UniversalReconNet(**{k: config[k] for k in fields if k in config})
     extra = {"radius"} if arch == PhysicsReconNet.arch else set()
     unknown = sorted(set(config) - {"arch", "period", "features", "blocks"} - extra)
     if unknown:

@@ -250,7 +250,11 @@ def reconstruct(
         - Output: ``(N, 3, H, W)``.
     """
     check_raw(raw)
-    period = _network_period(net)
+    if getattr(net, "period", 0) is None and kernels is not None:
+        # A network for any pattern (UniversalReconNet): aligned to the pattern's period.
+        period = tuple(net.tiling_period(tuple(kernels.shape[:2])))
+    else:
+        period = _network_period(net)
     radius = int(net.receptive_radius)
     device = _network_device(net, raw.device)
     memory_format = torch.channels_last if channels_last else torch.contiguous_format

@@ -43,7 +43,22 @@ def _opt(default: Any, help: str, *, flag: str | None = None) -> Any:
 
 @dataclass
 class PatternConfig:
-    name: str = _opt("D", "pattern name (A-E, bayer) or pattern file", flag="pattern")
+    name: str = _opt(
+        "D",
+        "pattern name (A-E, bayer) or pattern file; random: a new pattern every step, drawn by "
+        "splitcam.patterns.random and mixed with --mix (for --arch universal)",
+        flag="pattern",
+    )
+    mix: list[str] = _opt(
+        ["A", "B", "C", "D", "E", "bayer"],
+        "with --pattern random: the named patterns (or files) mixed with the random draws",
+    )
+    mix_fraction: float = _opt(
+        0.3, "with --pattern random: the fraction of steps that use one of --mix"
+    )
+    val_patterns: list[str] = _opt(
+        ["D", "E"], "with --pattern random: the patterns validation scores (mean over them)"
+    )
     learn: bool = _opt(
         False,
         "optimise the splitter kernels jointly with the network (paper Eq. 5-6)",
@@ -70,7 +85,8 @@ class NetworkConfig:
     arch: str = _opt(
         "physics",
         "physics (corrects the closed-form LMMSE estimate for the sensor's kernels and noise "
-        "level; the default because it wins at equal CPU time, see docs/results), packed "
+        "level; the default because it wins at equal CPU time, see docs/results), universal "
+        "(the same for any pattern, told each pixel's kernel; SPEC section 16), packed "
         "(blind, at 1/(Ph*Pw) of the positions) or paper (full resolution, SPEC section 5)",
     )
     features: int = _opt(64, "channels of the hidden layers")
@@ -259,8 +275,20 @@ class TrainConfig:
                 f"pattern.init must be support, exact or random, got {self.pattern.init!r}",
             ),
             (
-                self.network.arch in ("paper", "packed", "physics"),
-                f"network.arch must be physics, packed or paper, got {self.network.arch!r}",
+                self.network.arch in ("paper", "packed", "physics", "universal"),
+                f"network.arch must be physics, universal, packed or paper, got "
+                f"{self.network.arch!r}",
+            ),
+            (
+                self.pattern.name.lower() != "random"
+                or (self.network.arch == "universal" and not self.pattern.learn),
+                "--pattern random (a new pattern every step) needs --arch universal and no "
+                "--learn-pattern",
+            ),
+            (
+                0 <= self.pattern.mix_fraction <= 1
+                and (self.pattern.mix_fraction == 0 or bool(self.pattern.mix)),
+                "pattern.mix_fraction must be in [0, 1], and > 0 only with patterns in pattern.mix",
             ),
             (
                 self.optim.schedule in ("constant", "cosine"),

@@ -22,12 +22,13 @@ from .. import patterns
 from ..data.patches import ImageCache, PatchSampler, list_images
 from ..data.testsets import centre_crop
 from ..evaluation.protocol import mean_psnr
+from ..patterns.random import PatternMix
 from ..physics.noise import Exposure, GaussianNoise, PhotonNoise
-from ..physics.sensor import LearnableSplitterSensor, SplitterSensor
+from ..physics.sensor import LearnableSplitterSensor, SplitterSensor, SwitchingSensor
 from ..physics.system import ImagingSystem
 from ..recon.base import NetworkReconstructor, fast_precision
 from ..recon.design import design_pattern
-from ..recon.networks import build_network
+from ..recon.networks import UniversalReconNet, build_network
 from . import checkpoint as ckpt_io
 from .config import ConfigError, TrainConfig, read_config_file
 from .guard import DivergenceGuard
@@ -88,12 +89,13 @@ def build_system(
     :func:`~splitcam.recon.design.design_pattern` finds from its initialisation (unless
     ``design`` is false: a resumed run loads its own kernels).
     """
-    pattern = pattern or patterns.get(config.pattern.name)
-    if config.pattern.learn:
+    mix = pattern_mix(config)
+    pattern = pattern or (mix.pattern(0) if mix else patterns.get(config.pattern.name))
+    if mix is not None:
+        sensor: SplitterSensor = SwitchingSensor(pattern)
+    elif config.pattern.learn:
         gen = torch.Generator().manual_seed(config.run.seed + 17)
-        sensor: SplitterSensor = LearnableSplitterSensor(
-            pattern, init=config.pattern.init, generator=gen
-        )
+        sensor = LearnableSplitterSensor(pattern, init=config.pattern.init, generator=gen)
         if design and config.pattern.design_steps:
             designed = design_pattern(
                 pattern,
@@ -116,6 +118,14 @@ def build_system(
         }
     )
     return ImagingSystem(sensor, net)
+
+
+def pattern_mix(config: TrainConfig) -> PatternMix | None:
+    """The patterns of a ``--pattern random`` run (one per step), or None for one pattern."""
+    if config.pattern.name.strip().lower() != "random":
+        return None
+    named = [patterns.get(name) for name in config.pattern.mix]
+    return PatternMix(named, config.pattern.mix_fraction, seed=config.run.seed + 31)
 
 
 def _metasurface_sensor(spec: str, period: tuple[int, int], seed: int) -> SplitterSensor:
@@ -192,6 +202,9 @@ def _start_from(system: ImagingSystem, spec: str) -> dict[str, Any]:
         except ModelError as exc:
             raise ConfigError(f"--init-from: {exc}; or a run folder") from None
         record = {"name": meta.get("name", str(spec)), "provenance": meta.get("provenance")}
+    own_device = next(system.network.parameters()).device
+    if isinstance(system.network, UniversalReconNet):
+        return _start_universal(system.network, source.network, spec, record, own_device)
     if source.network.config() != system.network.config():
         raise ConfigError(
             f"--init-from {spec}: its network {source.network.config()} differs from this "
@@ -210,8 +223,34 @@ def _start_from(system: ImagingSystem, spec: str) -> dict[str, Any]:
             f"--init-from {spec}: it was trained for another pattern "
             f"({source.sensor.to_pattern().name}); use its pattern or --learn-pattern"
         )
-    own_device = next(system.network.parameters()).device
     system.network.load_state_dict(source.network.to(own_device).state_dict())
+    return record
+
+
+def _start_universal(
+    own: UniversalReconNet, source: torch.nn.Module, spec: str, record: dict, device: Any
+) -> dict[str, Any]:
+    """``run.init_from`` for a universal network: another universal network of the same shape
+    (for any pattern: fine-tuning), or a 2x2-period physics network whose trunk it starts from
+    (:meth:`~splitcam.recon.networks.UniversalReconNet.load_physics_trunk`)."""
+    state = source.to(device).state_dict()
+    if isinstance(source, UniversalReconNet):
+        if source.config() != own.config():
+            raise ConfigError(
+                f"--init-from {spec}: its network {source.config()} differs from this run's "
+                f"{own.config()}"
+            )
+        own.load_state_dict(state)
+    elif getattr(source, "arch", "") == "physics" and tuple(source.period) == (2, 2):
+        try:
+            own.load_physics_trunk(state)
+        except ValueError as exc:
+            raise ConfigError(f"--init-from {spec}: {exc}") from None
+    else:
+        raise ConfigError(
+            f"--init-from {spec}: a universal network starts from a universal network or from a "
+            f"2x2-period physics network, not from {source.config()}"
+        )
     return record
 
 
@@ -280,21 +319,33 @@ def validate(
     system: ImagingSystem,
     images: list[tuple[str, torch.Tensor]],
     sigmas: list[float] | list[Exposure],
+    val_patterns: list[patterns.Pattern] | None = None,
 ) -> dict[str, float]:
     """Mean PSNR per noise level (a sigma, or a photon-model exposure: ``val_psnr_N<photons>``)
     on the validation images, by the evaluation protocol itself
     (:func:`splitcam.evaluation.protocol.mean_psnr`): the pattern as a run's checkpoint records
     it, the same simulation, noise, reconstruction, rounding and averaging as ``splitcam
-    evaluate``, so the logged value is what ``evaluate`` reports for this step."""
+    evaluate``, so the logged value is what ``evaluate`` reports for this step.
+
+    With ``val_patterns`` (a run over many patterns) each of them is scored
+    (``val_psnr_<pattern>_<level>``) and the plain keys hold the means over the patterns."""
     was_training = system.training
     system.eval()
-    method = NetworkReconstructor(system.network, system.sensor.to_pattern(), "validation")
-    means = mean_psnr(method, images, sigmas)
+    targets = val_patterns or [system.sensor.to_pattern()]
+    per_pattern = {}
+    for pattern in targets:
+        method = NetworkReconstructor(system.network, pattern, "validation")
+        per_pattern[pattern.name] = mean_psnr(method, images, sigmas)
     system.train(was_training)
-    out = {
-        f"val_psnr_N{s.photons:g}" if isinstance(s, Exposure) else f"val_psnr_{s:g}": value
-        for s, value in means.items()
-    }
+
+    def key(s: float | Exposure) -> str:
+        return f"N{s.photons:g}" if isinstance(s, Exposure) else f"{s:g}"
+
+    means = {s: sum(m[s] for m in per_pattern.values()) / len(per_pattern) for s in sigmas}
+    out = {f"val_psnr_{key(s)}": value for s, value in means.items()}
+    if val_patterns:
+        for name, scores in per_pattern.items():
+            out.update({f"val_psnr_{name}_{key(s)}": v for s, v in scores.items()})
     out["val_psnr"] = sum(means.values()) / len(means)
     return out
 
@@ -488,6 +539,8 @@ def _train(
 
     pattern = patterns.Pattern.from_dict(loaded.meta["start_pattern"]) if loaded else None
     system = build_system(config, pattern, design=loaded is None).to(device)
+    mix = pattern_mix(config)
+    val_patterns = [patterns.get(p) for p in config.pattern.val_patterns] if mix else None
     start_pattern = system.sensor._meta.to_dict()
     fast = config.run.bf16 or fast_precision(config.run.precision, device)
     if config.run.channels_last or fast:
@@ -527,7 +580,8 @@ def _train(
         rank=dist_info.rank,
         world_size=dist_info.world_size,
         partial=config.data.partial_periods,
-        period=system.sensor.period,
+        # A new pattern every step: cut into periods of up to 4 (the largest drawn) instead.
+        period=(4, 4) if mix is not None else system.sensor.period,
     )
     noise_seed = (config.run.seed + start_step) * 7919 + 1 + 104729 * dist_info.rank
     if config.noise.model == "photon":
@@ -660,7 +714,7 @@ def _train(
     timed_out = time_limit_s is not None and train_seconds >= time_limit_s
     with _StopFlag() as stop:
         if step == 0 and val_images and dist_info.is_main:
-            start = validate(system, val_images, val_levels)
+            start = validate(system, val_images, val_levels, val_patterns)
             with open(metrics_path, "a", encoding="utf-8") as fh:
                 fh.write(json.dumps({"step": 0, **start, "time": time.time()}) + "\n")
         while step < config.optim.steps and not timed_out:
@@ -676,6 +730,8 @@ def _train(
                 )
             batch = sampler.sample(config.data.batch_size).to(device, non_blocking=True)
             last_batch = batch
+            if mix is not None:
+                system.sensor.set_pattern(mix.pattern(step))
             data_time += time.perf_counter() - t0
             with autocast:
                 pred = model(batch, noise)
@@ -736,7 +792,7 @@ def _train(
                 }
             if val_now and dist_info.is_main:
                 t_val = time.perf_counter()
-                last.update(validate(system, val_images, val_levels))
+                last.update(validate(system, val_images, val_levels, val_patterns))
                 last["step"] = step
                 t_window += time.perf_counter() - t_val  # keep steps/s about training only
             if (log_now or val_now) and dist_info.is_main:
