@@ -103,6 +103,8 @@ def cmd_train(args: argparse.Namespace) -> int:
         value = getattr(args, flag.name, None)
         if value is not None:
             overrides[flag.key] = value
+    if not args.resume and config.run.init_from and "network.arch" not in overrides:
+        overrides.update(_fine_tuning(config.run.init_from, overrides))
     config = config.override(overrides)
     # Under torchrun, train() also ends the process group, the same way on every rank.
     result = train(config, resume=args.resume, progress=not args.quiet)
@@ -116,6 +118,30 @@ def cmd_train(args: argparse.Namespace) -> int:
     state = "interrupted at" if result.interrupted else "finished at"
     print(f"{state} step {result.step}: {summary}; run folder {result.run_dir}")
     return STOPPED if result.interrupted else 0
+
+
+#: Default budget (minutes) of fine-tuning a network for any pattern to one pattern.
+FINE_TUNE_MINUTES = 10.0
+
+
+def _fine_tuning(init_from: str, overrides: dict) -> dict:
+    """Settings implied by ``--init-from`` a network for any pattern (``universal``) when
+    ``--arch`` is left out: its architecture, and unless ``--steps`` or ``--time-limit`` is
+    given, a budget of :data:`FINE_TUNE_MINUTES`."""
+    from .training.trainer import source_network
+
+    network = source_network(init_from)
+    if not network or network.get("arch") != "universal":
+        return {}
+    implied = {
+        "network.arch": "universal",
+        "network.features": network.get("features", 64),
+        "network.blocks": network.get("blocks", 10),
+    }
+    if "optim.steps" not in overrides and "run.time_limit" not in overrides:
+        implied["run.time_limit"] = FINE_TUNE_MINUTES
+        print(f"fine-tuning {init_from} for {FINE_TUNE_MINUTES:g} minutes (--time-limit)")
+    return implied
 
 
 def cmd_design(args: argparse.Namespace) -> int:

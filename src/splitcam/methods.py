@@ -65,26 +65,36 @@ def build_model(
     """
     system, meta = load_model(spec)
     name = meta.get("name") or Path(str(spec)).stem
-    fingerprint = f"model:{name}:{meta.get('sha256', '')}"
-    if getattr(system.network, "period", 0) is None:
-        if pattern is None:
-            raise ValueError(
-                f"model {name!r} reconstructs any pattern: name the pattern of the raw images "
-                f"(--pattern, a library name or a pattern file)"
-            )
-        resolved = patterns.get(pattern)
-        label = _pattern_label(pattern, resolved)
+    method = _network_method(system, f"net-{name}", pattern, tile, precision)
+    method.fingerprint = f"model:{name}:{meta.get('sha256', '')}{method.fingerprint}"
+    return method
+
+
+def _network_method(
+    system, label: str, pattern, tile: int | None, precision: str
+) -> NetworkReconstructor:
+    """A trained system as a method: with its own pattern, or for a network of any pattern
+    (``period`` None) with ``pattern``, labelled ``<label>-<pattern>``; ``fingerprint`` holds
+    what, beyond the weights, identifies its results (the pattern's values)."""
+    if getattr(system.network, "period", 0) is not None:
         method = NetworkReconstructor(
-            system.network, resolved, f"net-{name}-{label}", tile=tile, precision=precision
+            system.network, system.sensor.to_pattern(), label, tile=tile, precision=precision
         )
-        kernels = ",".join(f"{v:.9g}" for v in resolved.kernels.reshape(-1))
-        layout = ",".join(str(v) for v in resolved.layout.reshape(-1))
-        method.fingerprint = f"{fingerprint}:{label}:{resolved.kernels.shape}:{layout}:{kernels}"
+        method.fingerprint = ""
         return method
+    if pattern is None:
+        raise ValueError(
+            f"{label} reconstructs any pattern: name the pattern of the raw images "
+            f"(--pattern, a library name or a pattern file)"
+        )
+    resolved = patterns.get(pattern)
+    name = _pattern_label(pattern, resolved)
     method = NetworkReconstructor(
-        system.network, system.sensor.to_pattern(), f"net-{name}", tile=tile, precision=precision
+        system.network, resolved, f"{label}-{name}", tile=tile, precision=precision
     )
-    method.fingerprint = fingerprint
+    values = ",".join(f"{v:.9g}" for v in resolved.kernels.reshape(-1))
+    layout = ",".join(str(v) for v in resolved.layout.reshape(-1))
+    method.fingerprint = f":{name}:{resolved.kernels.shape}:{layout}:{values}"
     return method
 
 
@@ -126,7 +136,8 @@ def build_method(
     Args:
         spec: ``lmmse``, ``bilinear``, ``malvar2004``, ``menon2007``, a shipped model's name or
             model file, or the path of a run folder or checkpoint.
-        pattern: The pattern (name, file or :class:`~splitcam.patterns.Pattern`) for ``lmmse``.
+        pattern: The pattern (name, file or :class:`~splitcam.patterns.Pattern`) for ``lmmse``
+            and for a network of any pattern (``universal``).
         lmmse_train: Fit the LMMSE on this folder of training images instead of using the
             shipped fit (needed for patterns other than the built-in ones).
         tile: Tile size of network reconstruction.
@@ -165,11 +176,11 @@ def build_method(
         path = resolve(spec)
         system = load_system(path)
         label = path.parent.name if path.name == CHECKPOINT_NAME else path.stem
-        method = NetworkReconstructor(
-            system.network, system.sensor.to_pattern(), label, tile=tile, precision=precision
-        )
+        method = _network_method(system, label, pattern, tile, precision)
         stat = path.stat()
-        method.fingerprint = f"{path.resolve()}:{stat.st_size}:{stat.st_mtime_ns}"
+        method.fingerprint = (
+            f"{path.resolve()}:{stat.st_size}:{stat.st_mtime_ns}{method.fingerprint}"
+        )
         return method
     raise ValueError(
         f"unknown method {str(spec)!r}; valid: {', '.join(method_names())}, a shipped model "

@@ -142,6 +142,12 @@ class OptimConfig:
     )
     warmup_steps: int = _opt(100, "linear learning-rate warm-up steps (0: none)")
     betas: list[float] = _opt([0.9, 0.999], "Adam betas")
+    loss: str = _opt(
+        "mse",
+        "mse (the paper's) or log_mse: the logarithm of each batch's MSE, which weighs every "
+        "batch by its own error (a PSNR loss): over many patterns, hard ones do not drown the "
+        "rest",
+    )
     clip_grad: float | None = _opt(
         None, "clip the global gradient norm to this (none: no clipping)"
     )
@@ -295,6 +301,10 @@ class TrainConfig:
                 f"optim.schedule must be constant or cosine, got {self.optim.schedule!r}",
             ),
             (self.optim.warmup_steps >= 0, "optim.warmup_steps must be >= 0"),
+            (
+                self.optim.loss in ("mse", "log_mse"),
+                f"optim.loss must be mse or log_mse, got {self.optim.loss!r}",
+            ),
             (
                 self.run.precision in ("auto", "fp32", "bf16"),
                 f"run.precision must be auto, fp32 or bf16, got {self.run.precision!r}",

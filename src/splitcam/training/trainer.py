@@ -254,6 +254,23 @@ def _start_universal(
     return record
 
 
+def source_network(spec: str) -> dict[str, Any] | None:
+    """The network config of what ``run.init_from`` names (a shipped model, a model file, a run
+    folder or a checkpoint), read from its JSON header; None where there is none to read."""
+    from .models import ModelError, resolve_model
+
+    path = Path(spec)
+    if path.is_dir() or path.name == ckpt_io.CHECKPOINT_NAME:
+        try:
+            return ckpt_io.read_meta(ckpt_io.resolve(path)).get("network")
+        except (OSError, ValueError):
+            return None
+    try:
+        return json.loads(resolve_model(spec).read_text(encoding="utf-8")).get("network")
+    except (ModelError, OSError, ValueError):
+        return None
+
+
 def _continue_point(init_from: dict[str, Any], config: TrainConfig) -> tuple[int, float]:
     """Where a ``run.continue_schedule`` run begins: the source's total steps and the divergence
     guard's learning-rate scale at its end (from its provenance)."""
@@ -736,8 +753,9 @@ def _train(
             with autocast:
                 pred = model(batch, noise)
             loss = F.mse_loss(pred.float(), batch)
+            objective = loss.clamp_min(1e-12).log() if config.optim.loss == "log_mse" else loss
             optimizer.zero_grad(set_to_none=True)
-            loss.backward()
+            objective.backward()
             value = loss.item()
             grad_norm = float(
                 torch.nn.utils.clip_grad_norm_(
