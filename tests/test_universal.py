@@ -226,3 +226,157 @@ def test_random_pattern_needs_the_universal_network(tmp_path) -> None:
     config = tiny_config(tmp_path, tmp_path / "run", **{"pattern.name": "random"})
     with pytest.raises(ConfigError, match="--arch universal"):
         config.validate()
+
+
+# --- using it: models, the CLI, fine-tuning, design ---------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def tiny_universal(tmp_path_factory):
+    """A tiny universal network trained a few steps over random patterns, exported as a model;
+    its training images."""
+    from splitcam.training import train
+    from splitcam.training.models import export_model
+
+    root = tmp_path_factory.mktemp("universal")
+    data = blocky_images(root / "img", 6)
+    settings = {"pattern.name": "random", "network.arch": "universal", "optim.steps": 3}
+    train(tiny_config(data, root / "run", **settings), progress=False)
+    model = export_model(root / "run", root / "models" / "uni", name="uni")
+    return model, data
+
+
+def test_model_for_any_pattern_needs_a_pattern_and_names_a_bad_file(tiny_universal, tmp_path):
+    from splitcam.methods import build_method, build_model
+
+    model, _ = tiny_universal
+    with pytest.raises(ValueError, match="reconstructs any pattern"):
+        build_model(model)
+    missing = tmp_path / "mine.toml"
+    with pytest.raises(patterns.PatternError, match="mine.toml"):
+        build_model(model, pattern=str(missing))
+    # A pattern file: the label names the file, the reconstruction is that pattern's.
+    mine = random_pattern(np.random.default_rng(3))
+    patterns.save(mine, tmp_path / "mine.toml")
+    method = build_method(str(model), pattern=str(tmp_path / "mine.toml"), precision="fp32")
+    assert method.name == "net-uni-mine.toml" and method.pattern.equals(mine)
+    raw = SplitterSensor(mine)(_scene(1, 21, 19))
+    assert method.reconstruct(raw, 5.0).shape == (1, 3, 21, 19)
+    other = build_method(str(model), pattern="D", precision="fp32")
+    assert other.fingerprint != method.fingerprint
+
+
+def test_cli_reconstruct_and_evaluate_with_a_universal_model(tiny_universal, tmp_path, capsys):
+    from PIL import Image
+
+    from splitcam.cli import main
+
+    model, data = tiny_universal
+    photo = next(data.iterdir())
+    out = tmp_path / "rec.png"
+    args = ["reconstruct", "--model", str(model), "--image", str(photo), "--out", str(out)]
+    assert main([*args, "--pattern", "E", "--sigma", "5", "--quiet"]) == 0
+    with Image.open(out) as im:
+        assert im.size == (48, 48)
+    assert main([*args, "--pattern", str(tmp_path / "nope.toml")]) == 1
+    assert "nope.toml" in capsys.readouterr().err
+    mine = tmp_path / "mine.toml"
+    patterns.save(random_pattern(np.random.default_rng(4)), mine)
+    ev = ["evaluate", "--model", str(model), "--patterns", f"D,{mine}", "--datasets", str(data)]
+    assert main([*ev, "--sigmas", "0", "--out", str(tmp_path / "ev"), "--quiet"]) == 0
+    table = capsys.readouterr().out
+    assert "net-uni-D" in table and "net-uni-mine.toml" in table
+
+
+def test_main_job_uses_the_universal_network_for_patterns_without_one(
+    tiny_universal, tmp_path, capsys, monkeypatch
+):
+    """`splitcam evaluate --patterns FILE`: a pattern no shipped network serves gets the
+    shipped universal network, and the output says so."""
+    import shutil
+
+    from splitcam.cli import main
+    from splitcam.training import models
+
+    model, data = tiny_universal
+    shipped = tmp_path / "shipped"
+    shipped.mkdir()
+    for suffix in (".json", ".safetensors"):
+        shutil.copy(model.with_suffix(suffix), shipped / f"universal{suffix}")
+    monkeypatch.setattr(models, "MODELS_DIR", shipped)
+    mine = tmp_path / "mine.toml"
+    patterns.save(random_pattern(np.random.default_rng(5)), mine)
+    ev = ["evaluate", "--patterns", str(mine), "--datasets", str(data), "--sigmas", "0"]
+    assert main([*ev, "--out", str(tmp_path / "ev"), "--quiet"]) == 0
+    out = capsys.readouterr().out
+    assert f"pattern {mine} has no shipped network: reconstructed by the universal network" in out
+    assert "net-uni-mine.toml" in out and "lmmse-mine.toml" in out  # labelled by its own name
+
+
+def test_fine_tuning_from_a_universal_model(tiny_universal, tmp_path, capsys):
+    """`train --pattern FILE --init-from MODEL`: the architecture follows the model, the weights
+    start from it, and the run is a model like any other."""
+    from splitcam.cli import main
+    from splitcam.methods import build_method
+    from splitcam.training.models import load_model
+
+    model, data = tiny_universal
+    mine = tmp_path / "mine.toml"
+    patterns.save(random_pattern(np.random.default_rng(6)), mine)
+    run = tmp_path / "ft"
+    args = ["train", "--pattern", str(mine), "--init-from", str(model), "--data", str(data)]
+    tiny = ["--val-split", "2", "--val-images", "1", "--patch-size", "16", "--batch-size", "2"]
+    assert main([*args, *tiny, "--steps", "2", "--out", str(run), "--quiet"]) == 0
+    config = json.loads((run / "config.json").read_text())
+    assert config["network"]["arch"] == "universal" and config["network"]["features"] == 8
+    assert config["run"]["time_limit"] is None  # --steps given: no default budget
+    method = build_method(str(run), precision="fp32")  # a run of one pattern: its own
+    assert method.pattern.equals(patterns.load(mine))
+    source, _ = load_model(model)
+    from splitcam.training.checkpoint import load_system
+
+    tuned = load_system(run)
+    changed = [
+        k
+        for k, v in tuned.network.state_dict().items()
+        if not torch.equal(v, source.network.state_dict()[k])
+    ]
+    assert changed  # trained on from the model's weights
+    # No --steps: the default fine-tuning budget, announced.
+    run2 = tmp_path / "ft2"
+    assert main([*args, *tiny, "--out", str(run2), "--quiet", "--time-limit", "0.002"]) == 0
+    assert main([*args, *tiny, "--out", str(tmp_path / "ft3"), "--quiet", "--steps", "1"]) == 0
+    capsys.readouterr()
+
+
+def test_design_against_a_frozen_network(tiny_universal):
+    """`design --objective network`: the pattern moves to raise the network's PSNR; gradients
+    reach the logits through the frozen network."""
+    from splitcam.data.patches import ImageCache, PatchSampler, list_images
+    from splitcam.recon.design import design_pattern, network_psnr
+    from splitcam.training.models import load_model
+
+    model, data = tiny_universal
+    system, _ = load_model(model)
+    files = list_images(data)
+    sampler = PatchSampler(ImageCache(files, min_size=16, progress=False), patch_size=16)
+    before = [p.detach().clone() for p in system.network.parameters()]
+    result = design_pattern(
+        "D",
+        objective="network",
+        network=system.network,
+        patches=sampler,
+        sigmas=[0, 10],
+        steps=15,
+        lr=0.1,
+    )
+    assert not result.pattern.equals(result.start)  # the kernels moved
+    assert all(torch.equal(a, b) for a, b in zip(before, system.network.parameters()))
+    # On a fixed batch, at the objective's noise levels, the network does better on the design.
+    held = PatchSampler(ImageCache(files, min_size=16, progress=False), patch_size=16, seed=9)
+    held = held.sample(32)
+    before_db = network_psnr(result.start, system.network, held, [0, 10])
+    after_db = network_psnr(result.pattern, system.network, held, [0, 10])
+    assert sum(after_db.values()) > sum(before_db.values())
+    with pytest.raises(ValueError, match="needs a network"):
+        design_pattern("D", objective="network", steps=1)

@@ -103,8 +103,9 @@ def cmd_train(args: argparse.Namespace) -> int:
         value = getattr(args, flag.name, None)
         if value is not None:
             overrides[flag.key] = value
-    if not args.resume and config.run.init_from and "network.arch" not in overrides:
-        overrides.update(_fine_tuning(config.run.init_from, overrides))
+    init_from = overrides.get("run.init_from", config.run.init_from)
+    if not args.resume and init_from and "network.arch" not in overrides:
+        overrides.update(_fine_tuning(init_from, overrides))
     config = config.override(overrides)
     # Under torchrun, train() also ends the process group, the same way on every rank.
     result = train(config, resume=args.resume, progress=not args.quiet)
@@ -118,6 +119,37 @@ def cmd_train(args: argparse.Namespace) -> int:
     state = "interrupted at" if result.interrupted else "finished at"
     print(f"{state} step {result.step}: {summary}; run folder {result.run_dir}")
     return STOPPED if result.interrupted else 0
+
+
+def _design_network(args: argparse.Namespace) -> dict:
+    """What ``design --objective network`` needs: the frozen network of ``--model``, a sampler
+    of training patches from ``--data`` (all but the held-out last images, as training holds
+    out), and a fixed batch of patches of the held-out ones to score before and after."""
+    from .data.patches import ImageCache, PatchSampler, list_images
+    from .training.models import load_model
+
+    if not args.data:
+        raise ValueError("--objective network needs training images: --data DIR")
+    system, _ = load_model(args.model)
+    if getattr(system.network, "period", 0) is not None:
+        raise ValueError(f"--model {args.model} serves one pattern; give a network for any pattern")
+    files = list_images(args.data)
+    hold = min(32, max(1, len(files) // 10)) if len(files) >= 2 else 0
+    if hold >= len(files):
+        raise ValueError(f"--data {args.data}: too few images ({len(files)})")
+    size = 64
+    train_cache = ImageCache(files[: len(files) - hold], min_size=size, progress=False)
+    train = PatchSampler(train_cache, patch_size=size, seed=args.seed)
+    held = files[len(files) - hold :] or files
+    held_out = PatchSampler(
+        ImageCache(held, min_size=size, progress=False), patch_size=size, seed=12345
+    )
+    return {
+        "network": system.network,
+        "patches": train,
+        "batch_size": args.batch_size,
+        "held_out": held_out.sample(32),
+    }
 
 
 #: Default budget (minutes) of fine-tuning a network for any pattern to one pattern.
@@ -156,6 +188,7 @@ def cmd_design(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if out.suffix.lower() not in (".toml", ".json"):
         raise ValueError(f"--out must end in .toml or .json, got {out.name!r}")
+    in_loop = _design_network(args) if args.objective == "network" else {}
     result = design_pattern(
         args.pattern,
         init=args.init,
@@ -166,6 +199,7 @@ def cmd_design(args: argparse.Namespace) -> int:
         objective=args.objective,
         name=args.name,
         progress=not args.quiet,
+        **{k: v for k, v in in_loop.items() if k != "held_out"},
     )
     out.parent.mkdir(parents=True, exist_ok=True)
     patterns.save(result.pattern, out)
@@ -205,6 +239,26 @@ def cmd_design(args: argparse.Namespace) -> int:
         f"{args.steps} steps in {result.seconds:.1f} s:"
     )
     print(_table(rows))
+    if in_loop:
+        from .recon.design import network_psnr
+
+        held_out, net = in_loop["held_out"], in_loop["network"]
+        before = network_psnr(result.start, net, held_out, result.sigmas)
+        after = network_psnr(result.pattern, net, held_out, result.sigmas)
+        print(f"{args.model} network PSNR (dB) on {len(held_out)} held-out patches:")
+        print(
+            _table(
+                [
+                    {
+                        "sigma": f"{s:g}",
+                        result.start.name: f"{before[s]:.2f}",
+                        result.pattern.name: f"{after[s]:.2f}",
+                        "gain": f"{after[s] - before[s]:+.2f}",
+                    }
+                    for s in result.sigmas
+                ]
+            )
+        )
     print(f"wrote {out} and {figure}")
     return 0
 
@@ -740,7 +794,18 @@ def _add_design_parser(sub) -> None:
         "--objective",
         choices=OBJECTIVES,
         default="mse",
-        help="mse: the mean closed-form MSE over the sigmas (default); psnr: the mean PSNR",
+        help="mse: the mean closed-form MSE over the sigmas (default); psnr: the mean PSNR; "
+        "network: the PSNR of a frozen network for any pattern (--model) on training patches "
+        "(--data), one sigma per step in turn",
+    )
+    p.add_argument(
+        "--model",
+        default="universal",
+        help="with --objective network: the network (default universal)",
+    )
+    p.add_argument("--data", help="with --objective network: folder of training images")
+    p.add_argument(
+        "--batch-size", type=int, default=8, help="with --objective network: patches per step"
     )
     p.add_argument("--seed", type=int, default=0, help="seed of --init random (default 0)")
     p.add_argument("--name", help="name of the designed pattern (default: START-designed)")

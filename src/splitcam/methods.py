@@ -30,7 +30,7 @@ from .recon.base import NetworkReconstructor, Reconstructor
 from .recon.closed_form import closed_form_lmmse
 from .recon.demosaic import ClassicalDemosaic
 from .recon.lmmse import LMMSE, shipped_lmmse
-from .training.checkpoint import CHECKPOINT_NAME, load_system, resolve
+from .training.checkpoint import CHECKPOINT_NAME, load_system, read_meta, resolve
 from .training.models import load_model, model_names
 
 __all__ = ["DEMOSAICKING", "build_method", "build_methods", "build_model", "method_names"]
@@ -65,18 +65,27 @@ def build_model(
     """
     system, meta = load_model(spec)
     name = meta.get("name") or Path(str(spec)).stem
-    method = _network_method(system, f"net-{name}", pattern, tile, precision)
+    own = _trained_on_one_pattern(meta.get("config"))
+    method = _network_method(system, f"net-{name}", pattern, tile, precision, own)
     method.fingerprint = f"model:{name}:{meta.get('sha256', '')}{method.fingerprint}"
     return method
 
 
+def _trained_on_one_pattern(config: dict | None) -> bool:
+    """Whether a run's (or model's) saved config trained on one pattern, not ``random``."""
+    name = ((config or {}).get("pattern") or {}).get("name", "")
+    return str(name).strip().lower() != "random"
+
+
 def _network_method(
-    system, label: str, pattern, tile: int | None, precision: str
+    system, label: str, pattern, tile: int | None, precision: str, own_pattern: bool
 ) -> NetworkReconstructor:
     """A trained system as a method: with its own pattern, or for a network of any pattern
     (``period`` None) with ``pattern``, labelled ``<label>-<pattern>``; ``fingerprint`` holds
-    what, beyond the weights, identifies its results (the pattern's values)."""
-    if getattr(system.network, "period", 0) is not None:
+    what, beyond the weights, identifies its results (the pattern's values). A network of any
+    pattern fine-tuned on one (``own_pattern``) reconstructs that one unless told another."""
+    fixed = getattr(system.network, "period", 0) is not None
+    if fixed or (own_pattern and pattern is None):
         method = NetworkReconstructor(
             system.network, system.sensor.to_pattern(), label, tile=tile, precision=precision
         )
@@ -176,7 +185,8 @@ def build_method(
         path = resolve(spec)
         system = load_system(path)
         label = path.parent.name if path.name == CHECKPOINT_NAME else path.stem
-        method = _network_method(system, label, pattern, tile, precision)
+        own = _trained_on_one_pattern(read_meta(path).get("config"))
+        method = _network_method(system, label, pattern, tile, precision, own)
         stat = path.stat()
         method.fingerprint = (
             f"{path.resolve()}:{stat.st_size}:{stat.st_mtime_ns}{method.fingerprint}"

@@ -37,6 +37,7 @@ __all__ = [
     "DesignResult",
     "closed_form_psnr",
     "design_pattern",
+    "network_psnr",
 ]
 
 #: Noise levels (8-bit units) the design averages over by default: the paper's test levels.
@@ -46,8 +47,10 @@ DEFAULT_STEPS = 300
 DEFAULT_LR = 0.1
 #: ``mse``: minimise the closed-form MSE averaged over the sigmas (the high-noise levels weigh
 #: most, their errors are largest); ``psnr``: maximise the closed-form PSNR averaged over the
-#: sigmas (every level weighs the same in dB).
-OBJECTIVES = ("mse", "psnr")
+#: sigmas (every level weighs the same in dB); ``network``: maximise the PSNR of a frozen network
+#: for any pattern (:class:`~splitcam.recon.networks.UniversalReconNet`) on training patches,
+#: one sigma of the list per step in turn.
+OBJECTIVES = ("mse", "psnr", "network")
 
 
 def _objective_db(mse: torch.Tensor, objective: str) -> torch.Tensor:
@@ -63,6 +66,22 @@ def _objective_db(mse: torch.Tensor, objective: str) -> torch.Tensor:
 
 def _psnr(mse: torch.Tensor) -> torch.Tensor:
     return -10.0 * torch.log10(mse)
+
+
+def _network_db(
+    sensor: torch.nn.Module,
+    network: torch.nn.Module,
+    rgb: torch.Tensor,
+    sigma: float,
+    generator: torch.Generator,
+) -> torch.Tensor:
+    """PSNR (dB) of ``network`` on ``rgb`` seen through the sensor at noise ``sigma``: the
+    ``network`` objective of one step, differentiable in the sensor's kernels."""
+    rgb = rgb.to(torch.float32)
+    raw = sensor(rgb.double()).float()
+    raw = raw + (sigma / 255.0) * torch.randn(raw.shape, generator=generator)
+    out = network(raw, sigma, sensor.pixel_kernels())
+    return _psnr((out.float() - rgb).square().mean())
 
 
 @dataclass
@@ -117,6 +136,27 @@ def closed_form_psnr(
     return _psnr(closed_form_mse(kernels, sig, statistics=statistics, radius=radius))
 
 
+def network_psnr(
+    pattern: Pattern | str,
+    network: torch.nn.Module,
+    rgb: torch.Tensor,
+    sigmas: Iterable[float],
+    seed: int = 0,
+) -> dict[float, float]:
+    """PSNR (dB, per sigma) of a network for any pattern on patches ``rgb`` seen through
+    ``pattern``, with noise drawn from ``seed``: how the ``network`` objective scores a pattern
+    on a fixed set of patches (no rounding to 8 bits; for comparing patterns)."""
+    from ..physics.sensor import SplitterSensor
+
+    sensor = SplitterSensor(get(pattern))
+    generator = torch.Generator().manual_seed(seed)
+    with torch.no_grad():
+        return {
+            float(s): float(_network_db(sensor, network.eval(), rgb, float(s), generator))
+            for s in sigmas
+        }
+
+
 @contextlib.contextmanager
 def _intra_op_threads(threads: int | None) -> Iterator[None]:
     """Run with ``threads`` intra-op threads (``None``: leave as is), restored afterwards."""
@@ -154,8 +194,12 @@ def design_pattern(
     name: str | None = None,
     threads: int | None = 1,
     progress: bool = False,
+    network: torch.nn.Module | None = None,
+    patches: Any = None,
+    batch_size: int = 8,
 ) -> DesignResult:
-    """Optimise a pattern's kernels for the closed-form LMMSE, averaged over ``sigmas``.
+    """Optimise a pattern's kernels for the closed-form LMMSE, averaged over ``sigmas``, or for
+    a network of any pattern (``objective="network"``).
 
     Adam on the softmax logits of a :class:`~splitcam.physics.sensor.LearnableSplitterSensor`
     (float64); the loss of all sigmas comes from one batched closed-form solve per step. The
@@ -180,8 +224,14 @@ def design_pattern(
         seed: Seed of the ``random`` initialisation.
         radius: LMMSE filter radius (filters are ``2r+1`` square).
         statistics: Image statistics (default: the shipped ones).
-        objective: ``mse`` (the mean closed-form MSE over the sigmas) or ``psnr`` (the mean
-            closed-form PSNR); see :data:`OBJECTIVES`.
+        objective: ``mse`` (the mean closed-form MSE over the sigmas), ``psnr`` (the mean
+            closed-form PSNR) or ``network``; see :data:`OBJECTIVES`.
+        network: For ``network``: the frozen network (called ``network(raw, sigma, kernels)``;
+            gradients reach the kernels through its LMMSE estimate, its data-consistency
+            residual and its kernel encoder).
+        patches: For ``network``: where training patches come from (an object with
+            ``sample(n) -> (n, 3, h, w)``, e.g. :class:`~splitcam.data.patches.PatchSampler`).
+        batch_size: For ``network``: patches per step.
         name: Name of the designed pattern (default ``<start>-designed``).
         threads: Intra-op threads during the optimisation (restored afterwards; ``None`` leaves
             them). The problem is small: on this 2-core machine, busy with a training run, a step
@@ -212,6 +262,8 @@ def design_pattern(
         isinstance(threads, bool) or not isinstance(threads, int) or threads < 1
     ):
         raise ValueError(f"expected threads as an integer >= 1 or None, got {threads!r}")
+    if objective == "network" and (network is None or patches is None):
+        raise ValueError("objective 'network' needs a network and training patches")
     stats = statistics if statistics is not None else shipped_image_statistics()
     sig = torch.tensor(sigma_list, dtype=torch.float64)
     generator = torch.Generator().manual_seed(seed)
@@ -231,8 +283,15 @@ def design_pattern(
         with torch.no_grad():
             before = mse_of(start)
         optimizer = torch.optim.Adam([sensor.logits], lr=lr)
-        for _ in range(steps):
-            value = _objective_db(mse_of(sensor.pixel_kernels()), objective)
+        noise = torch.Generator().manual_seed(seed + 1)
+        if network is not None:
+            network.eval().requires_grad_(False)
+        for step in range(steps):
+            if objective == "network":
+                sigma = sigma_list[step % len(sigma_list)]
+                value = _network_db(sensor, network, patches.sample(batch_size), sigma, noise)
+            else:
+                value = _objective_db(mse_of(sensor.pixel_kernels()), objective)
             optimizer.zero_grad(set_to_none=True)
             (-value).backward()
             optimizer.step()
@@ -250,10 +309,12 @@ def design_pattern(
         designed,
         provenance="designed",
         description=(
-            f"designed from pattern {start.name} ({init} start) for the closed-form LMMSE "
-            f"({objective}) at sigma {', '.join(f'{s:g}' for s in sigma_list)}"
+            f"designed from pattern {start.name} ({init} start) for "
+            + ("a network for any pattern" if objective == "network" else "the closed-form LMMSE")
+            + f" ({objective}) at sigma {', '.join(f'{s:g}' for s in sigma_list)}"
         ),
-        reference="splitcam design (closed-form LMMSE of the kernels)",
+        reference="splitcam design"
+        + (" (a frozen network)" if objective == "network" else " (closed-form LMMSE)"),
         metadata={
             "start": start.name,
             "init": init,
