@@ -371,7 +371,7 @@ def test_design_against_a_frozen_network(tiny_universal):
         lr=0.1,
     )
     assert not result.pattern.equals(result.start)  # the kernels moved
-    assert all(torch.equal(a, b) for a, b in zip(before, system.network.parameters()))
+    assert all(torch.equal(a, b) for a, b in zip(before, system.network.parameters(), strict=True))
     # On a fixed batch, at the objective's noise levels, the network does better on the design.
     held = PatchSampler(ImageCache(files, min_size=16, progress=False), patch_size=16, seed=9)
     held = held.sample(32)
