@@ -54,6 +54,30 @@ def cmd_patterns(args: argparse.Namespace) -> int:
     return 0
 
 
+def _check_distinct(inputs: dict[str, str | None], outputs: dict[str, str | None]) -> None:
+    """Refuse an output file that is one of the command's inputs or another of its outputs
+    (the same file by any path): writing it would destroy what the user gave or just wrote."""
+
+    def same(a: Path, b: Path) -> bool:
+        if a.exists() and b.exists():
+            return os.path.samefile(a, b)
+        return a.resolve() == b.resolve()
+
+    seen: list[tuple[str, Path]] = []
+    given = [(flag, Path(p)) for flag, p in inputs.items() if p]
+    for flag, path in ((f, Path(p)) for f, p in outputs.items() if p):
+        for other, known in given:
+            if same(path, known):
+                raise ValueError(
+                    f"{flag} {path} is the file given as {other}: it would be overwritten; "
+                    f"choose another output file"
+                )
+        for other, known in seen:
+            if same(path, known):
+                raise ValueError(f"{flag} and {other} name the same file {path}; choose two files")
+        seen.append((flag, path))
+
+
 def cmd_simulate(args: argparse.Namespace) -> int:
     import torch
 
@@ -68,13 +92,14 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if out.suffix.lower() not in (".png", ".npy"):
         raise ValueError(f"--out must end in .png or .npy, got {out.name!r}")
+    preview = Path(args.preview) if args.preview else out.with_name(out.stem + "_preview.png")
+    _check_distinct({"IMAGE": str(image)}, {"--out": str(out), "--preview": str(preview)})
     rgb = torch.from_numpy(read_image(image)).permute(2, 0, 1)[None]
     # The evaluation protocol's simulation: float64 sensor, noise seeded from the image name and
     # sigma, so a simulation is reproducible and matches what `splitcam evaluate` feeds methods.
     raw = simulate(SplitterSensor(pattern), rgb, image.stem, args.sigma)[0, 0].numpy()
     out.parent.mkdir(parents=True, exist_ok=True)
     scale = write_raw(out, raw)
-    preview = Path(args.preview) if args.preview else out.with_name(out.stem + "_preview.png")
     write_image(preview, false_colour(raw, pattern))
     stored = f"16-bit PNG, full scale {scale:g}" if out.suffix.lower() == ".png" else "float32"
     print(
@@ -118,6 +143,9 @@ def cmd_train(args: argparse.Namespace) -> int:
     )
     state = "interrupted at" if result.interrupted else "finished at"
     print(f"{state} step {result.step}: {summary}; run folder {result.run_dir}")
+    if result.failure:
+        print(f"splitcam train: failed: {result.failure}", file=sys.stderr)
+        return 1
     return STOPPED if result.interrupted else 0
 
 
@@ -285,6 +313,7 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
 
     if (args.image is None) == (args.raw is None):
         raise ValueError("give exactly one of --image (simulate, then reconstruct) or --raw")
+    _check_distinct({"--image": args.image, "--raw": args.raw}, {"--out": args.out})
     given = [x for x in (args.method, args.checkpoint, args.model) if x]
     if len(given) != 1:
         raise ValueError(
@@ -480,7 +509,9 @@ def cmd_models(args: argparse.Namespace) -> int:
         rows.append(
             {
                 "model": name,
-                "pattern": meta["pattern"]["name"],
+                "pattern": "any"
+                if (meta.get("config") or {}).get("pattern", {}).get("name") == "random"
+                else meta["pattern"]["name"],
                 "network": meta["network"]["arch"],
                 "steps": str(prov.get("total_steps", "?")),
                 "batch": str(segs[-1].get("batch_size") if segs else "?"),

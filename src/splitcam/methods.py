@@ -31,7 +31,7 @@ from .recon.closed_form import closed_form_lmmse
 from .recon.demosaic import ClassicalDemosaic
 from .recon.lmmse import LMMSE, shipped_lmmse
 from .training.checkpoint import CHECKPOINT_NAME, load_system, read_meta, resolve
-from .training.models import load_model, model_names
+from .training.models import check_unambiguous, load_model, model_names
 
 __all__ = ["DEMOSAICKING", "build_method", "build_methods", "build_model", "method_names"]
 
@@ -177,6 +177,7 @@ def build_method(
         lmmse.pattern = resolved
         lmmse.name = f"lmmse-{_pattern_label(pattern, resolved)}"
         return lmmse
+    check_unambiguous(spec, "method")
     if isinstance(spec, str) and spec.strip() in model_names():
         return build_model(spec.strip(), pattern=pattern, tile=tile, precision=precision)
     if _is_path(spec) and str(spec).endswith(".json") and Path(spec).is_file():

@@ -37,6 +37,7 @@ from . import checkpoint as ckpt_io
 __all__ = [
     "MODELS_DIR",
     "ModelError",
+    "check_unambiguous",
     "export_model",
     "load_model",
     "model_names",
@@ -60,6 +61,19 @@ def model_names() -> list[str]:
     if not MODELS_DIR.is_dir():
         return []
     return sorted(p.stem for p in MODELS_DIR.glob("*.json"))
+
+
+def check_unambiguous(spec: str | os.PathLike[str], flag: str) -> None:
+    """Refuse a bare name that is both a shipped model and a file or folder here (``D`` when
+    ``./D`` is a run folder, as ``splitcam sweep`` names them): either reading would silently
+    use something the user did not mean. The message shows both and how to name each."""
+    text = str(spec)
+    if isinstance(spec, str) and text in model_names() and Path(text).exists():
+        kind = "run folder" if Path(text).is_dir() else "file"
+        raise ModelError(
+            f"{flag} {text} is ambiguous: the shipped model {text} and the {kind} ./{text}; "
+            f"write ./{text} for the {kind}, or --model {text} for the shipped model"
+        )
 
 
 def resolve_model(spec: str | os.PathLike[str]) -> Path:

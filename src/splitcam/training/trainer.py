@@ -184,8 +184,12 @@ def _start_from(system: ImagingSystem, spec: str) -> dict[str, Any]:
     kernels (logits ``log k``), a fixed one must be the source's pattern. Returns what the
     checkpoints record: the source's name and accumulated provenance.
     """
-    from .models import ModelError, load_model, provenance_of
+    from .models import ModelError, check_unambiguous, load_model, provenance_of
 
+    try:
+        check_unambiguous(spec, "--init-from")
+    except ModelError as exc:
+        raise ConfigError(str(exc)) from None
     path = Path(spec)
     if path.is_dir() or path.name == ckpt_io.CHECKPOINT_NAME:
         checkpoint = ckpt_io.resolve(path)
@@ -298,14 +302,48 @@ def val_split(config: TrainConfig) -> int:
     return min(32, max(1, n // 10)) if n >= 2 else 0
 
 
+def _short_side(path: Path) -> int:
+    """An image file's smaller side, from its header (an unreadable file counts as large:
+    decoding reports it later, naming it)."""
+    from PIL import Image
+
+    try:
+        with Image.open(path) as im:
+            return min(im.size)
+    except OSError:
+        return 1 << 30
+
+
+def held_out(config: TrainConfig) -> list[Path]:
+    """The training folder's validation images: the last ``val_split`` (sorted by name) of those
+    that fit the validation crop (or, in a folder of smaller images, that are as large as its
+    largest), so a tiny image sorting last is never the whole validation set.
+
+    Raises:
+        ConfigError: The split would leave no training image.
+    """
+    data = config.data
+    split = val_split(config)
+    if not split:
+        return []
+    files = list_images(data.train)
+    sides = {f: _short_side(f) for f in files}
+    need = min(data.val_crop or 1, max(sides.values()))
+    chosen = [f for f in files if sides[f] >= need][-split:]
+    if len(chosen) >= len(files):
+        raise ConfigError(
+            f"data.val_split {split} leaves no training images (the folder has {len(files)})"
+        )
+    return chosen
+
+
 def _val_images(config: TrainConfig) -> list[tuple[str, torch.Tensor]]:
     """Validation images: the held-out split or the --val folder, centre-cropped."""
     data = config.data
-    split = val_split(config)
     if data.val:
         source: Any = data.val
-    elif split and data.train:
-        source = list_images(data.train)[-split:]
+    elif val_split(config) and data.train:
+        source = held_out(config)
     else:
         return []
     cache = ImageCache(source, min_size=1, max_images=data.val_max_images, progress=False)
@@ -321,14 +359,9 @@ def _val_images(config: TrainConfig) -> list[tuple[str, torch.Tensor]]:
 def _train_source(config: TrainConfig) -> Any:
     if not config.data.train:
         raise ConfigError("no training data: give --data DIR (or data.train in the config)")
-    split = val_split(config)
-    if split:
-        files = list_images(config.data.train)
-        if split >= len(files):
-            raise ConfigError(
-                f"data.val_split {split} leaves no training images (the folder has {len(files)})"
-            )
-        return files[:-split]
+    held = set(held_out(config))
+    if held:
+        return [f for f in list_images(config.data.train) if f not in held]
     return config.data.train
 
 
@@ -394,6 +427,16 @@ LOCK_NAME = ".lock"
 CHANGES_NAME = "changes.jsonl"
 
 
+def _last_metrics(path: Path) -> dict[str, float]:
+    """The last logged row of a run's metrics (validation included where it was logged)."""
+    last: dict[str, float] = {}
+    if path.is_file():
+        for line in path.read_text(encoding="utf-8").splitlines():
+            with contextlib.suppress(ValueError):
+                last.update(json.loads(line))
+    return last
+
+
 def _truncate_metrics(path: Path, step: int) -> None:
     """Drop log lines after ``step`` (steps a killed run did after its last checkpoint)."""
     if not path.is_file():
@@ -414,6 +457,48 @@ class TrainResult:
     step: int
     interrupted: bool
     last_metrics: dict[str, float]
+    #: Why the run failed (diverged past the guard, or ended far below where it started), or None.
+    failure: str | None = None
+
+
+#: The divergence guard gives up once it has halved the learning rate this many times.
+GUARD_GIVES_UP = 10
+#: A run that ends this many dB below its start in validation PSNR has failed.
+FAILED_DROP_DB = 3.0
+
+
+def failure_of(metrics_path: Path, last: dict[str, float], lr_scale: float) -> str | None:
+    """Why a finished run failed, or None: its loss is not finite, the guard halved the learning
+    rate :data:`GUARD_GIVES_UP` times, or its final validation PSNR is :data:`FAILED_DROP_DB`
+    below the first one logged (the untrained network, or where a resumed run began)."""
+    loss = last.get("loss")
+    if loss is not None and not math.isfinite(loss):
+        return f"the loss is {loss}: training diverged"
+    if lr_scale <= 0.5**GUARD_GIVES_UP:
+        return (
+            f"the divergence guard halved the learning rate {GUARD_GIVES_UP} times and gave up: "
+            f"training diverges at this learning rate (lower --lr)"
+        )
+    first, first_loss = None, None
+    if metrics_path.is_file():
+        for line in metrics_path.read_text(encoding="utf-8").splitlines():
+            with contextlib.suppress(ValueError):
+                row = json.loads(line)
+                first = first or (row if "val_psnr" in row else None)
+                first_loss = first_loss or row.get("loss")
+    if first_loss and loss is not None and loss > 10 * first_loss:
+        return (
+            f"the training loss rose from {first_loss:.3g} to {loss:.3g}: training diverged "
+            f"(lower --lr)"
+        )
+    if first is not None and "val_psnr" in last:
+        drop = first["val_psnr"] - last["val_psnr"]
+        if drop >= FAILED_DROP_DB:
+            return (
+                f"validation PSNR fell from {first['val_psnr']:.2f} dB at step {first['step']} "
+                f"to {last['val_psnr']:.2f} dB: training diverged or the settings are wrong"
+            )
+    return None
 
 
 def train(config: TrainConfig, *, resume: bool = False, progress: bool = True) -> TrainResult:
@@ -615,6 +700,14 @@ def _train(
             seed=noise_seed,
         )
     val_images = _val_images(config) if dist_info.is_main else []
+    if val_images and progress and dist_info.is_main and not config.data.val:
+        names = [name for name, _ in val_images]
+        shown = ", ".join(names[:4]) + (", ..." if len(names) > 4 else "")
+        crop = f" (of those at least {config.data.val_crop} px)" if config.data.val_crop else ""
+        print(
+            f"validation: {len(names)} of the last {val_split(config)} images of "
+            f"{config.data.train}{crop}, held out of training: {shown}"
+        )
     val_levels: list = list(config.data.val_sigmas)
     if config.noise.model == "photon":
         val_levels = [Exposure(n, **config.noise.sensor()) for n in config.noise.val_photons]
@@ -633,6 +726,15 @@ def _train(
             group["betas"] = tuple(config.optim.betas)
 
     guard = DivergenceGuard(config.optim.divergence_factor, lr_scale=lr_scale)
+
+    spent = config.run.time_limit is not None and train_seconds >= 60 * config.run.time_limit
+    if loaded is not None and (step >= config.optim.steps or spent):
+        # Nothing to train: the run's record (config, changes, checkpoint) stays as it is, so a
+        # changed setting is never recorded for steps that did not run under it.
+        if dist_info.is_main:
+            budget = "its time limit" if spent else f"{config.optim.steps} steps"
+            print(f"{run_dir} is already at step {step} ({budget}): nothing to train")
+        return TrainResult(run_dir, step, False, _last_metrics(run_dir / METRICS_NAME))
 
     model: torch.nn.Module = system
     if dist_info.world_size > 1:
@@ -772,6 +874,9 @@ def _train(
                         f"the learning rate by {guard.lr_scale:g}",
                         file=sys.stderr,
                     )
+                if guard.lr_scale <= 0.5**GUARD_GIVES_UP:
+                    step += 1
+                    break
             else:
                 optimizer.step()
                 guard.applied(value, system, optimizer)
@@ -843,7 +948,10 @@ def _train(
     if (interrupted or timed_out) and dist_info.is_main:
         why = "time limit reached" if timed_out else "interrupted"
         print(f"{why}: saved step {step} to {ckpt_path}; continue with --resume")
-    return TrainResult(run_dir, step, interrupted, last)
+    failure = None
+    if dist_info.is_main and not interrupted:
+        failure = failure_of(metrics_path, last, guard.lr_scale)
+    return TrainResult(run_dir, step, interrupted, last, failure)
 
 
 def _max_over_ranks(value: float) -> float:

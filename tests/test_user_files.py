@@ -1,0 +1,176 @@
+"""Nothing a user owns is lost or silently misread: outputs never replace inputs, a name that
+means two things is refused, the validation split is never one tiny image."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from conftest import blocky_images, tiny_config
+from PIL import Image
+
+from splitcam.cli import main
+
+
+@pytest.fixture
+def photo(tmp_path):
+    rng = np.random.default_rng(0)
+    arr = rng.integers(0, 256, size=(10, 12, 3), dtype=np.uint8)
+    path = tmp_path / "photo.png"
+    Image.fromarray(arr).save(path)
+    return path, arr
+
+
+def _unchanged(path, arr) -> bool:
+    with Image.open(path) as im:
+        return np.array_equal(np.asarray(im), arr)
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        [
+            "reconstruct",
+            "--method",
+            "lmmse",
+            "--pattern",
+            "D",
+            "--image",
+            "{photo}",
+            "--out",
+            "{photo}",
+        ],
+        ["simulate", "{photo}", "--out", "{photo}"],
+        ["simulate", "{photo}", "--out", "{dir}/raw.png", "--preview", "{photo}"],
+    ],
+)
+def test_an_output_never_replaces_an_input(argv, photo, tmp_path, capsys):
+    path, arr = photo
+    argv = [a.format(photo=path, dir=tmp_path) for a in argv]
+    assert main(argv) == 1
+    assert "would be overwritten" in capsys.readouterr().err
+    assert _unchanged(path, arr)
+
+
+def test_two_outputs_are_two_files(photo, tmp_path, capsys):
+    path, _ = photo
+    raw = tmp_path / "raw.png"
+    assert main(["simulate", str(path), "--out", str(raw), "--preview", str(raw)]) == 1
+    assert "name the same file" in capsys.readouterr().err
+    assert not raw.exists()
+    # The same file by another path counts too.
+    other = tmp_path / "sub" / ".." / "raw.png"
+    (tmp_path / "sub").mkdir()
+    assert main(["simulate", str(path), "--out", str(raw), "--preview", str(other)]) == 1
+
+
+def test_a_name_that_is_both_a_shipped_model_and_a_folder_is_refused(
+    photo, tmp_path, monkeypatch, capsys
+):
+    """`--checkpoint D` with ./D a run folder (sweep names them so): an error showing both, and
+    each still reachable by its unambiguous name."""
+    from splitcam.methods import build_method
+    from splitcam.training.models import ModelError, model_names
+
+    assert "D" in model_names()
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "D").mkdir()
+    with pytest.raises(ModelError, match=r"shipped model D and the run folder ./D"):
+        build_method("D")
+    path, _ = photo
+    args = ["reconstruct", "--image", str(path), "--out", str(tmp_path / "r.png")]
+    assert main([*args, "--checkpoint", "D"]) == 1
+    err = capsys.readouterr().err
+    assert "ambiguous" in err and "--model D" in err and "./D" in err
+    assert main([*args, "--model", "D", "--quiet"]) == 0  # the shipped one, by its flag
+
+
+def test_init_from_an_ambiguous_name_is_refused(tmp_path, monkeypatch):
+    from splitcam.training import ConfigError, train
+
+    data = blocky_images(tmp_path / "img", 4)
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "D").mkdir()
+    config = tiny_config(data, tmp_path / "run", **{"run.init_from": "D", "network.features": 64})
+    with pytest.raises(ConfigError, match="ambiguous"):
+        train(config, progress=False)
+
+
+def test_validation_never_uses_an_image_smaller_than_its_crop(tmp_path, capsys):
+    """A 16x16 image sorting last would have been the whole validation set."""
+    from splitcam.training import train
+    from splitcam.training.trainer import held_out
+
+    data = blocky_images(tmp_path / "img", 5)
+    Image.fromarray(np.zeros((16, 16, 3), np.uint8)).save(data / "zz_tiny.png")
+    config = tiny_config(data, tmp_path / "run", **{"data.val_crop": 32, "data.val_split": 1})
+    chosen = held_out(config)
+    assert [p.name for p in chosen] == ["im4.png"]
+    train(config, progress=True)
+    out = capsys.readouterr().out
+    assert "validation: 1 of the last 1 images" in out and "training: im4\n" in out
+    # The tiny image is trained on, not lost: the training set is the rest.
+    from splitcam.training.trainer import _train_source
+
+    assert {p.name for p in _train_source(config)} == {f"im{i}.png" for i in range(4)} | {
+        "zz_tiny.png"
+    }
+    # Images all smaller than the crop: the largest ones, never the tiny one.
+    big = tiny_config(data, tmp_path / "r2", **{"data.val_crop": 64, "data.val_split": 2})
+    assert [p.name for p in held_out(big)] == ["im3.png", "im4.png"]
+
+
+def test_resuming_a_finished_run_with_other_settings_records_nothing(tmp_path, capsys):
+    """No step runs, so the run's config, changes and checkpoint stay as they were (an exported
+    model would otherwise report a batch size and learning rate it was never trained with)."""
+    import json
+
+    from splitcam.training import checkpoint as ckpt_io
+    from splitcam.training import train
+
+    data = blocky_images(tmp_path / "img", 5)
+    run = tmp_path / "run"
+    train(tiny_config(data, run, **{"optim.steps": 3}), progress=False)
+    before = {n: (run / n).read_bytes() for n in ("config.json", "checkpoint.safetensors")}
+    changed = tiny_config(data, run, **{"optim.steps": 3, "optim.lr": 0.5, "data.batch_size": 2})
+    result = train(changed, resume=True, progress=False)
+    assert result.step == 3 and "nothing to train" in capsys.readouterr().out
+    assert all((run / n).read_bytes() == b for n, b in before.items())
+    assert not (run / "changes.jsonl").exists()
+    assert ckpt_io.read_meta(run / "checkpoint.safetensors")["config"]["optim"]["lr"] == 1e-3
+    assert json.loads((run / "config.json").read_text())["data"]["batch_size"] == 4
+    assert "val_psnr" in result.last_metrics
+    # More steps: training continues under the new settings, and that is recorded.
+    more = tiny_config(data, run, **{"optim.steps": 4, "optim.lr": 0.5})
+    assert train(more, resume=True, progress=False).step == 4
+    assert json.loads((run / "config.json").read_text())["optim"]["lr"] == 0.5
+    assert (run / "changes.jsonl").exists()
+
+
+def test_a_run_that_diverges_says_so_and_fails(tmp_path, capsys):
+    """`--lr 100` used to end at a loss of 1e19 and report "finished" with exit 0."""
+    from splitcam.training import train
+
+    data = blocky_images(tmp_path / "img", 5)
+    args = ["train", "--data", str(data), "--patch-size", "16", "--batch-size", "4"]
+    args += ["--features", "8", "--blocks", "1", "--val-split", "2", "--val-crop", "32"]
+    args += ["--val-every", "10", "--threads", "1", "--quiet"]
+    assert main([*args, "--steps", "20", "--lr", "100", "--out", str(tmp_path / "bad")]) == 1
+    assert "splitcam train: failed:" in capsys.readouterr().err
+    good = train(tiny_config(data, tmp_path / "good", **{"optim.steps": 6}), progress=False)
+    assert good.failure is None
+
+
+def test_the_guard_gives_up_after_halving_the_rate_ten_times(tmp_path):
+    from splitcam.training import train
+    from splitcam.training.trainer import GUARD_GIVES_UP
+
+    data = blocky_images(tmp_path / "img", 5)
+    # A factor below 1 makes every step once the window is full a divergence.
+    config = tiny_config(
+        data,
+        tmp_path / "r",
+        **{"optim.steps": 400, "optim.divergence_factor": 1e-9, "run.val_every": 1000},
+    )
+    result = train(config, progress=False)
+    assert result.step < 400
+    assert result.failure and f"halved the learning rate {GUARD_GIVES_UP} times" in result.failure
