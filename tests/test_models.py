@@ -145,7 +145,7 @@ def test_damaged_model_files_are_refused(trained_run, tmp_path):
 def test_cli_models_export_list_and_evaluate(trained_run, tmp_path, monkeypatch, capsys):
     monkeypatch.setattr(models_module, "MODELS_DIR", tmp_path / "shipped")
     (tmp_path / "shipped").mkdir()
-    assert main(["models", "export", str(trained_run), "--name", "D"]) == 0
+    assert main(["models", "export", str(trained_run), "--name", "D", "--ship"]) == 0
     assert main(["models"]) == 0
     out = capsys.readouterr().out
     assert re.search(r"\| D +\| D +\| physics \| 4 +\| 4 +\|", out), out

@@ -174,3 +174,26 @@ def test_the_guard_gives_up_after_halving_the_rate_ten_times(tmp_path):
     result = train(config, progress=False)
     assert result.step < 400
     assert result.failure and f"halved the learning rate {GUARD_GIVES_UP} times" in result.failure
+
+
+def test_models_export_never_replaces_a_model_unasked(tmp_path, monkeypatch, capsys):
+    """As the README showed it, `models export RUN --name D` replaced the shipped model D."""
+    from splitcam.training import models, train
+
+    data = blocky_images(tmp_path / "img", 5)
+    run = tmp_path / "run"
+    train(tiny_config(data, run, **{"optim.steps": 2}), progress=False)
+    shipped = tmp_path / "shipped"
+    shipped.mkdir()
+    (shipped / "D.json").write_text("{}")
+    monkeypatch.setattr(models, "MODELS_DIR", shipped)
+    monkeypatch.chdir(tmp_path)
+    assert main(["models", "export", str(run), "--name", "D"]) == 0
+    assert (tmp_path / "models" / "D.json").is_file()  # a user folder by default
+    assert (shipped / "D.json").read_text() == "{}"
+    assert main(["models", "export", str(run), "--name", "D"]) == 1  # exists now
+    assert "--force" in capsys.readouterr().err
+    assert main(["models", "export", str(run), "--name", "D", "--ship"]) == 1
+    assert (shipped / "D.json").read_text() == "{}"
+    assert main(["models", "export", str(run), "--name", "D", "--ship", "--force"]) == 0
+    assert models.load_model("D")[1]["name"] == "D"
