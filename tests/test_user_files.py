@@ -197,3 +197,36 @@ def test_models_export_never_replaces_a_model_unasked(tmp_path, monkeypatch, cap
     assert (shipped / "D.json").read_text() == "{}"
     assert main(["models", "export", str(run), "--name", "D", "--ship", "--force"]) == 0
     assert models.load_model("D")[1]["name"] == "D"
+
+
+def test_an_edited_model_file_is_refused_and_old_files_are_fingerprinted_by_their_fields(
+    tmp_path,
+):
+    """An edited `radius` cost 5.2 dB without an error; now the fields carry a checksum."""
+    import json
+
+    from splitcam.data.tensorfiles import meta_checksum
+    from splitcam.methods import build_model
+    from splitcam.training import train
+    from splitcam.training.models import ModelError, export_model, load_model
+
+    data = blocky_images(tmp_path / "img", 5)
+    train(tiny_config(data, tmp_path / "run", **{"optim.steps": 2}), progress=False)
+    path = export_model(tmp_path / "run", tmp_path / "m")
+    meta = json.loads(path.read_text())
+    assert meta["meta_sha256"] == meta_checksum(meta)
+    first = build_model(path).fingerprint
+    edited = {**meta, "network": {**meta["network"], "radius": 2}}
+    path.write_text(json.dumps(edited))
+    with pytest.raises(ModelError, match="changed after it was written"):
+        load_model(path)
+    # A file from before the field checksum: loads, and its fingerprint follows its fields.
+    del edited["meta_sha256"]
+    path.write_text(json.dumps(edited))
+    assert build_model(path).fingerprint != first
+    # The shipped files all carry it.
+    from splitcam.training.models import MODELS_DIR
+
+    for shipped in MODELS_DIR.glob("*.json"):
+        stored = json.loads(shipped.read_text())
+        assert stored["meta_sha256"] == meta_checksum(stored), shipped.name

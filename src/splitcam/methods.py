@@ -26,6 +26,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from . import patterns
+from .data.tensorfiles import meta_checksum
 from .recon.base import NetworkReconstructor, Reconstructor
 from .recon.closed_form import closed_form_lmmse
 from .recon.demosaic import ClassicalDemosaic
@@ -67,7 +68,9 @@ def build_model(
     name = meta.get("name") or Path(str(spec)).stem
     own = _trained_on_one_pattern(meta.get("config"))
     method = _network_method(system, f"net-{name}", pattern, tile, precision, own)
-    method.fingerprint = f"model:{name}:{meta.get('sha256', '')}{method.fingerprint}"
+    # Files written before their fields had a checksum: the fields themselves identify them.
+    fields = "" if "meta_sha256" in meta else f":{meta_checksum(meta)}"
+    method.fingerprint = f"model:{name}:{meta.get('sha256', '')}{fields}{method.fingerprint}"
     return method
 
 

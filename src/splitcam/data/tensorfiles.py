@@ -1,9 +1,10 @@
 """A pair of files for tensors and what they mean: ``NAME.safetensors`` plus ``NAME.json``.
 
 The tensor file is plain safetensors (never a pickle); the JSON file says what the tensors are
-(``format``, ``version`` and any fields of the caller) and records the SHA-256 of the tensor file,
-so a damaged or mismatched pair is found on loading. Used for the LMMSE statistics (fitted and
-pattern-free) and the shipped models.
+(``format``, ``version`` and any fields of the caller) and records the SHA-256 of the tensor file
+and of its own fields (``meta_sha256``: an edited architecture or pattern changes results as
+much as edited weights), so a damaged, edited or mismatched pair is found on loading. Used for
+the LMMSE statistics (fitted and pattern-free) and the shipped models.
 """
 
 from __future__ import annotations
@@ -58,8 +59,17 @@ def save_pair(
         "tensors": tensors_path.name,
         "sha256": hashlib.sha256(tensors_path.read_bytes()).hexdigest(),
     }
+    header["meta_sha256"] = meta_checksum(header)
     meta_path.write_text(json.dumps(header, indent=1) + "\n")
     return meta_path
+
+
+def meta_checksum(header: dict[str, Any]) -> str:
+    """SHA-256 of a pair's JSON fields (all but ``meta_sha256`` itself), key order and
+    whitespace aside."""
+    fields = {k: v for k, v in header.items() if k != "meta_sha256"}
+    text = json.dumps(fields, sort_keys=True, separators=(",", ":"), ensure_ascii=True)
+    return hashlib.sha256(text.encode()).hexdigest()
 
 
 def _canonical(blob: bytes) -> bytes:
@@ -111,6 +121,11 @@ def load_pair(
     if meta.get("version") != version:
         raise error(
             f"'{meta_path}': expected format version {version}, got {meta.get('version')!r}"
+        )
+    if "meta_sha256" in meta and meta_checksum(meta) != meta["meta_sha256"]:
+        raise error(
+            f"'{meta_path}' was changed after it was written (its fields do not match their "
+            f"recorded checksum): export it again rather than editing it"
         )
     try:
         blob = tensors_path.read_bytes()
