@@ -230,3 +230,43 @@ def test_an_edited_model_file_is_refused_and_old_files_are_fingerprinted_by_thei
     for shipped in MODELS_DIR.glob("*.json"):
         stored = json.loads(shipped.read_text())
         assert stored["meta_sha256"] == meta_checksum(stored), shipped.name
+
+
+@pytest.mark.parametrize("suffix", [".png", ".npy"])
+def test_raw_files_record_how_they_were_made(photo, tmp_path, capsys, suffix):
+    """`simulate` records the pattern and noise; `reconstruct --raw` uses them and refuses a
+    contradiction; a raw file without the record needs --sigma and --pattern."""
+    import numpy as np
+
+    from splitcam.data.imageio import read_raw, read_raw_meta, write_raw
+
+    path, _ = photo
+    raw = tmp_path / f"raw{suffix}"
+    assert main(["simulate", str(path), "--pattern", "D", "--sigma", "15", "--out", str(raw)]) == 0
+    made = read_raw_meta(raw)
+    assert made["sigma"] == 15.0 and made["noise"] == "gaussian"
+    assert made["pattern"]["name"] == "D"
+    rec = ["reconstruct", "--raw", str(raw), "--out", str(tmp_path / "r.png"), "--quiet"]
+    # The recorded sigma and pattern are used: the same result as saying them.
+    assert main([*rec, "--method", "lmmse"]) == 0
+    with Image.open(tmp_path / "r.png") as im:
+        implied = np.asarray(im)
+    assert main([*rec, "--method", "lmmse", "--pattern", "D", "--sigma", "15"]) == 0
+    with Image.open(tmp_path / "r.png") as im:
+        assert np.array_equal(np.asarray(im), implied)
+    capsys.readouterr()
+    # Contradictions.
+    assert main([*rec, "--method", "lmmse", "--sigma", "0"]) == 1
+    assert "contradicts the noise level" in capsys.readouterr().err
+    assert main([*rec, "--method", "lmmse", "--pattern", "A"]) == 1
+    assert "contradicts the pattern" in capsys.readouterr().err
+    assert main([*rec, "--model", "E"]) == 1  # a network of another pattern (1x3 period)
+    assert "differs from the pattern of E" in capsys.readouterr().err
+    # Without a record: both must be given.
+    bare = tmp_path / f"bare{suffix}"
+    write_raw(bare, read_raw(raw))
+    assert read_raw_meta(bare) is None
+    bare_rec = ["reconstruct", "--raw", str(bare), "--out", str(tmp_path / "b.png")]
+    assert main([*bare_rec, "--method", "lmmse", "--pattern", "D"]) == 1
+    assert "--sigma" in capsys.readouterr().err
+    assert main([*bare_rec, "--method", "lmmse", "--pattern", "D", "--sigma", "15"]) == 0

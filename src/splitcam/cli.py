@@ -99,7 +99,8 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     # sigma, so a simulation is reproducible and matches what `splitcam evaluate` feeds methods.
     raw = simulate(SplitterSensor(pattern), rgb, image.stem, args.sigma)[0, 0].numpy()
     out.parent.mkdir(parents=True, exist_ok=True)
-    scale = write_raw(out, raw)
+    made = {"pattern": pattern.to_dict(), "noise": "gaussian", "sigma": float(args.sigma)}
+    scale = write_raw(out, raw, meta=made)
     write_image(preview, false_colour(raw, pattern))
     stored = f"16-bit PNG, full scale {scale:g}" if out.suffix.lower() == ".png" else "float32"
     print(
@@ -306,7 +307,7 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
     import torch
 
     from . import patterns
-    from .data.imageio import read_image, read_raw, write_image
+    from .data.imageio import read_image, read_raw, read_raw_meta, write_image
     from .methods import build_method, build_model
     from .physics.sensor import SplitterSensor
     from .physics.system import simulate
@@ -321,29 +322,54 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
             "or --checkpoint (a run folder)"
         )
     spec = given[0]
+    sigma, pattern = args.sigma, args.pattern
+    recorded = None
+    if args.raw:
+        # What simulate recorded in the raw file: the noise level, and the pattern (which must
+        # agree with whatever the command is told or the method was trained for).
+        made = read_raw_meta(args.raw)
+        if made is not None:
+            recorded = patterns.Pattern.from_dict(made.get("pattern"), source=str(args.raw))
+            if sigma is not None and sigma != made.get("sigma"):
+                raise ValueError(
+                    f"--sigma {sigma:g} contradicts the noise level recorded in {args.raw} "
+                    f"(sigma {made.get('sigma'):g}); leave --sigma out"
+                )
+            if pattern is not None and not patterns.get(pattern).equals(recorded):
+                raise ValueError(
+                    f"--pattern {pattern} contradicts the pattern recorded in {args.raw} "
+                    f"({recorded.name}); leave --pattern out"
+                )
+            sigma, pattern = float(made.get("sigma", 0.0)), pattern or recorded
+        elif sigma is None or pattern is None:
+            raise ValueError(
+                f"{args.raw} does not record how it was made (not written by `splitcam "
+                f"simulate`): give its noise level (--sigma) and its pattern (--pattern)"
+            )
+    sigma = 0.0 if sigma is None else sigma
     method = (
-        build_model(spec, pattern=args.pattern, tile=args.tile, precision=args.precision)
+        build_model(spec, pattern=pattern, tile=args.tile, precision=args.precision)
         if args.model
         else build_method(
             spec,
-            pattern=args.pattern,
+            pattern=pattern,
             lmmse_train=args.lmmse_train,
             tile=args.tile,
             precision=args.precision,
             progress=not args.quiet,
         )
     )
-    if args.pattern is not None and not patterns.get(args.pattern).equals(method.pattern):
-        raise ValueError(
-            f"--pattern {args.pattern} differs from the pattern of {spec} ({method.pattern.name})"
-        )
+    if pattern is not None and not patterns.get(pattern).equals(method.pattern):
+        name = pattern.name if isinstance(pattern, patterns.Pattern) else pattern
+        where = f"the raw image's pattern {name}" if recorded is not None else f"--pattern {name}"
+        raise ValueError(f"{where} differs from the pattern of {spec} ({method.pattern.name})")
     if args.image:
         rgb = torch.from_numpy(read_image(args.image)).permute(2, 0, 1)[None]
-        raw = simulate(SplitterSensor(method.pattern), rgb, Path(args.image).stem, args.sigma)
+        raw = simulate(SplitterSensor(method.pattern), rgb, Path(args.image).stem, sigma)
     else:
         raw = torch.from_numpy(read_raw(args.raw))[None, None]
     with torch.no_grad():
-        out = method.reconstruct(raw, args.sigma)
+        out = method.reconstruct(raw, sigma)
     write_image(args.out, out[0].clamp(0, 1))
     print(f"{method.name}: wrote {args.out} ({out.shape[-1]}x{out.shape[-2]})")
     return 0
@@ -1223,10 +1249,19 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--checkpoint", help="run folder or checkpoint file (same as --method RUN)")
     p.add_argument("--model", help="a shipped model (`splitcam models` lists them) or model file")
-    p.add_argument("--pattern", help="pattern name or file (for --method lmmse)")
+    p.add_argument(
+        "--pattern",
+        help="pattern name or file: for --method lmmse and a network for any pattern, and of a "
+        "--raw file that does not record it",
+    )
     p.add_argument("--image", help="colour image to simulate and reconstruct")
     p.add_argument("--raw", help="raw image to reconstruct")
-    p.add_argument("--sigma", type=float, default=0.0, help="noise sigma for --image")
+    p.add_argument(
+        "--sigma",
+        type=float,
+        help="noise sigma: added to --image (default 0); of --raw, needed only if the file does "
+        "not record it (raw files from `splitcam simulate` do)",
+    )
     _add_method_options(p)
     p.add_argument("--out", required=True, help="output PNG")
     p.add_argument("--quiet", action="store_true")

@@ -21,6 +21,7 @@ naming the file and the problem.
 
 from __future__ import annotations
 
+import json
 import math
 import os
 import struct
@@ -37,6 +38,7 @@ if TYPE_CHECKING:
 
 __all__ = [
     "IMAGE_SUFFIXES",
+    "RAW_META_KEY",
     "RAW_OFFSET_KEY",
     "RAW_SCALE_KEY",
     "ImageReadError",
@@ -44,6 +46,7 @@ __all__ = [
     "read_image",
     "read_image_uint8",
     "read_raw",
+    "read_raw_meta",
     "write_image",
     "write_raw",
 ]
@@ -53,6 +56,9 @@ IMAGE_SUFFIXES: tuple[str, ...] = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".b
 
 RAW_SCALE_KEY = "splitcam:scale"
 RAW_OFFSET_KEY = "splitcam:offset"
+#: PNG text chunk (and, for ``.npy``, the sidecar ``NAME.npy.json``) holding how a raw image was
+#: made: the pattern and the noise (:func:`write_raw`'s ``meta``).
+RAW_META_KEY = "splitcam:meta"
 """PNG text-chunk key under which :func:`write_raw` records the scale of a raw PNG."""
 
 # Pillow modes that carry a single intensity channel (with or without alpha).
@@ -416,8 +422,44 @@ def _default_raw_scale(peak: float) -> float:
     return float(2.0 ** math.ceil(math.log2(peak)))
 
 
+def _sidecar(path: Path) -> Path:
+    return path.with_name(path.name + ".json")
+
+
+def read_raw_meta(path: str | os.PathLike[str]) -> dict[str, Any] | None:
+    """How a raw image was made, as :func:`write_raw` recorded it (``None`` if it was not).
+
+    Raises:
+        ImageReadError: The record is there but damaged.
+    """
+    path = Path(path)
+    if path.suffix.lower() == ".npy":
+        side = _sidecar(path)
+        if not side.is_file():
+            return None
+        text: str | None = side.read_text(encoding="utf-8")
+    else:
+        from PIL import Image
+
+        with _reading(path), Image.open(path) as im:
+            text = im.info.get(RAW_META_KEY)
+        if text is None:
+            return None
+    try:
+        meta = json.loads(text)
+    except ValueError:
+        raise ImageReadError(path, f"damaged {RAW_META_KEY} record") from None
+    if not isinstance(meta, dict):
+        raise ImageReadError(path, f"damaged {RAW_META_KEY} record")
+    return meta
+
+
 def write_raw(
-    path: str | os.PathLike[str], raw: np.ndarray | torch.Tensor, *, scale: float | None = None
+    path: str | os.PathLike[str],
+    raw: np.ndarray | torch.Tensor,
+    *,
+    scale: float | None = None,
+    meta: dict[str, Any] | None = None,
 ) -> float:
     """Write a raw (single-channel) sensor image.
 
@@ -433,6 +475,9 @@ def write_raw(
     Args:
         path: Output file, ``.npy`` or ``.png``.
         raw: Float image (values may exceed 1, and noise may make some negative).
+        meta: How the image was made (JSON-serialisable: pattern, noise), stored in the PNG's
+            ``splitcam:meta`` text chunk or beside a ``.npy`` as ``NAME.npy.json``
+            (:func:`read_raw_meta`); without it, a stale sidecar of an earlier file is removed.
         scale: Full-scale range of the PNG above ``offset``. Default: the smallest power of two
             that is at least ``max(raw) - offset`` (and at least 1), so that a lossless
             splitter's values up to 4 are kept. Ignored for ``.npy``.
@@ -451,6 +496,10 @@ def write_raw(
     suffix = path.suffix.lower()
     if suffix == ".npy":
         np.save(path, arr.astype(np.float32))
+        if meta is not None:
+            _sidecar(path).write_text(json.dumps(meta), encoding="utf-8")
+        else:
+            _sidecar(path).unlink(missing_ok=True)
         return 1.0
     if suffix != ".png":
         raise ValueError(f"cannot write raw '{path}': expected a .npy or .png suffix")
@@ -469,6 +518,8 @@ def write_raw(
     info.add_text(RAW_SCALE_KEY, repr(scale))
     if offset:
         info.add_text(RAW_OFFSET_KEY, repr(offset))
+    if meta is not None:
+        info.add_text(RAW_META_KEY, json.dumps(meta))
     Image.fromarray(levels.astype(np.uint16)).save(path, pnginfo=info)
     return scale
 
