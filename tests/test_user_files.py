@@ -270,3 +270,32 @@ def test_raw_files_record_how_they_were_made(photo, tmp_path, capsys, suffix):
     assert main([*bare_rec, "--method", "lmmse", "--pattern", "D"]) == 1
     assert "--sigma" in capsys.readouterr().err
     assert main([*bare_rec, "--method", "lmmse", "--pattern", "D", "--sigma", "15"]) == 0
+
+
+def test_evaluate_keeps_earlier_results_of_other_methods(tmp_path, capsys):
+    """A second evaluation into the same folder used to cut the table to its own rows."""
+    import json
+
+    from splitcam.evaluation.tables import CSV_NAME, read_rows
+
+    data = blocky_images(tmp_path / "img", 2)
+    out = tmp_path / "ev"
+    common = ["evaluate", "--datasets", str(data), "--out", str(out), "--quiet"]
+    assert main([*common, "--method", "lmmse", "--patterns", "D,A", "--sigmas", "0", "5"]) == 0
+    first = read_rows(out / CSV_NAME)
+    assert len(first) == 2 * 2 * 2
+    capsys.readouterr()
+    assert main([*common, "--method", "malvar2004", "--sigmas", "0"]) == 0
+    printed = capsys.readouterr().out
+    rows = read_rows(out / CSV_NAME)
+    assert {r.method for r in rows} == {"lmmse-D", "lmmse-A", "bayer+malvar2004"}
+    assert len(rows) == len(first) + 2
+    assert "keeps the earlier results" in printed and "lmmse-D" in printed
+    summary = json.loads((out / "summary.json").read_text())
+    assert set(summary) == {"lmmse-D", "lmmse-A", "bayer+malvar2004"}
+    assert "lmmse-A" in (out / "table.md").read_text()
+    assert (out / "sigma_curves.png").is_file()  # the table has two levels: the chart too
+    # Another border crop cannot share the table: refused, nothing lost.
+    assert main([*common, "--method", "bilinear", "--sigmas", "0", "--crop", "4"]) == 1
+    assert "--restart" in capsys.readouterr().err
+    assert len(read_rows(out / CSV_NAME)) == len(rows)

@@ -490,15 +490,25 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
         return 130
-    summary = summarise(rows)
+    # What the folder holds: this evaluation's rows and those of others kept beside them.
+    from .evaluation.tables import CSV_NAME, read_rows
+
+    kept = read_rows(Path(args.out) / CSV_NAME)
+    summary = summarise(kept)
     print(markdown_tables(summary))
+    if len(kept) > len(rows):
+        others = sorted({r.method for r in kept} - {r.method for r in rows})
+        print(f"(the table keeps the earlier results in {args.out} of: {', '.join(others)})")
     written = "per_image.csv, summary.json and table.md"
-    if len(sigmas) > 1:
+    chart = Path(args.out) / "sigma_curves.png"
+    if len({r.level for r in kept}) > 1:
         from .viz.charts import sigma_chart
 
         curves = [(name, entry["all"]) for name, entry in summary.items()]
-        sigma_chart(curves, Path(args.out) / "sigma_curves.png")
+        sigma_chart(curves, chart)
         written += ", sigma_curves.png"
+    else:
+        chart.unlink(missing_ok=True)  # an earlier chart would not match the table
     if not chosen or args.save_images:
         written += " and the zoomed crops in zoom/"
     print(f"wrote {args.out}/{written}")

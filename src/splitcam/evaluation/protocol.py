@@ -246,15 +246,22 @@ def evaluate(
 
     out_dir = Path(out) if out is not None else None
     done: dict[tuple, EvalRow] = {}
+    others: list[EvalRow] = []
     if out_dir is not None:
         out_dir.mkdir(parents=True, exist_ok=True)
-        done = _previous_rows(out_dir, fingerprints, sensor_settings) if resume else {}
-        # Rewrite the CSV with the rows kept, then append: the file always holds exactly the
-        # results of this evaluation so far.
-        write_summary(list(done.values()), out_dir)
+        done, others, other_prints = (
+            _previous_rows(out_dir, fingerprints, sensor_settings, crop) if resume else ({}, [], {})
+        )
+        # Rewrite the CSV with the rows kept (this evaluation's so far, and those of other
+        # methods, which stay), then append: the file holds every result that still applies.
+        write_summary([*others, *done.values()], out_dir)
         (out_dir / SETTINGS_NAME).write_text(
             json.dumps(
-                {"crop": crop, "fingerprints": fingerprints, "photon_sensor": sensor_settings},
+                {
+                    "crop": crop,
+                    "fingerprints": {**other_prints, **fingerprints},
+                    "photon_sensor": sensor_settings,
+                },
                 indent=2,
             )
             + "\n",
@@ -336,7 +343,7 @@ def evaluate(
         if bar is not None:
             bar.close()
     if out_dir is not None:
-        write_summary(rows, out_dir)
+        write_summary([*others, *rows], out_dir)
     return rows
 
 
@@ -361,26 +368,50 @@ def _sensor_settings(levels: Sequence[float | Exposure]) -> dict | None:
 
 
 def _previous_rows(
-    out_dir: Path, fingerprints: dict[str, str], sensor_settings: dict | None = None
-) -> dict[tuple, EvalRow]:
-    """Rows of an earlier (possibly interrupted) evaluation in ``out_dir`` that still apply:
-    same method fingerprint, and for photon-model rows the same sensor settings."""
+    out_dir: Path,
+    fingerprints: dict[str, str],
+    sensor_settings: dict | None = None,
+    crop: int = 0,
+) -> tuple[dict[tuple, EvalRow], list[EvalRow], dict[str, str]]:
+    """What an earlier evaluation left in ``out_dir``: its rows that this one reuses (same
+    method fingerprint, and for photon-model rows the same sensor settings), the rows of
+    methods this one does not evaluate (kept, with their fingerprints), and those fingerprints.
+    Rows of a method evaluated again with other weights or pattern are superseded.
+
+    Raises:
+        ValueError: The folder's results were scored with another crop, or other photon sensor
+            settings, than this evaluation's: one table cannot hold both.
+    """
     csv_path, settings_path = out_dir / CSV_NAME, out_dir / SETTINGS_NAME
     if not (csv_path.is_file() and settings_path.is_file()):
-        return {}
+        return {}, [], {}
     try:
         settings = json.loads(settings_path.read_text(encoding="utf-8"))
-        before = settings["fingerprints"]
+        before = dict(settings["fingerprints"])
     except (OSError, ValueError, KeyError, TypeError):
-        return {}
+        return {}, [], {}
+    rows = read_rows(csv_path)
+    if rows and settings.get("crop", 0) != crop:
+        raise ValueError(
+            f"{out_dir} holds results scored with a {settings.get('crop', 0)}-pixel border crop; "
+            f"this evaluation crops {crop}: choose another --out, or --restart to discard them"
+        )
     same_sensor = settings.get("photon_sensor") == sensor_settings
-    return {
+    others = [row for row in rows if row.method not in fingerprints]
+    if not same_sensor and any(r.photons for r in others):
+        raise ValueError(
+            f"{out_dir} holds photon-model results of other sensor settings (read noise, full "
+            f"well, ADC): choose another --out, or --restart to discard them"
+        )
+    reused = {
         row.key: row
-        for row in read_rows(csv_path)
+        for row in rows
         if row.method in fingerprints
         and before.get(row.method) == fingerprints[row.method]
         and (not row.photons or same_sensor)
     }
+    prints = {m: f for m, f in before.items() if m not in fingerprints}
+    return reused, others, prints
 
 
 def _save_images(
