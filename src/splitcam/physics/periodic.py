@@ -126,27 +126,3 @@ def phase_conv(x: torch.Tensor, weight: torch.Tensor, period: Sequence[int]) -> 
     out = F.conv2d(x, weight.reshape(p * o, c, kh, kw), padding=(kh // 2, kw // 2))
     index = phase_map(h, w, (ph, pw), x.device).expand(n, 1, o, h, w)
     return out.view(n, p, o, h, w).gather(1, index).squeeze(1)
-
-
-def phase_conv_transpose(
-    y: torch.Tensor, weight: torch.Tensor, period: Sequence[int]
-) -> torch.Tensor:
-    """The adjoint of :func:`phase_conv`: each output pixel's value spread back by its own
-    phase's kernel, ``x[n, c, u, v] = sum_{(y, x), o} weight[p(y, x), o, c, u - y + kh//2,
-    v - x + kw//2] * y[n, o, y, x]``. Computed as one transposed convolution of the output split
-    by phase (each phase's pixels in their own channels, zero elsewhere).
-
-    Shape:
-        - y: ``(N, O, H, W)``.
-        - weight: ``(Ph * Pw, O, C, kh, kw)``, odd ``kh``, ``kw``.
-        - output: ``(N, C, H, W)``.
-    """
-    ph, pw = as_period(period)
-    p, o, c, kh, kw = weight.shape
-    if p != ph * pw:
-        raise ValueError(f"expected {ph * pw} phase kernels for period {(ph, pw)}, got {p}")
-    n, _, h, w = y.shape
-    phases = torch.arange(p, device=y.device)[:, None, None]
-    mask = (phase_map(h, w, (ph, pw), y.device)[None] == phases).to(y.dtype)  # (P, H, W)
-    split = (y[:, None] * mask[None, :, None]).reshape(n, p * o, h, w)
-    return F.conv_transpose2d(split, weight.reshape(p * o, c, kh, kw), padding=(kh // 2, kw // 2))

@@ -33,13 +33,7 @@ from torch import nn
 
 from ..physics.noise import Exposure
 from ..physics.periodic import as_period as _as_period
-from ..physics.periodic import (
-    period_shuffle,
-    period_unshuffle,
-    phase_conv,
-    phase_conv_transpose,
-    phase_map,
-)
+from ..physics.periodic import period_shuffle, period_unshuffle, phase_conv, phase_map
 from .base import check_raw
 from .closed_form import ImageStatistics, lmmse_estimate, shipped_image_statistics
 from .lmmse import DEFAULT_RADIUS
@@ -372,11 +366,9 @@ class UniversalReconNet(nn.Module):
         radius: int = DEFAULT_RADIUS,
         kernel_size: int = 5,
         embed: int = 8,
-        adjoint: bool = True,
         statistics: ImageStatistics | None = None,
     ) -> None:
         super().__init__()
-        self.adjoint = bool(adjoint)
         self.features = _as_count(features, "features", 1)
         self.num_blocks = _as_count(blocks, "blocks", 0)
         self.radius = _as_count(radius, "radius", 0)
@@ -387,8 +379,7 @@ class UniversalReconNet(nn.Module):
         taps = 3 * self.kernel_size**2
         self.encoder = nn.Sequential(nn.Linear(taps, 64), nn.ReLU(), nn.Linear(64, self.embed))
         c = self.CELL[0] * self.CELL[1]
-        inputs = c + 3 * c + 1 + c + self.embed * c + (6 * c if self.adjoint else 0)
-        self.trunk = _Trunk(inputs, 3 * c, self.features, blocks)
+        self.trunk = _Trunk(c + 3 * c + 1 + c + self.embed * c, 3 * c, self.features, blocks)
         nn.init.zeros_(self.trunk.tail.weight)
         nn.init.zeros_(self.trunk.tail.bias)
         stats = statistics if statistics is not None else shipped_image_statistics()
@@ -439,15 +430,6 @@ class UniversalReconNet(nn.Module):
             weight = kernels.to(estimate.dtype).reshape(ph * pw, 1, 3, kh, kw)
             residual = raw.to(estimate.dtype) - phase_conv(estimate, weight, (ph, pw))
             features = self.kernel_features(kernels)  # (Ph, Pw, E)
-            if self.adjoint:
-                # The raw image spread back over the scene colours each pixel collected
-                # (A^T g), normalised by how much of each colour the pixels collect there
-                # (A^T 1): for a filter array the mosaic in its colour channels, for a router
-                # the light returned to where it came from. The same meaning for every pattern.
-                back = phase_conv_transpose(raw.to(estimate.dtype), weight, (ph, pw))
-                ones = torch.ones_like(raw[:1], dtype=estimate.dtype)
-                seen = phase_conv_transpose(ones, weight, (ph, pw))
-                back = back / (seen + 0.05)
         # Each pixel's features by its phase (a gather), then packed like the rest.
         index = phase_map(h, w, (ph, pw), raw.device)
         per_pixel = features.reshape(ph * pw, -1)[index].permute(2, 0, 1)
@@ -461,14 +443,6 @@ class UniversalReconNet(nn.Module):
                 level.to(dtype),
                 period_unshuffle(residual, cell).to(dtype),
                 period_unshuffle(per_pixel.to(dtype), cell),
-                *(
-                    [
-                        period_unshuffle(back, cell).to(dtype),
-                        period_unshuffle(seen, cell).expand(n, -1, -1, -1).to(dtype),
-                    ]
-                    if self.adjoint
-                    else []
-                ),
             ],
             1,
         )
@@ -520,7 +494,6 @@ class UniversalReconNet(nn.Module):
             "radius": self.radius,
             "kernel_size": self.kernel_size,
             "embed": self.embed,
-            "adjoint": self.adjoint,
         }
 
 
@@ -581,7 +554,7 @@ def build_network(config: Mapping[str, Any]) -> nn.Module:
         known = ", ".join(repr(a) for a in ARCHITECTURES)
         raise ValueError(f"unknown network arch {arch!r}; expected one of {known}")
     if arch == UniversalReconNet.arch:
-        fields = {"features", "blocks", "radius", "kernel_size", "embed", "adjoint"}
+        fields = {"features", "blocks", "radius", "kernel_size", "embed"}
         unknown = sorted(set(config) - fields - {"arch", "period"})
         if unknown:
             raise ValueError(f"unknown network config field(s): {', '.join(map(str, unknown))}")
