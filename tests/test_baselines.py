@@ -268,6 +268,11 @@ def test_save_load_round_trip_and_damaged_files(tmp_path):
     meta = json.loads(text)
     meta["radius"] = 3
     meta_path.write_text(json.dumps(meta))
+    with pytest.raises(LMMSEFileError, match="changed after it was written"):
+        LMMSEStatistics.load(meta_path)
+    # A file from before the fields had a checksum: the shapes are still checked.
+    del meta["meta_sha256"]
+    meta_path.write_text(json.dumps(meta))
     with pytest.raises(LMMSEFileError, match="damaged LMMSE statistics"):
         LMMSEStatistics.load(meta_path)
     tensors_path.unlink()

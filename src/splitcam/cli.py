@@ -211,6 +211,7 @@ def cmd_design(args: argparse.Namespace) -> int:
     from matplotlib.figure import Figure
 
     from . import patterns
+    from .io import atomic_path
     from .recon.design import design_pattern
     from .viz.patterns import draw_pattern
 
@@ -251,7 +252,8 @@ def cmd_design(args: argparse.Namespace) -> int:
     fig = Figure(figsize=(image.shape[1] / dpi, image.shape[0] / dpi), dpi=dpi)
     fig.figimage(image)
     figure = out.with_suffix(".png")
-    fig.savefig(figure, dpi=dpi)
+    with atomic_path(figure) as tmp:
+        fig.savefig(tmp, dpi=dpi)
 
     before, after = result.psnr_before, result.psnr_after
     rows = [
@@ -737,6 +739,7 @@ def cmd_optics(args: argparse.Namespace) -> int:
     import numpy as np
 
     from . import patterns
+    from .io import atomic_path
     from .optics import Optics, bayer_collection, pattern_of, profile
     from .viz.patterns import draw_height_maps, draw_pattern
 
@@ -778,7 +781,8 @@ def cmd_optics(args: argparse.Namespace) -> int:
     else:
         pattern = pattern_of(height, period, optics, name=out.stem)
     patterns.save(pattern, out)
-    np.save(out.with_suffix(".npy"), height.cpu().numpy())
+    with atomic_path(out.with_suffix(".npy")) as tmp:
+        np.save(tmp, height.cpu().numpy())
     fig = draw_pattern(pattern, out.with_suffix(".png"))
     del fig
     heights_png = out.with_name(out.stem + "_height.png")

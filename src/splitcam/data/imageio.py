@@ -33,6 +33,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from ..io import atomic_path, write_bytes, write_text
+
 if TYPE_CHECKING:
     import torch
 
@@ -379,17 +381,19 @@ def write_image(
         if suffix in (".jpg", ".jpeg"):
             options = {"quality": 95, "subsampling": 0}
         try:
-            Image.fromarray(levels).save(path, **options)
+            with atomic_path(path) as tmp:
+                Image.fromarray(levels).save(tmp, **options)
         except ValueError as exc:
             raise ValueError(f"cannot write '{path}': {exc}") from None
     elif bits == 16:
         levels16 = np.rint(arr * 65535.0).astype(np.uint16)
         if suffix == ".png":
-            path.write_bytes(_encode_png16_rgb(levels16))
+            write_bytes(path, _encode_png16_rgb(levels16))
         elif suffix in (".tif", ".tiff"):
             import tifffile
 
-            tifffile.imwrite(path, levels16, photometric="rgb", compression="zlib")
+            with atomic_path(path) as tmp:
+                tifffile.imwrite(tmp, levels16, photometric="rgb", compression="zlib")
         else:
             raise ValueError(f"cannot write '{path}': 16-bit output needs a .png or .tif suffix")
     else:
@@ -495,9 +499,10 @@ def write_raw(
     arr = _to_raw_array(raw)
     suffix = path.suffix.lower()
     if suffix == ".npy":
-        np.save(path, arr.astype(np.float32))
+        with atomic_path(path) as tmp:
+            np.save(tmp, arr.astype(np.float32))
         if meta is not None:
-            _sidecar(path).write_text(json.dumps(meta), encoding="utf-8")
+            write_text(_sidecar(path), json.dumps(meta))
         else:
             _sidecar(path).unlink(missing_ok=True)
         return 1.0
@@ -520,7 +525,8 @@ def write_raw(
         info.add_text(RAW_OFFSET_KEY, repr(offset))
     if meta is not None:
         info.add_text(RAW_META_KEY, json.dumps(meta))
-    Image.fromarray(levels.astype(np.uint16)).save(path, pnginfo=info)
+    with atomic_path(path) as tmp:
+        Image.fromarray(levels.astype(np.uint16)).save(tmp, pnginfo=info)
     return scale
 
 

@@ -17,6 +17,8 @@ from typing import Any
 
 import torch
 
+from ..io import write_bytes, write_text
+
 
 class TensorFileError(ValueError):
     """A tensor-file pair is missing, unreadable, damaged or of another kind; the message says
@@ -51,16 +53,17 @@ def save_pair(
         {k: v.detach().cpu().contiguous() for k, v in tensors.items()},
         metadata={"format": fmt, "version": str(version)},
     )
-    tensors_path.write_bytes(_canonical(blob))
+    data = _canonical(blob)
     header = {
         "format": fmt,
         "version": version,
         **meta,
         "tensors": tensors_path.name,
-        "sha256": hashlib.sha256(tensors_path.read_bytes()).hexdigest(),
+        "sha256": hashlib.sha256(data).hexdigest(),
     }
     header["meta_sha256"] = meta_checksum(header)
-    meta_path.write_text(json.dumps(header, indent=1) + "\n")
+    write_bytes(tensors_path, data)
+    write_text(meta_path, json.dumps(header, indent=1) + "\n")
     return meta_path
 
 

@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from ..io import write_text
 from ..patterns import get
 from ..physics.noise import Exposure, add_exposure_noise
 from ..physics.sensor import SplitterSensor
@@ -175,7 +176,8 @@ def write_study(
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    (out / "exposure.json").write_text(
+    write_text(
+        out / "exposure.json",
         json.dumps(
             {
                 "results": {p: {f"{n:g}": v for n, v in r.items()} for p, r in results.items()},
@@ -183,7 +185,7 @@ def write_study(
             },
             indent=1,
         )
-        + "\n"
+        + "\n",
     )
     chart = exposure_chart(results, out / "exposure.png")
     photons = sorted(next(iter(results.values())))
@@ -252,5 +254,5 @@ def write_study(
             )
     lines += ["", f"![exposure]({chart.name})", ""]
     path = out / "exposure.md"
-    path.write_text("\n".join(lines), encoding="utf-8")
+    write_text(path, "\n".join(lines))
     return path

@@ -25,6 +25,7 @@ from pathlib import Path
 import torch
 
 from ..data.imageio import write_image
+from ..io import write_text
 from ..patterns import Pattern, save
 from ..physics.noise import Exposure, check_level
 from ..physics.sensor import SplitterSensor
@@ -255,7 +256,8 @@ def evaluate(
         # Rewrite the CSV with the rows kept (this evaluation's so far, and those of other
         # methods, which stay), then append: the file holds every result that still applies.
         write_summary([*others, *done.values()], out_dir)
-        (out_dir / SETTINGS_NAME).write_text(
+        write_text(
+            out_dir / SETTINGS_NAME,
             json.dumps(
                 {
                     "crop": crop,
@@ -265,7 +267,6 @@ def evaluate(
                 indent=2,
             )
             + "\n",
-            encoding="utf-8",
         )
         (out_dir / "patterns").mkdir(exist_ok=True)
         for method in methods:

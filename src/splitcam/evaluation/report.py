@@ -8,6 +8,7 @@ import os
 from pathlib import Path
 
 from .. import patterns
+from ..io import write_text
 from ..viz.charts import exposure_chart, sigma_chart
 from ..viz.patterns import draw_pattern
 from .tables import level_heading
@@ -159,7 +160,7 @@ def make_report(results: list[str | os.PathLike], out: str | os.PathLike) -> Pat
         )
         lines += ["", "## PSNR and CIEDE2000 against exposure", "", f"![exposure]({chart.name})"]
     report = out / "report.md"
-    report.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    write_text(report, "\n".join(lines) + "\n")
     return report
 
 
@@ -467,5 +468,5 @@ def paper_tables(
         lines += ["", "## Zoomed crops (Figs. 4, 5, 7, 8)", ""]
         lines += [f"![zoom]({z})" for z in zooms]
     report = out / "reproduce.md"
-    report.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    write_text(report, "\n".join(lines) + "\n")
     return report

@@ -12,6 +12,7 @@ from collections.abc import Iterable, Sequence
 from dataclasses import astuple, dataclass, fields
 from pathlib import Path
 
+from ..io import appending, atomic_path, write_text
 from .metrics import mean_over_images
 
 __all__ = [
@@ -96,7 +97,7 @@ def append_rows(path: str | os.PathLike, rows: Iterable[EvalRow]) -> None:
     """Append rows to a CSV file (header first if the file is new), flushed to disk."""
     path = Path(path)
     new = not path.is_file() or path.stat().st_size == 0
-    with open(path, "a", newline="", encoding="utf-8") as fh:
+    with appending(path, newline="") as fh:
         writer = csv.writer(fh)
         if new:
             writer.writerow([f.name for f in fields(EvalRow)])
@@ -137,13 +138,11 @@ def write_summary(rows: Sequence[EvalRow], out_dir: str | os.PathLike) -> dict:
     ``out_dir``; returns the summary."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    tmp = out_dir / (CSV_NAME + ".tmp")
-    tmp.unlink(missing_ok=True)
-    append_rows(tmp, rows)
-    os.replace(tmp, out_dir / CSV_NAME)
+    with atomic_path(out_dir / CSV_NAME) as tmp:
+        append_rows(tmp, rows)
     summary = summarise(rows)
-    (out_dir / "summary.json").write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
-    (out_dir / "table.md").write_text(markdown_tables(summary), encoding="utf-8")
+    write_text(out_dir / "summary.json", json.dumps(summary, indent=2) + "\n")
+    write_text(out_dir / "table.md", markdown_tables(summary))
     return summary
 
 

@@ -23,6 +23,7 @@ import os
 import sys
 from pathlib import Path
 
+from ..io import write_text
 from .core import Pattern, PatternError
 
 if sys.version_info >= (3, 11):
@@ -97,7 +98,4 @@ def save(pattern: Pattern, path: str | os.PathLike) -> Path:
     suffix = _suffix(path)
     data = pattern.to_dict()
     text = json.dumps(data, indent=2) + "\n" if suffix == ".json" else _toml(data)
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(text, encoding="utf-8")
-    os.replace(tmp, path)
-    return path
+    return write_text(path, text)

@@ -11,6 +11,7 @@ damaged one.
 
 from __future__ import annotations
 
+import errno
 import json
 import os
 from dataclasses import dataclass
@@ -19,6 +20,7 @@ from typing import Any
 
 import torch
 
+from ..io import atomic_path, write_text
 from ..patterns import Pattern
 from ..physics.sensor import SplitterSensor
 from ..physics.system import ImagingSystem
@@ -82,6 +84,7 @@ def load_optimizer(optimizer: torch.optim.Optimizer, ckpt: Checkpoint) -> None:
 
 def save(path: str | os.PathLike, meta: dict[str, Any], tensors: dict[str, torch.Tensor]) -> Path:
     """Write ``tensors`` and ``meta`` atomically to ``path`` (and ``meta`` to ``path.json``)."""
+    from safetensors import SafetensorError
     from safetensors.torch import save_file
 
     path = Path(path)
@@ -90,14 +93,14 @@ def save(path: str | os.PathLike, meta: dict[str, Any], tensors: dict[str, torch
     text = json.dumps(meta, indent=2)
     # safetensors refuses shared or non-contiguous storage; clone into plain CPU tensors.
     plain = {k: v.detach().to("cpu").contiguous().clone() for k, v in tensors.items()}
-    tmp = path.with_name(path.name + ".tmp")
-    save_file(plain, str(tmp), metadata={"splitcam": text})
-    with open(tmp, "rb") as fh:
-        os.fsync(fh.fileno())
-    os.replace(tmp, path)
-    json_tmp = path.with_suffix(".json.tmp")
-    json_tmp.write_text(text + "\n", encoding="utf-8")
-    os.replace(json_tmp, path.with_suffix(".json"))
+    with atomic_path(path) as tmp:
+        try:
+            save_file(plain, str(tmp), metadata={"splitcam": text})
+        except SafetensorError as exc:  # how safetensors reports a failed write (a full disk)
+            raise OSError(errno.EIO, str(exc)) from None
+        with open(tmp, "rb") as fh:
+            os.fsync(fh.fileno())
+    write_text(path.with_suffix(".json"), text + "\n")
     return path
 
 

@@ -25,6 +25,9 @@ else:  # pragma: no cover
     import tomli as tomllib
 
 
+from ..io import write_text
+
+
 class ConfigError(ValueError):
     """A configuration file or override is invalid; the message names the key."""
 
@@ -376,7 +379,7 @@ class TrainConfig:
 
     def write(self, path: str | Path) -> Path:
         path = Path(path)
-        path.write_text(json.dumps(self.to_dict(), indent=2) + "\n", encoding="utf-8")
+        write_text(path, json.dumps(self.to_dict(), indent=2) + "\n")
         return path
 
 

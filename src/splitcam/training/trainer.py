@@ -22,6 +22,7 @@ from .. import patterns
 from ..data.patches import ImageCache, PatchSampler, list_images
 from ..data.testsets import centre_crop
 from ..evaluation.protocol import mean_psnr
+from ..io import appending, atomic_path, stale_temporaries, write_text
 from ..patterns.random import PatternMix
 from ..physics.noise import Exposure, GaussianNoise, PhotonNoise
 from ..physics.sensor import LearnableSplitterSensor, SplitterSensor, SwitchingSensor
@@ -147,7 +148,8 @@ def _export_profile(sensor: Any, run_dir: Path) -> None:
     from ..viz.patterns import draw_height_maps
 
     height = sensor.height().detach().cpu().to(torch.float64).numpy()
-    np.save(run_dir / "height.npy", height)
+    with atomic_path(run_dir / "height.npy") as tmp:
+        np.save(tmp, height)
     draw_height_maps(
         [("learned height map", height)],
         run_dir / "height.png",
@@ -448,7 +450,7 @@ def _truncate_metrics(path: Path, step: int) -> None:
                 kept.append(line)
         except json.JSONDecodeError:
             continue  # a line cut by a kill
-    path.write_text("".join(k + "\n" for k in kept), encoding="utf-8")
+    write_text(path, "".join(k + "\n" for k in kept))
 
 
 @dataclass
@@ -617,7 +619,7 @@ def _train(
     elif resume:
         # A process killed while writing leaves a partial temporary file beside the intact
         # checkpoint; it is rewritten by the next save, but clear it now so nothing stale lingers.
-        for stale in run_dir.glob("*.tmp"):
+        for stale in [*run_dir.glob("*.tmp"), *stale_temporaries(run_dir)]:
             stale.unlink(missing_ok=True)
         loaded = ckpt_io.load(ckpt_path)
         ckpt_io.require(
@@ -768,7 +770,7 @@ def _train(
         # Settings changed on resume apply from here on; the record says when and what.
         for key, (old, new) in changes.items():
             print(f"resume at step {step}: {key} {old!r} -> {new!r}")
-        with open(run_dir / CHANGES_NAME, "a", encoding="utf-8") as fh:
+        with appending(run_dir / CHANGES_NAME) as fh:
             fh.write(json.dumps({"step": step, "time": time.time(), "changes": changes}) + "\n")
 
     def save() -> None:
@@ -834,7 +836,7 @@ def _train(
     with _StopFlag() as stop:
         if step == 0 and val_images and dist_info.is_main:
             start = validate(system, val_images, val_levels, val_patterns)
-            with open(metrics_path, "a", encoding="utf-8") as fh:
+            with appending(metrics_path) as fh:
                 fh.write(json.dumps({"step": 0, **start, "time": time.time()}) + "\n")
         while step < config.optim.steps and not timed_out:
             t0 = time.perf_counter()
@@ -920,7 +922,7 @@ def _train(
                 t_window += time.perf_counter() - t_val  # keep steps/s about training only
             if (log_now or val_now) and dist_info.is_main:
                 last["time"] = time.time()
-                with open(metrics_path, "a", encoding="utf-8") as fh:
+                with appending(metrics_path) as fh:
                     fh.write(json.dumps(last) + "\n")
                 if writer is not None:
                     for key, value in last.items():

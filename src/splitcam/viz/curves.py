@@ -9,6 +9,8 @@ import warnings
 from numbers import Real
 from pathlib import Path
 
+from ..io import atomic_path
+
 
 def _valid(row: object) -> bool:
     """A logged step: a JSON object with an integer step and numbers for every other value."""
@@ -109,7 +111,8 @@ def plot_run(run: str | os.PathLike, out: str | os.PathLike | None = None) -> Pa
     )
     fig.tight_layout()
     out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out, dpi=120)
+    with atomic_path(out) as tmp:
+        fig.savefig(tmp, dpi=120)
     return out
 
 
@@ -176,5 +179,6 @@ def compare_runs(runs: list[str | os.PathLike], out: str | os.PathLike) -> Path:
     fig.tight_layout(rect=(0, 0.17 * len(labels) / (4 + 0.17 * len(labels)) + 0.02, 1, 1))
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out, dpi=120)
+    with atomic_path(out) as tmp:
+        fig.savefig(tmp, dpi=120)
     return out

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..io import atomic_path
 from ..patterns import COLOURS, Pattern, measure, pixel_response
 
 _RGB = {"R": (0.84, 0.15, 0.16), "G": (0.17, 0.63, 0.17), "B": (0.12, 0.37, 0.84)}
@@ -140,7 +141,8 @@ def draw_pattern(pattern: Pattern, out: str | os.PathLike | None = None, *, dpi:
     )
     if out is not None:
         Path(out).parent.mkdir(parents=True, exist_ok=True)
-        fig.savefig(out, dpi=dpi)
+        with atomic_path(out) as tmp:
+            fig.savefig(tmp, dpi=dpi)
     return fig
 
 
@@ -182,5 +184,6 @@ def draw_height_maps(
     fig.tight_layout()
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out, dpi=120)
+    with atomic_path(out) as tmp:
+        fig.savefig(tmp, dpi=120)
     return out

@@ -10,6 +10,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from ..io import atomic_path
+
 __all__ = ["check_region", "detail_region", "zoom_figure"]
 
 
@@ -106,5 +108,6 @@ def zoom_figure(
     fig.tight_layout()
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=130)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=130)
     return path
