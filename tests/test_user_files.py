@@ -364,3 +364,73 @@ def test_training_on_a_full_disk_fails_in_one_line(tmp_path, monkeypatch, capsys
     assert main(args) == 1
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "No space left" in err[0] and str(tmp_path / "run") in err[0]
+
+
+# --- smaller ones -------------------------------------------------------------------------------
+
+
+def test_optics_refuse_a_pillar_index_equal_to_the_spacer_and_negative_heights(tmp_path, capsys):
+    from splitcam.optics import Optics
+
+    with pytest.raises(ValueError, match="above the spacer"):
+        Optics(index=1.0)  # was a ZeroDivisionError in the lens profile
+    height = tmp_path / "h.npy"
+    np.save(height, -np.ones((2 * 8, 2 * 8)))
+    args = ["optics", "--profile", str(height), "--samples", "8", "--out", str(tmp_path / "p.toml")]
+    assert main(args) == 1
+    assert "heights must lie in [0," in capsys.readouterr().err
+
+
+def test_a_kernel_too_large_for_the_statistics_says_what_to_do():
+    import torch
+
+    from splitcam.recon.closed_form import closed_form_mse
+
+    with pytest.raises(ValueError, match="kernels up to 9x9 work with radius 4"):
+        closed_form_mse(torch.full((1, 1, 3, 15, 15), 1 / 300), 0.0)
+
+
+def test_flags_without_effect_are_refused(tmp_path, capsys):
+    data = blocky_images(tmp_path / "img", 3)
+    assert main(["train", "--data", str(data), "--photons", "10", "100", "--steps", "1"]) == 1
+    assert "--photons: settings of the photon model; add --noise photon" in capsys.readouterr().err
+    ev = ["evaluate", "--method", "lmmse", "--patterns", "D", "--datasets", str(data)]
+    assert main([*ev, "--read-noise", "3", "--out", str(tmp_path / "e")]) == 1
+    assert "no effect without --photons" in capsys.readouterr().err
+    assert main(["study", "exposure", "--points", "0", "--datasets", str(data)]) == 1
+    assert "--points must be at least 1" in capsys.readouterr().err
+
+
+def test_a_tiny_image_in_an_evaluation_folder_is_named(tmp_path, capsys):
+    data = blocky_images(tmp_path / "img", 2)
+    Image.fromarray(np.zeros((6, 6, 3), np.uint8)).save(data / "tiny.png")
+    ev = ["evaluate", "--method", "lmmse", "--patterns", "D", "--datasets", str(data)]
+    assert main([*ev, "--out", str(tmp_path / "e")]) == 1
+    err = capsys.readouterr().err
+    assert "img/tiny (6x6)" in err and "11x11" in err
+    assert not (tmp_path / "e" / "per_image.csv").exists()  # refused before any work
+
+
+def test_reconstruct_writes_16_bit_and_float_outputs(photo, tmp_path):
+    path, _ = photo
+    args = ["reconstruct", "--method", "lmmse", "--pattern", "D", "--image", str(path), "--quiet"]
+    assert main([*args, "--out", str(tmp_path / "r.png"), "--bits", "16"]) == 0
+    assert (tmp_path / "r.png").read_bytes()[24] == 16  # PNG bit depth
+    assert main([*args, "--out", str(tmp_path / "r.tif"), "--bits", "16"]) == 0
+    assert main([*args, "--out", str(tmp_path / "r.npy")]) == 0
+    rec = np.load(tmp_path / "r.npy")
+    assert rec.shape == (10, 12, 3) and rec.dtype == np.float32
+    with Image.open(tmp_path / "r.png") as im:
+        assert im.size == (12, 10)
+
+
+def test_patterns_show_a_shipped_models_learned_pattern(tmp_path):
+    from splitcam import patterns
+    from splitcam.training.models import load_model
+
+    out = tmp_path / "a.png"
+    assert main(["patterns", "show", "A-opt", "--out", str(out)]) == 0
+    assert out.stat().st_size > 1000
+    assert main(["patterns", "export", "A-opt", "--out", str(tmp_path / "a.toml")]) == 0
+    learned = load_model("A-opt")[0].sensor.to_pattern()
+    assert np.allclose(patterns.load(tmp_path / "a.toml").kernels, learned.kernels)

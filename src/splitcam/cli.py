@@ -27,6 +27,23 @@ def _table(rows: list[dict[str, str]]) -> str:
     return "\n".join(lines)
 
 
+def _pattern_or_model(spec: str):
+    """A pattern by name or file, or the pattern of a shipped model of one pattern (``A-opt``:
+    its learned kernels)."""
+    from . import patterns
+    from .training.models import load_model, model_names
+
+    try:
+        return patterns.get(spec)
+    except patterns.PatternError:
+        if spec not in model_names():
+            raise
+        system, meta = load_model(spec)
+        if getattr(system.network, "period", 0) is None:
+            raise ValueError(f"model {spec} serves any pattern; it has none to show") from None
+        return system.sensor.to_pattern(spec)
+
+
 def cmd_patterns(args: argparse.Namespace) -> int:
     from . import patterns
 
@@ -34,13 +51,13 @@ def cmd_patterns(args: argparse.Namespace) -> int:
         names = args.names or patterns.names()
         rows = []
         for name in names:
-            p = patterns.get(name)
+            p = _pattern_or_model(name)
             rows.append({**patterns.measure(p).row(), "provenance": p.provenance})
         print(_table(rows))
         return 0
     if len(args.names) != 1:
         raise ValueError(f"'patterns {args.action}' takes one pattern name or file")
-    pattern = patterns.get(args.names[0])
+    pattern = _pattern_or_model(args.names[0])
     if args.action == "show":
         from .viz.patterns import draw_pattern
 
@@ -129,6 +146,11 @@ def cmd_train(args: argparse.Namespace) -> int:
         value = getattr(args, flag.name, None)
         if value is not None:
             overrides[flag.key] = value
+    photon_only = sorted(k for k in overrides if k.startswith("noise.") and k != "noise.model")
+    model = overrides.get("noise.model", config.noise.model)
+    if photon_only and model != "photon":
+        flags = ", ".join("--" + k.split(".", 1)[1].replace("_", "-") for k in photon_only)
+        raise ValueError(f"{flags}: settings of the photon model; add --noise photon")
     init_from = overrides.get("run.init_from", config.run.init_from)
     if not args.resume and init_from and "network.arch" not in overrides:
         overrides.update(_fine_tuning(init_from, overrides))
@@ -370,9 +392,19 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
         raw = simulate(SplitterSensor(method.pattern), rgb, Path(args.image).stem, sigma)
     else:
         raw = torch.from_numpy(read_raw(args.raw))[None, None]
+    if hasattr(method, "progress"):
+        method.progress = not args.quiet
     with torch.no_grad():
         out = method.reconstruct(raw, sigma)
-    write_image(args.out, out[0].clamp(0, 1))
+    if Path(args.out).suffix.lower() == ".npy":  # float32 (H, W, 3), unclipped
+        import numpy as np
+
+        from .io import atomic_path
+
+        with atomic_path(args.out) as tmp:
+            np.save(tmp, out[0].permute(1, 2, 0).float().numpy())
+    else:
+        write_image(args.out, out[0].clamp(0, 1), bits=args.bits)
     print(f"{method.name}: wrote {args.out} ({out.shape[-1]}x{out.shape[-2]})")
     return 0
 
@@ -467,6 +499,11 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     )
     from .physics.noise import Exposure
 
+    if not args.photons and _sensor_flags_given(args):
+        raise ValueError(
+            f"{', '.join(_sensor_flags_given(args))} describe the photon model's sensor and have "
+            f"no effect without --photons (the exposures to score)"
+        )
     exposures = [Exposure(n, **_sensor(args)) for n in args.photons or ()]  # checked first
     paper_sigmas = [0.0, 5.0, 10.0, 15.0, 20.0]  # SPEC section 7
     sigmas = args.sigmas if args.sigmas is not None else [] if exposures else paper_sigmas
@@ -705,6 +742,8 @@ def cmd_study(args: argparse.Namespace) -> int:
         write_study,
     )
 
+    if args.points < 1:
+        raise ValueError(f"--points must be at least 1, got {args.points}")
     photons = args.photons or default_exposures(args.points)
     datasets = load_datasets(args.datasets, args.max_images)
     images = [img for _, imgs in datasets for img in imgs]
@@ -920,27 +959,32 @@ def _add_precision(p: argparse.ArgumentParser, default: str) -> None:
 def _add_sensor_options(p: argparse.ArgumentParser) -> None:
     """The photon model's sensor besides the exposure (splitcam.physics.noise.Exposure), shared
     by `evaluate` and `study exposure`."""
-    p.add_argument(
-        "--read-noise", type=float, default=2.0, help="photon model: electrons (default 2)"
-    )
+    p.add_argument("--read-noise", type=float, help="photon model: electrons (default 2)")
     p.add_argument(
         "--full-well", type=float, help="photon model: saturation, electrons (default: none)"
     )
     p.add_argument(
         "--gain", type=float, help="photon model: ADC electrons per DN (default: no ADC)"
     )
-    p.add_argument("--bits", type=int, default=12, help="photon model: ADC bits (default 12)")
+    p.add_argument("--bits", type=int, help="photon model: ADC bits (default 12)")
 
 
 def _sensor(args: argparse.Namespace) -> dict:
     """The keyword arguments of :class:`~splitcam.physics.noise.Exposure` from the options of
     :func:`_add_sensor_options`."""
     return {
-        "read_noise": args.read_noise,
+        "read_noise": 2.0 if args.read_noise is None else args.read_noise,
         "full_well": args.full_well,
         "gain": args.gain,
-        "bits": args.bits,
+        "bits": 12 if args.bits is None else args.bits,
     }
+
+
+def _sensor_flags_given(args: argparse.Namespace) -> list[str]:
+    """The photon-model sensor flags given on the command line."""
+    names = {"read_noise": "--read-noise", "full_well": "--full-well", "gain": "--gain"}
+    names["bits"] = "--bits"
+    return [flag for name, flag in names.items() if getattr(args, name, None) is not None]
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -1277,8 +1321,15 @@ def build_parser() -> argparse.ArgumentParser:
         "not record it (raw files from `splitcam simulate` do)",
     )
     _add_method_options(p)
-    p.add_argument("--out", required=True, help="output PNG")
-    p.add_argument("--quiet", action="store_true")
+    p.add_argument(
+        "--out",
+        required=True,
+        help="output image: .png, .tif/.tiff or .jpg, or .npy (float32 H x W x 3, unclipped)",
+    )
+    p.add_argument(
+        "--bits", type=int, choices=[8, 16], default=8, help="bits per channel of PNG/TIFF (8)"
+    )
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(handler=cmd_reconstruct)
     return parser
 

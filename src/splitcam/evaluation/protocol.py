@@ -32,7 +32,7 @@ from ..physics.sensor import SplitterSensor
 from ..physics.system import simulate
 from ..recon.base import Reconstructor
 from ..viz.zoom import check_region, zoom_figure
-from .metrics import compute_all, mean_over_images
+from .metrics import SSIM_WINDOW, compute_all, mean_over_images
 from .tables import CSV_NAME, EvalRow, append_rows, level_label, read_rows, write_summary
 
 __all__ = [
@@ -243,6 +243,19 @@ def evaluate(
     if zoom_images is None:
         zooms = [Zoom(images[0][0]) for _, images in datasets if images]
     zoom = _check_zooms(zooms, datasets)
+    need = SSIM_WINDOW + 2 * crop  # what SSIM's window needs after the border crop
+    small = [
+        f"{dataset}/{name} ({rgb.shape[-1]}x{rgb.shape[-2]})"
+        for dataset, images in datasets
+        for name, rgb in images
+        if min(rgb.shape[-2:]) < need
+    ]
+    if small:
+        raise ValueError(
+            f"{len(small)} image(s) smaller than {need}x{need} pixels, the least SSIM needs with "
+            f"a {crop}-pixel border crop: {', '.join(small[:5])}{' ...' if len(small) > 5 else ''}"
+            f"; remove them from the folder"
+        )
     fingerprints = {m.name: _fingerprint(m, crop) for m in methods}
 
     out_dir = Path(out) if out is not None else None

@@ -107,6 +107,11 @@ class Optics:
                 f"refractive indices must be >= 1, got index {self.index}, spacer "
                 f"{self.spacer_index}"
             )
+        if self.index <= self.spacer_index:
+            raise ValueError(
+                f"the pillars' index ({self.index:g}) must be above the spacer's "
+                f"({self.spacer_index:g}): otherwise a height changes no phase"
+            )
         if not (self.max_height > 0):
             raise ValueError(f"max_height must be > 0 µm, got {self.max_height}")
         if isinstance(self.samples, bool) or not isinstance(self.samples, int) or self.samples < 1:
@@ -366,4 +371,12 @@ def profile(spec: str, period: tuple[int, int], optics: Optics, seed: int = 0) -
             raise ValueError(f"cannot read the height map {spec!r}: {exc}") from None
     if tuple(height.shape) != shape:
         raise ValueError(f"expected a height map of shape {shape}, got {tuple(height.shape)}")
+    if not bool(torch.isfinite(height).all()):
+        raise ValueError(f"the height map {spec!r} holds NaN or infinite heights")
+    low, high = float(height.min()), float(height.max())
+    if low < 0 or high > optics.max_height + 1e-9:
+        raise ValueError(
+            f"the height map {spec!r} spans {low:g}..{high:g} µm; heights must lie in "
+            f"[0, {optics.max_height:g}] µm (the pillars' maximum height, --max-height)"
+        )
     return height

@@ -148,6 +148,8 @@ class NetworkReconstructor:
         self.name = name
         self.tile = tile
         self.precision = precision
+        #: Show a progress bar over the tiles (what the CLI turns on for large images).
+        self.progress = False
         self._kernels = pattern_pixel_kernels(pattern)
 
     def reconstruct(self, raw: torch.Tensor, sigma: float) -> torch.Tensor:
@@ -163,6 +165,7 @@ class NetworkReconstructor:
             channels_last=fast,
             sigma=sigma,
             kernels=self._kernels,
+            progress=self.progress,
         )
 
     def __repr__(self) -> str:

@@ -263,9 +263,13 @@ def _moments(
     index, (wh, ww) = _design_index((ph, pw), kh, kw, radius)
     lo = stats.max_offset
     if max(wh, ww) - 1 > lo:
+        largest = lo + 1 - 2 * radius
         raise ValueError(
-            f"radius {radius} with {kh}x{kw} kernels needs image statistics up to offset "
-            f"{max(wh, ww) - 1}, these cover {lo}"
+            f"the closed-form LMMSE of {kh}x{kw} kernels with radius {radius} needs image "
+            f"statistics up to offset {max(wh, ww) - 1}, these cover {lo}: kernels up to "
+            f"{largest - (largest + 1) % 2}x{largest - (largest + 1) % 2} work with radius "
+            f"{radius}; for larger ones, estimate statistics with a larger max_offset "
+            f"(splitcam.recon.closed_form.estimate_image_statistics) or use --lmmse-train DIR"
         )
     flat = torch.cat([kernels.reshape(-1), kernels.new_zeros(1)])
     # The caches hold numpy arrays: a tensor made under inference_mode (validation) could not
