@@ -761,10 +761,11 @@ def cmd_study(args: argparse.Namespace) -> int:
         progress=not args.quiet,
     )
     snr = raw_snr_check(images, patterns=args.patterns) if "bayer" in args.patterns else None
+    sensor = _sensor(args)
     note = (
-        f"Images: {names}. Read noise {args.read_noise:g} e-, "
+        f"Images: {names}. Read noise {sensor['read_noise']:g} e-, "
         + (f"full well {args.full_well:g} e-, " if args.full_well else "no saturation, ")
-        + (f"ADC {args.bits} bits at {args.gain:g} e-/DN. " if args.gain else "no ADC. ")
+        + (f"ADC {sensor['bits']} bits at {args.gain:g} e-/DN. " if args.gain else "no ADC. ")
         + "Command: "
         f"`splitcam study exposure {' '.join(sys.argv[3:])}`"
     )
