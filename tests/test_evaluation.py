@@ -287,14 +287,20 @@ def test_report_puts_results_beside_the_paper(tmp_path, capsys):
 
     learned = Spy("learned")
     learned.pattern = LearnableSplitterSensor("A", init="random").to_pattern("A-opt")
+    images = _images(24)
     evaluate(
         [Spy("plain-D"), learned, Spy("bayerish", pattern="bayer")],
-        [("set", _images(1))],
-        [0, 10],
+        [("kodak24", images), ("mcmaster", images[:18])],  # the paper's test sets' sizes
+        [10, 0],
         tmp_path / "res",
         progress=False,
     )
+    # The same methods on another set: the paper's numbers are not set beside these.
+    evaluate([Spy("plain-D")], [("set", images[:2])], [0], tmp_path / "other", progress=False)
+    other = make_report([tmp_path / "other"], tmp_path / "rep-other").read_text()
+    assert "(40.35" not in other
     report = make_report([tmp_path / "res"], tmp_path / "rep").read_text()
+    assert report.index("σ=0") < report.index("σ=10")  # levels in order
     summary = json.loads((tmp_path / "res/summary.json").read_text())
     ours = summary["plain-D"]["all"]["0"]["psnr"]
     assert f"{ours:.2f} / " in report and f"(40.35, {ours - 40.35:+.2f})" in report

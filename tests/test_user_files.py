@@ -434,3 +434,38 @@ def test_patterns_show_a_shipped_models_learned_pattern(tmp_path):
     assert main(["patterns", "export", "A-opt", "--out", str(tmp_path / "a.toml")]) == 0
     learned = load_model("A-opt")[0].sensor.to_pattern()
     assert np.allclose(patterns.load(tmp_path / "a.toml").kernels, learned.kernels)
+
+
+def test_report_draws_two_learned_patterns_of_one_name_apart(tmp_path):
+    from splitcam.evaluation import evaluate
+    from splitcam.evaluation.report import make_report
+    from splitcam.physics.sensor import LearnableSplitterSensor
+
+    class Fixed:
+        def __init__(self, name, pattern):
+            self.name, self.pattern = name, pattern
+
+        def reconstruct(self, raw, sigma):
+            return raw.expand(-1, 3, -1, -1) / 4
+
+    import torch
+
+    gen = torch.Generator().manual_seed(0)
+    images = [("a", torch.rand(3, 16, 16, generator=gen))]
+    for i, folder in enumerate(("one", "two")):
+        g = torch.Generator().manual_seed(i)
+        learned = LearnableSplitterSensor("D", init="random", generator=g).to_pattern()
+        evaluate([Fixed("net", learned)], [("s", images)], [0], tmp_path / folder, progress=False)
+    report = make_report([tmp_path / "one", tmp_path / "two"], tmp_path / "rep").read_text()
+    assert "patterns/D-learned.png" in report and "patterns/D-learned-2.png" in report
+    assert (tmp_path / "rep" / "patterns" / "D-learned-2.png").is_file()
+
+
+def test_sigma_charts_tell_every_line_apart():
+    from splitcam.viz.charts import KIND_STYLES, _palette, method_kind
+
+    colours = _palette(16)
+    assert len({str(c) for c in colours}) == 16
+    kinds = [method_kind(n) for n in ("net-D", "lmmse-D", "bayer+malvar2004", "res: lmmse-A")]
+    assert kinds == ["network", "lmmse", "classical", "lmmse"]
+    assert len({str(v) for v in KIND_STYLES.values()}) == 3

@@ -544,11 +544,12 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
         from .viz.charts import sigma_chart
 
         curves = [(name, entry["all"]) for name, entry in summary.items()]
-        sigma_chart(curves, chart)
+        sigma_chart(curves, chart, patterns_of={n: e["pattern"] for n, e in summary.items()})
         written += ", sigma_curves.png"
     else:
         chart.unlink(missing_ok=True)  # an earlier chart would not match the table
-    if not chosen or args.save_images:
+    zoom = Path(args.out) / "zoom"
+    if (not chosen or args.save_images) and zoom.is_dir() and any(zoom.iterdir()):
         written += " and the zoomed crops in zoom/"
     print(f"wrote {args.out}/{written}")
     return 0
@@ -559,7 +560,9 @@ def cmd_report(args: argparse.Namespace) -> int:
 
     path = make_report(args.results, args.out)
     print(path.read_text(encoding="utf-8"))
-    print(f"wrote {path} with pattern figures and {Path(args.out) / 'sigma_curves.png'}")
+    charts = [Path(args.out) / n for n in ("sigma_curves.png", "exposure_curves.png")]
+    drawn = " and ".join(str(c) for c in charts if c.is_file())
+    print(f"wrote {path} with pattern figures" + (f" and {drawn}" if drawn else ""))
     return 0
 
 

@@ -83,7 +83,7 @@ def level_label(sigma: float, photons: float = 0.0) -> str:
     return f"N{photons:g}" if photons else f"{sigma:g}"
 
 
-def _level_order(label: str) -> tuple[int, float]:
+def level_order(label: str) -> tuple[int, float]:
     """Gaussian levels first by sigma, then exposures by photo-electrons."""
     return (1, float(label[1:])) if label.startswith("N") else (0, float(label))
 
@@ -158,7 +158,7 @@ def summarise(rows: Sequence[EvalRow]) -> dict:
         for group in [*groups, "all"]:
             chosen = mine if group == "all" else [r for r in mine if r.dataset == group]
             per_sigma = {}
-            for level in sorted({r.level for r in chosen}, key=_level_order):
+            for level in sorted({r.level for r in chosen}, key=level_order):
                 at = [r for r in chosen if r.level == level]
                 stats = {}
                 for metric in METRICS:

@@ -11,12 +11,47 @@ from ..io import atomic_path
 __all__ = ["exposure_chart", "sigma_chart"]
 
 
+def method_kind(label: str) -> str:
+    """``lmmse``, ``classical`` (Bayer demosaicking) or ``network``, from a method's label."""
+    name = label.rsplit(": ", 1)[-1]  # a report prefixes the result folder
+    if name.startswith("lmmse"):
+        return "lmmse"
+    if name.startswith("bayer+"):
+        return "classical"
+    return "network"
+
+
+#: Line style and marker per kind of method: a pattern's curves share a colour.
+KIND_STYLES = {
+    "network": {"ls": "-", "marker": "o"},
+    "lmmse": {"ls": "--", "marker": "s"},
+    "classical": {"ls": ":", "marker": "^"},
+}
+
+
+def _palette(n: int) -> list:
+    """``n`` distinguishable colours: the default cycle up to 10, tab20 up to 20, then a
+    continuous colour map."""
+    import matplotlib
+
+    if n <= 10:
+        return matplotlib.rcParams["axes.prop_cycle"].by_key()["color"][:n]
+    cmap = matplotlib.colormaps["tab20" if n <= 20 else "turbo"]
+    return [cmap(i / max(n - 1, 1)) if n > 20 else cmap(i) for i in range(n)]
+
+
 def sigma_chart(
     curves: Sequence[tuple[str, Mapping[str, Mapping[str, float]]]],
     path: str | os.PathLike,
     references: Mapping[str, Sequence[tuple[float, float]]] | None = None,
+    *,
+    patterns_of: Mapping[str, str] | None = None,
 ) -> Path:
     """PSNR and CIEDE2000 against sigma for every method (the paper's Fig. 9).
+
+    Each pattern has its own colour and each kind of method its own line style and marker
+    (network solid, LMMSE dashed, classical demosaicking dotted), so every line can be told
+    apart; the x ticks are the sigmas measured.
 
     Args:
         curves: ``(label, {sigma: {"psnr": .., "ciede2000": ..}})`` per method (photon-model
@@ -24,31 +59,23 @@ def sigma_chart(
         path: PNG to write.
         references: Reference PSNR curves ``{label: [(sigma, psnr), ...]}``, drawn grey dashed
             (the paper's trained networks).
+        patterns_of: The pattern of each label (default: each label its own colour).
     """
-    import matplotlib
     from matplotlib.figure import Figure
 
     fig = Figure(figsize=(12, 4.6))
     ax1, ax2 = fig.subplots(1, 2)
-    colours = matplotlib.rcParams["axes.prop_cycle"].by_key()["color"]
-    for i, (label, per_sigma) in enumerate(curves):
-        colour = colours[i % len(colours)]
+    group = {label: (patterns_of or {}).get(label, label) for label, _ in curves}
+    keys = list(dict.fromkeys(group.values()))
+    colour_of = dict(zip(keys, _palette(len(keys)), strict=True))
+    measured: set[float] = set()
+    for label, per_sigma in curves:
+        style = {"color": colour_of[group[label]], "ms": 4, **KIND_STYLES[method_kind(label)]}
         sig = sorted((s for s in per_sigma if not s.startswith("N")), key=float)  # N...: exposures
         xs = [float(s) for s in sig]
-        ax1.plot(xs, [per_sigma[s]["psnr"] for s in sig], "o-", color=colour, label=label)
-        ax2.plot(xs, [per_sigma[s]["ciede2000"] for s in sig], "o-", color=colour, label=label)
-    for ref, points in (references or {}).items():
-        xs, values = zip(*points, strict=True)
-        ax1.plot(xs, values, "--", color="grey", alpha=0.7, lw=1)
-        ax1.annotate(
-            f"paper {ref}",
-            (xs[-1], values[-1]),
-            fontsize=7,
-            color="dimgrey",
-            xytext=(3, 0),
-            textcoords="offset points",
-            va="center",
-        )
+        measured.update(xs)
+        ax1.plot(xs, [per_sigma[s]["psnr"] for s in sig], label=label, **style)
+        ax2.plot(xs, [per_sigma[s]["ciede2000"] for s in sig], label=label, **style)
     ax1.set_xlabel("noise σ (8-bit units)")
     ax1.set_ylabel("PSNR (dB)")
     ax1.set_title(
@@ -59,6 +86,8 @@ def sigma_chart(
     ax2.set_title("colour error", fontsize=10)
     for ax in (ax1, ax2):
         ax.grid(alpha=0.3)
+        ax.set_xticks(sorted(measured))
+        ax.set_xticklabels([f"{x:g}" for x in sorted(measured)])
     ax2.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1))
     fig.tight_layout()
     path = Path(path)
