@@ -618,7 +618,17 @@ def test_provenance_records_each_thread_count_of_a_resumed_run(image_folder, tmp
     assert meta["provenance"]["segments"][-1]["device"].endswith("; 1 thread)")
 
 
-@pytest.mark.parametrize("name", model_names())
+def _one_pattern_models() -> list[str]:
+    """Shipped models of one pattern (a model for any pattern has a test of its own)."""
+    return [
+        name
+        for name in model_names()
+        if json.loads((models_module.MODELS_DIR / f"{name}.json").read_text())["network"]["arch"]
+        != "universal"
+    ]
+
+
+@pytest.mark.parametrize("name", _one_pattern_models())
 def test_every_shipped_model_loads_matches_its_json_and_beats_its_lmmse(name, shared_data):
     """The models inside the package itself (not a fixture's): at most 2 MB, the JSON's pattern
     and architecture are what loads, deterministic, and better than the training-free closed-form
@@ -678,3 +688,38 @@ def test_the_main_job_scores_every_shipped_model_on_crops(trained_run, tmp_path,
     assert main(["evaluate", *common, "--max-size", "0", "--out", str(tmp_path / "whole")]) == 0
     rows = list(csv.DictReader((tmp_path / "whole" / "per_image.csv").open()))
     assert {r["dataset"] for r in rows} == {"skimage"}
+
+
+#: The smallest lead (dB) of the shipped universal model over a library pattern's LMMSE on the
+#: test's crops, less a margin (docs/results/universal/README.md).
+UNIVERSAL_LEAD = 0.5
+
+
+@pytest.mark.skipif("universal" not in model_names(), reason="no universal model shipped")
+def test_the_shipped_universal_model_beats_the_lmmse_of_every_library_pattern(shared_data):
+    """The model for any pattern: a few MB, and on held-out crops with odd sides (127 px: every
+    period above 1 ends part-way) better than the closed-form LMMSE of each library pattern by
+    at least UNIVERSAL_LEAD dB at sigma 0 and 15 (the smallest lead measured: see
+    docs/results/universal/README.md)."""
+    from splitcam import patterns
+    from splitcam.data.imageio import read_image
+    from splitcam.data.patches import list_images
+    from splitcam.data.testsets import centre_crop
+    from splitcam.recon.closed_form import closed_form_lmmse
+
+    weights = models_module.MODELS_DIR / "universal.safetensors"
+    assert weights.stat().st_size <= 4 * 1024**2
+    crops = [
+        (
+            path.name,
+            centre_crop(torch.from_numpy(read_image(path)).permute(2, 0, 1), 127, multiple=1),
+        )
+        for path in list_images(shared_data / "train")[-4:]
+    ]
+    for name in patterns.names():
+        method = build_method("universal", pattern=name, precision="fp32")
+        assert method.name == f"net-universal-{name}"
+        net = mean_psnr(method, crops, [0.0, 15.0])
+        lmmse = mean_psnr(closed_form_lmmse(name), crops, [0.0, 15.0])
+        lead = min(net[0.0] - lmmse[0.0], net[15.0] - lmmse[15.0])
+        assert lead > UNIVERSAL_LEAD, (name, net, lmmse)

@@ -16,7 +16,7 @@ def _valid() -> dict:
 
 
 def test_registry_names_and_case_insensitive_lookup():
-    assert patterns.names() == ["A", "B", "C", "D", "E", "bayer"]
+    assert patterns.names() == ["A", "B", "C", "D", "E", "bayer", "rgbw", "quad"]
     assert patterns.get("d").name == "D"
     assert patterns.get("BAYER").name == "bayer"
     with pytest.raises(PatternError, match="unknown pattern 'F'; valid names: A, B, C, D, E, bay"):
@@ -182,3 +182,23 @@ def test_measures_match_hand_computation():
     # B like R; divided by the 12 units of light.
     travel = (2 * (2 + np.sqrt(2)) + 2) / 12
     assert m["A"].mean_travel == pytest.approx(travel)
+
+
+def test_low_light_filter_arrays_collect_their_share_of_white_light():
+    """SPEC section 14: RGBW collects 2/3 of white light (twice Bayer), Quad Bayer 1/3; counted
+    independently here from the layouts' pixel types."""
+    import numpy as np
+
+    rgbw, quad, bayer = (patterns.get(n) for n in ("rgbw", "quad", "bayer"))
+    assert rgbw.period == quad.period == (4, 4)
+    # Half of RGBW's pixels pass all three colours, the other half one.
+    passes = rgbw.kernels[rgbw.layout].sum(axis=(-1, -2)).sum(-1)  # colours passed per pixel
+    assert (passes == 3).sum() == 8 and (passes == 1).sum() == 8
+    assert patterns.measure(rgbw).white == pytest.approx(2 / 3)
+    assert patterns.measure(quad).white == pytest.approx(1 / 3)
+    assert patterns.measure(bayer).white == pytest.approx(1 / 3)
+    assert patterns.measure(patterns.get("A")).white == pytest.approx(1.0)
+    # Quad Bayer is Bayer with every pixel doubled in both directions.
+    colour = quad.kernels[quad.layout][..., 0, 0].argmax(-1)
+    bayer_colour = bayer.kernels[bayer.layout][..., 0, 0].argmax(-1)
+    assert np.array_equal(colour, np.kron(bayer_colour, np.ones((2, 2), dtype=int)))

@@ -1,4 +1,5 @@
-"""The published splitter patterns A–E and the Bayer filter (SPEC section 2).
+"""The published splitter patterns A–E, the Bayer filter (SPEC section 2) and the low-light
+filter arrays RGBW and Quad Bayer (SPEC section 14).
 
 Kernels are written ``[row][col]``; the centre tap is the light that stays on the pixel where it
 arrived. A and D match the authors' code exactly; B, C and E are modelled from the device
@@ -134,6 +135,40 @@ def _pattern_bayer() -> Pattern:
     )
 
 
+# Filters of the low-light arrays (SPEC section 14): W passes every colour, R, G, B their own.
+_W, _R, _G, _B = 0, 1, 2, 3
+_FILTERS = np.zeros((4, 3, 1, 1))
+_FILTERS[_W] = 1.0
+for _c in range(3):
+    _FILTERS[1 + _c, _c] = 1.0
+
+
+def _pattern_rgbw() -> Pattern:
+    layout = [[_W, _B, _W, _G], [_B, _W, _G, _W], [_W, _G, _W, _R], [_G, _W, _R, _W]]
+    return Pattern(
+        name="rgbw",
+        layout=np.array(layout),
+        kernels=_FILTERS.copy(),
+        provenance="standard",
+        description="RGBW colour filter array: panchromatic (W) pixels on a checkerboard, half "
+        "of all pixels, ideal filters; collects 2/3 of white light, twice a Bayer filter",
+        reference="Compton & Hamilton (Kodak), image sensor with improved light sensitivity ('CFA 2.0')",
+    )
+
+
+def _pattern_quad() -> Pattern:
+    layout = [[_R, _R, _G, _G], [_R, _R, _G, _G], [_G, _G, _B, _B], [_G, _G, _B, _B]]
+    return Pattern(
+        name="quad",
+        layout=np.array(layout),
+        kernels=_FILTERS.copy(),
+        provenance="standard",
+        description="Quad Bayer (Tetracell) filter array: each colour of the RGGB arrangement on "
+        "a 2x2 block of pixels, ideal filters; collects 1/3 of white light, as a Bayer filter",
+        reference="Sony Quad Bayer / Samsung Tetracell image sensors",
+    )
+
+
 BUILTIN_FACTORIES = {
     "A": _pattern_a,
     "B": _pattern_b,
@@ -141,4 +176,6 @@ BUILTIN_FACTORIES = {
     "D": _pattern_d,
     "E": _pattern_e,
     "bayer": _pattern_bayer,
+    "rgbw": _pattern_rgbw,
+    "quad": _pattern_quad,
 }

@@ -4,7 +4,8 @@ The paper's three principles — avoid the sub-pixel (pooling) structure, split 
 as small as possible, split the incident light fully — become numbers that can be read for any
 pattern, including learned ones:
 
-- ``efficiency``: mean kernel sum over the layout, per colour (1 = lossless, 1/3 for Bayer G/2...).
+- ``efficiency``: mean kernel sum over the layout, per colour (1 = lossless, 1/3 for Bayer G/2...);
+  ``white``, their mean: the share of white light collected.
 - ``split_fraction``: share of the incident (white) light that leaves the pixel it arrived at.
 - ``spread``: the largest distance (in pixels) any light travels; ``mean_travel``: the
   light-weighted mean distance travelled.
@@ -38,12 +39,19 @@ class PatternMeasures:
     def pooling(self) -> bool:
         return self.pooling_unit > 1
 
+    @property
+    def white(self) -> float:
+        """Share of white light the sensor collects (the mean of the three efficiencies): 1 for
+        a lossless router, 2/3 for an ideal RGBW array, 1/3 for Bayer and Quad Bayer."""
+        return sum(self.efficiency) / 3
+
     def row(self) -> dict[str, str]:
         """Formatted cells for a table."""
         return {
             "pattern": self.name,
             "period": f"{self.period[0]}x{self.period[1]}",
             "efficiency R/G/B": "/".join(f"{e:.2f}" for e in self.efficiency),
+            "white": f"{self.white:.3f}",
             "split": f"{self.split_fraction:.2f}",
             "spread (px)": f"{self.spread:.2f}",
             "mean travel (px)": f"{self.mean_travel:.2f}",
