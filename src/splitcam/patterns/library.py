@@ -152,7 +152,8 @@ def _pattern_rgbw() -> Pattern:
         provenance="standard",
         description="RGBW colour filter array: panchromatic (W) pixels on a checkerboard, half "
         "of all pixels, ideal filters; collects 2/3 of white light, twice a Bayer filter",
-        reference="Compton & Hamilton (Kodak), image sensor with improved light sensitivity ('CFA 2.0')",
+        reference="Compton & Hamilton (Kodak): image sensor with improved light sensitivity "
+        "('CFA 2.0')",
     )
 
 
