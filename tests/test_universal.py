@@ -330,6 +330,7 @@ def test_fine_tuning_from_a_universal_model(tiny_universal, tmp_path, capsys):
     config = json.loads((run / "config.json").read_text())
     assert config["network"]["arch"] == "universal" and config["network"]["features"] == 8
     assert config["run"]["time_limit"] is None  # --steps given: no default budget
+    assert config["optim"]["lr"] == 3e-4  # the fine-tuning rate
     method = build_method(str(run), precision="fp32")  # a run of one pattern: its own
     assert method.pattern.equals(patterns.load(mine))
     source, _ = load_model(model)
