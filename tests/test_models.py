@@ -198,11 +198,21 @@ def test_training_from_a_model_continues_its_weights_and_provenance(
     assert [s["steps"] for s in prov["segments"]] == [4, 2]
     assert prov["segments"][1]["init_from"] == "m"
     assert [r["step"] for r in prov["validation"]] == [0, 2, 4, 4, 6]
-    # A fixed pattern must be the model's; another architecture is refused.
-    with pytest.raises(ConfigError, match="another pattern"):
+    # Another fixed pattern of the same period starts from these weights, and says so; another
+    # architecture (or period) is refused.
+    other = _config(
+        image_folder,
+        tmp_path / "x",
+        **{"run.init_from": str(model), "pattern.name": "A", "optim.steps": 1},
+    )
+    train(other, progress=False)
+    assert (
+        ckpt_io.read_meta(tmp_path / "x" / "checkpoint.safetensors")["init_from"]["pattern"] == "D"
+    )
+    with pytest.raises(ConfigError, match="differs"):
         train(
             _config(
-                image_folder, tmp_path / "x", **{"run.init_from": str(model), "pattern.name": "A"}
+                image_folder, tmp_path / "z", **{"run.init_from": str(model), "pattern.name": "E"}
             ),
             progress=False,
         )

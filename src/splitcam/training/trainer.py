@@ -182,9 +182,10 @@ def device_name(device: torch.device) -> str:
 def _start_from(system: ImagingSystem, spec: str) -> dict[str, Any]:
     """Load the weights of a model or run into a new run's system (``run.init_from``).
 
-    The network must have the same architecture; a learned pattern starts from the source's
-    kernels (logits ``log k``), a fixed one must be the source's pattern. Returns what the
-    checkpoints record: the source's name and accumulated provenance.
+    The network must have the same architecture (and period); a learned pattern starts from the
+    source's kernels (logits ``log k``); a fixed one may be another pattern of that period (a
+    head start: most of what the network learnt is not specific to the pattern). Returns what the
+    checkpoints record: the source's name, its pattern if another, and accumulated provenance.
     """
     from .models import ModelError, check_unambiguous, load_model, provenance_of
 
@@ -225,9 +226,13 @@ def _start_from(system: ImagingSystem, spec: str) -> dict[str, Any]:
         with torch.no_grad():
             own.logits.copy_(exact.logits)
     elif not torch.allclose(own.pixel_kernels().detach().double(), kernels.double(), atol=1e-6):
-        raise ConfigError(
-            f"--init-from {spec}: it was trained for another pattern "
-            f"({source.sensor.to_pattern().name}); use its pattern or --learn-pattern"
+        # Another pattern of the same period: what the network learnt (denoising, detail,
+        # colour) is mostly not specific to the pattern, so it is a head start (the network
+        # config, period included, matched above). Said, and recorded.
+        record["pattern"] = source.sensor.to_pattern().name
+        print(
+            f"--init-from {spec}: its network was trained for pattern {record['pattern']}; "
+            f"training it on for {own.to_pattern().name}"
         )
     system.network.load_state_dict(source.network.to(own_device).state_dict())
     return record
