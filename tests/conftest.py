@@ -20,6 +20,19 @@ def shared_data() -> Path:
     return SHARED_DATA
 
 
+@pytest.fixture
+def photo(tmp_path):
+    """A random 10x12 RGB photo ``photo.png`` in ``tmp_path``, and its pixels."""
+    import numpy as np
+    from PIL import Image
+
+    rng = np.random.default_rng(0)
+    arr = rng.integers(0, 256, size=(10, 12, 3), dtype=np.uint8)
+    path = tmp_path / "photo.png"
+    Image.fromarray(arr).save(path)
+    return path, arr
+
+
 #: A training run small enough for a test: 16-pixel patches, an 8-feature one-block network,
 #: validation on 2 held-out images.
 TINY_SETTINGS = {

@@ -14,15 +14,6 @@ from splitcam.physics.noise import evaluation_noise
 from splitcam.physics.sensor import SplitterSensor
 
 
-@pytest.fixture
-def photo(tmp_path):
-    rng = np.random.default_rng(0)
-    arr = rng.integers(0, 256, size=(10, 12, 3), dtype=np.uint8)
-    path = tmp_path / "photo.png"
-    Image.fromarray(arr).save(path)
-    return path, arr
-
-
 def test_patterns_table_lists_every_pattern(capsys):
     assert main(["patterns"]) == 0
     out = capsys.readouterr().out

@@ -11,15 +11,6 @@ from PIL import Image
 from splitcam.cli import main
 
 
-@pytest.fixture
-def photo(tmp_path):
-    rng = np.random.default_rng(0)
-    arr = rng.integers(0, 256, size=(10, 12, 3), dtype=np.uint8)
-    path = tmp_path / "photo.png"
-    Image.fromarray(arr).save(path)
-    return path, arr
-
-
 def _unchanged(path, arr) -> bool:
     with Image.open(path) as im:
         return np.array_equal(np.asarray(im), arr)

@@ -116,8 +116,12 @@ class ResidualBlock(nn.Module):
         self.conv1 = _conv3x3(features, features)
         self.conv2 = _conv3x3(features, features)
 
-    def forward(self, x: torch.Tensor) -> torch.Tensor:
-        return x + self.conv2(F.relu(self.conv1(x)))
+    def forward(self, x: torch.Tensor, film: torch.Tensor | None = None) -> torch.Tensor:
+        inner = self.conv1(x)
+        if film is not None:  # (N, 2F, 1, 1): a scale and a shift per channel
+            scale, shift = film.chunk(2, dim=1)
+            inner = inner * (1 + scale) + shift
+        return x + self.conv2(F.relu(inner))
 
     @property
     def reach(self) -> int:
@@ -134,9 +138,15 @@ class _Trunk(nn.Module):
         self.body_out = _conv3x3(features, features)
         self.tail = _conv3x3(features, out_channels)
 
-    def forward(self, x: torch.Tensor) -> torch.Tensor:
+    def forward(self, x: torch.Tensor, film: torch.Tensor | None = None) -> torch.Tensor:
         head = self.head(x)
-        return self.tail(head + self.body_out(self.blocks(head)))
+        if film is None:
+            body = self.blocks(head)
+        else:  # (N, blocks * 2F, 1, 1): each block's scale and shift
+            body = head
+            for block, own in zip(self.blocks, film.chunk(len(self.blocks), dim=1), strict=True):
+                body = block(body, own)
+        return self.tail(head + self.body_out(body))
 
     @property
     def reach(self) -> int:
@@ -234,7 +244,28 @@ class PackedReconNet(_Reconstructor):
         return (self.trunk.reach + 1) * max(self.period) - 1
 
 
-class PhysicsReconNet(_Reconstructor):
+class _WithStatistics(nn.Module):
+    """The image statistics a network solves its LMMSE filters from, kept as (float64) buffers
+    so a checkpoint carries them, and the check of the physics a network is called with."""
+
+    def _keep_statistics(self, statistics: ImageStatistics | None) -> None:
+        stats = statistics if statistics is not None else shipped_image_statistics()
+        self.register_buffer("stat_mean", stats.mean.clone())
+        self.register_buffer("stat_second", stats.second.clone())
+
+    def statistics(self) -> ImageStatistics:
+        return ImageStatistics(self.stat_mean.double(), self.stat_second.double(), 0)
+
+    def _check_physics(self, raw: torch.Tensor, sigma: Any, kernels: Any) -> None:
+        check_raw(raw)
+        if sigma is None or kernels is None:
+            raise ValueError(
+                f"the {self.arch} network needs the noise level and the sensor's pixel kernels: "
+                "call net(raw, sigma, kernels)"
+            )
+
+
+class PhysicsReconNet(_Reconstructor, _WithStatistics):
     """The packed network, given the physics: it corrects the closed-form LMMSE estimate.
 
     Inputs of the trunk, all at cell resolution: the packed raw image (``Ph * Pw`` channels), the
@@ -276,12 +307,7 @@ class PhysicsReconNet(_Reconstructor):
         self.trunk = _Trunk(p + 3 * p + 1, 3 * p, self.features, self.num_blocks)
         nn.init.zeros_(self.trunk.tail.weight)
         nn.init.zeros_(self.trunk.tail.bias)
-        stats = statistics if statistics is not None else shipped_image_statistics()
-        self.register_buffer("stat_mean", stats.mean.clone())
-        self.register_buffer("stat_second", stats.second.clone())
-
-    def statistics(self) -> ImageStatistics:
-        return ImageStatistics(self.stat_mean.double(), self.stat_second.double(), 0)
+        self._keep_statistics(statistics)
 
     def forward(
         self,
@@ -289,12 +315,7 @@ class PhysicsReconNet(_Reconstructor):
         sigma: float | torch.Tensor | None = None,
         kernels: torch.Tensor | None = None,
     ) -> torch.Tensor:
-        check_raw(raw)
-        if sigma is None or kernels is None:
-            raise ValueError(
-                "the physics network needs the noise level and the sensor's pixel kernels: "
-                "call net(raw, sigma, kernels)"
-            )
+        self._check_physics(raw, sigma, kernels)
         if tuple(kernels.shape[:2]) != self.period:
             raise ValueError(
                 f"expected kernels of period {self.period}, got {tuple(kernels.shape[:2])}"
@@ -317,7 +338,7 @@ class PhysicsReconNet(_Reconstructor):
         return {**super().config(), "radius": self.radius}
 
 
-class UniversalReconNet(nn.Module):
+class UniversalReconNet(_WithStatistics):
     """One network for any pattern: the physics network, told each pixel's kernel (SPEC 16).
 
     Like :class:`PhysicsReconNet` it corrects the closed-form LMMSE estimate of the pattern it is
@@ -366,9 +387,11 @@ class UniversalReconNet(nn.Module):
         radius: int = DEFAULT_RADIUS,
         kernel_size: int = 5,
         embed: int = 8,
+        film: bool = False,
         statistics: ImageStatistics | None = None,
     ) -> None:
         super().__init__()
+        self.film = bool(film)
         self.features = _as_count(features, "features", 1)
         self.num_blocks = _as_count(blocks, "blocks", 0)
         self.radius = _as_count(radius, "radius", 0)
@@ -382,12 +405,14 @@ class UniversalReconNet(nn.Module):
         self.trunk = _Trunk(c + 3 * c + 1 + c + self.embed * c, 3 * c, self.features, blocks)
         nn.init.zeros_(self.trunk.tail.weight)
         nn.init.zeros_(self.trunk.tail.bias)
-        stats = statistics if statistics is not None else shipped_image_statistics()
-        self.register_buffer("stat_mean", stats.mean.clone())
-        self.register_buffer("stat_second", stats.second.clone())
-
-    def statistics(self) -> ImageStatistics:
-        return ImageStatistics(self.stat_mean.double(), self.stat_second.double(), 0)
+        if self.film:
+            # The pattern as a whole (its phases' features pooled) scales and shifts every
+            # block's channels: a mode per pattern, where the per-pixel inputs act only at the
+            # head. Starts at zero (no modulation).
+            self.modulation = nn.Linear(self.embed, 2 * self.features * self.num_blocks)
+            nn.init.zeros_(self.modulation.weight)
+            nn.init.zeros_(self.modulation.bias)
+        self._keep_statistics(statistics)
 
     def _check_kernels(self, kernels: torch.Tensor) -> None:
         if kernels.ndim != 5 or kernels.shape[2] != 3:
@@ -415,12 +440,7 @@ class UniversalReconNet(nn.Module):
         sigma: float | torch.Tensor | None = None,
         kernels: torch.Tensor | None = None,
     ) -> torch.Tensor:
-        check_raw(raw)
-        if sigma is None or kernels is None:
-            raise ValueError(
-                "the universal network needs the noise level and the sensor's pixel kernels: "
-                "call net(raw, sigma, kernels)"
-            )
+        self._check_physics(raw, sigma, kernels)
         self._check_kernels(kernels)
         ph, pw, _, kh, kw = kernels.shape
         n, _, h, w = raw.shape
@@ -448,7 +468,11 @@ class UniversalReconNet(nn.Module):
         )
         if raw.is_contiguous(memory_format=torch.channels_last):
             x = x.contiguous(memory_format=torch.channels_last)
-        correction = period_shuffle(self.trunk(x), cell, (h, w))
+        film = None
+        if self.film and self.num_blocks:
+            pooled = features.reshape(ph * pw, -1).mean(0)
+            film = self.modulation(pooled).to(dtype).view(1, -1, 1, 1).expand(n, -1, -1, -1)
+        correction = period_shuffle(self.trunk(x, film), cell, (h, w))
         return estimate + correction
 
     @property
@@ -494,6 +518,7 @@ class UniversalReconNet(nn.Module):
             "radius": self.radius,
             "kernel_size": self.kernel_size,
             "embed": self.embed,
+            **({"film": True} if self.film else {}),
         }
 
 
@@ -554,7 +579,7 @@ def build_network(config: Mapping[str, Any]) -> nn.Module:
         known = ", ".join(repr(a) for a in ARCHITECTURES)
         raise ValueError(f"unknown network arch {arch!r}; expected one of {known}")
     if arch == UniversalReconNet.arch:
-        fields = {"features", "blocks", "radius", "kernel_size", "embed"}
+        fields = {"features", "blocks", "radius", "kernel_size", "embed", "film"}
         unknown = sorted(set(config) - fields - {"arch", "period"})
         if unknown:
             raise ValueError(f"unknown network config field(s): {', '.join(map(str, unknown))}")
