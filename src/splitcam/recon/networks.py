@@ -116,12 +116,8 @@ class ResidualBlock(nn.Module):
         self.conv1 = _conv3x3(features, features)
         self.conv2 = _conv3x3(features, features)
 
-    def forward(self, x: torch.Tensor, film: torch.Tensor | None = None) -> torch.Tensor:
-        inner = self.conv1(x)
-        if film is not None:  # (N, 2F, 1, 1): a scale and a shift per channel
-            scale, shift = film.chunk(2, dim=1)
-            inner = inner * (1 + scale) + shift
-        return x + self.conv2(F.relu(inner))
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return x + self.conv2(F.relu(self.conv1(x)))
 
     @property
     def reach(self) -> int:
@@ -138,15 +134,9 @@ class _Trunk(nn.Module):
         self.body_out = _conv3x3(features, features)
         self.tail = _conv3x3(features, out_channels)
 
-    def forward(self, x: torch.Tensor, film: torch.Tensor | None = None) -> torch.Tensor:
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
         head = self.head(x)
-        if film is None:
-            body = self.blocks(head)
-        else:  # (N, blocks * 2F, 1, 1): each block's scale and shift
-            body = head
-            for block, own in zip(self.blocks, film.chunk(len(self.blocks), dim=1), strict=True):
-                body = block(body, own)
-        return self.tail(head + self.body_out(body))
+        return self.tail(head + self.body_out(self.blocks(head)))
 
     @property
     def reach(self) -> int:
@@ -387,11 +377,9 @@ class UniversalReconNet(_WithStatistics):
         radius: int = DEFAULT_RADIUS,
         kernel_size: int = 5,
         embed: int = 8,
-        film: bool = False,
         statistics: ImageStatistics | None = None,
     ) -> None:
         super().__init__()
-        self.film = bool(film)
         self.features = _as_count(features, "features", 1)
         self.num_blocks = _as_count(blocks, "blocks", 0)
         self.radius = _as_count(radius, "radius", 0)
@@ -405,13 +393,6 @@ class UniversalReconNet(_WithStatistics):
         self.trunk = _Trunk(c + 3 * c + 1 + c + self.embed * c, 3 * c, self.features, blocks)
         nn.init.zeros_(self.trunk.tail.weight)
         nn.init.zeros_(self.trunk.tail.bias)
-        if self.film:
-            # The pattern as a whole (its phases' features pooled) scales and shifts every
-            # block's channels: a mode per pattern, where the per-pixel inputs act only at the
-            # head. Starts at zero (no modulation).
-            self.modulation = nn.Linear(self.embed, 2 * self.features * self.num_blocks)
-            nn.init.zeros_(self.modulation.weight)
-            nn.init.zeros_(self.modulation.bias)
         self._keep_statistics(statistics)
 
     def _check_kernels(self, kernels: torch.Tensor) -> None:
@@ -468,11 +449,7 @@ class UniversalReconNet(_WithStatistics):
         )
         if raw.is_contiguous(memory_format=torch.channels_last):
             x = x.contiguous(memory_format=torch.channels_last)
-        film = None
-        if self.film and self.num_blocks:
-            pooled = features.reshape(ph * pw, -1).mean(0)
-            film = self.modulation(pooled).to(dtype).view(1, -1, 1, 1).expand(n, -1, -1, -1)
-        correction = period_shuffle(self.trunk(x, film), cell, (h, w))
+        correction = period_shuffle(self.trunk(x), cell, (h, w))
         return estimate + correction
 
     @property
@@ -518,7 +495,6 @@ class UniversalReconNet(_WithStatistics):
             "radius": self.radius,
             "kernel_size": self.kernel_size,
             "embed": self.embed,
-            **({"film": True} if self.film else {}),
         }
 
 
@@ -579,7 +555,7 @@ def build_network(config: Mapping[str, Any]) -> nn.Module:
         known = ", ".join(repr(a) for a in ARCHITECTURES)
         raise ValueError(f"unknown network arch {arch!r}; expected one of {known}")
     if arch == UniversalReconNet.arch:
-        fields = {"features", "blocks", "radius", "kernel_size", "embed", "film"}
+        fields = {"features", "blocks", "radius", "kernel_size", "embed"}
         unknown = sorted(set(config) - fields - {"arch", "period"})
         if unknown:
             raise ValueError(f"unknown network config field(s): {', '.join(map(str, unknown))}")

@@ -94,11 +94,6 @@ class NetworkConfig:
     )
     features: int = _opt(64, "channels of the hidden layers")
     blocks: int = _opt(10, "residual blocks")
-    film: bool = _opt(
-        False,
-        "universal network: the whole pattern scales and shifts every residual block's channels "
-        "(FiLM) besides the per-pixel kernel inputs",
-    )
 
 
 @dataclass

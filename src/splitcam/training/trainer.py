@@ -116,7 +116,6 @@ def build_system(
             "period": list(pattern.period),
             "features": config.network.features,
             "blocks": config.network.blocks,
-            **({"film": True} if config.network.film else {}),
         }
     )
     return ImagingSystem(sensor, net)
