@@ -16,7 +16,18 @@ def _valid() -> dict:
 
 
 def test_registry_names_and_case_insensitive_lookup():
-    assert patterns.names() == ["A", "B", "C", "D", "E", "bayer", "rgbw", "quad"]
+    assert patterns.names() == [
+        "A",
+        "B",
+        "C",
+        "D",
+        "E",
+        "bayer",
+        "rgbw",
+        "quad",
+        "router-zou",
+        "router-best",
+    ]
     assert patterns.get("d").name == "D"
     assert patterns.get("BAYER").name == "bayer"
     with pytest.raises(PatternError, match="unknown pattern 'F'; valid names: A, B, C, D, E, bay"):
@@ -202,3 +213,52 @@ def test_low_light_filter_arrays_collect_their_share_of_white_light():
     colour = quad.kernels[quad.layout][..., 0, 0].argmax(-1)
     bayer_colour = bayer.kernels[bayer.layout][..., 0, 0].argmax(-1)
     assert np.array_equal(colour, np.kron(bayer_colour, np.ones((2, 2), dtype=int)))
+
+
+def test_router_model_is_a_with_losses_and_crosstalk():
+    """SPEC 15: router(1, 0) is A; every colour's kernel sums to eta + chi (light lost, never
+    created); the eta part lands on pixels of its colour and the chi part only on others."""
+    import numpy as np
+
+    a = patterns.get("A")
+    assert np.array_equal(patterns.get("router(eta=1;chi=0)").kernels, a.kernels)
+    eta, chi = (0.56, 0.6, 0.43), (0.3, 0.25, 0.5)
+    r = patterns.router(eta, chi)
+    assert np.allclose(r.kernels.sum((2, 3)), np.add(eta, chi)[None, :])
+    colour = np.array([[0, 1], [1, 2]])  # A's RGGB pixels
+    for s in range(4):
+        i, j = divmod(s, 2)
+        for c in range(3):
+            target = np.array(
+                [[colour[(i + u) % 2, (j + v) % 2] == c for v in (-1, 0, 1)] for u in (-1, 0, 1)]
+            )
+            assert r.kernels[s, c][target].sum() == pytest.approx(eta[c])
+            assert r.kernels[s, c][~target].sum() == pytest.approx(chi[c])
+    same = patterns.get("router(eta=0.56,0.6,0.43;chi=0.3,0.25,0.5)")
+    assert np.allclose(same.kernels, r.kernels)
+    with pytest.raises(PatternError, match="eta \\+ chi = 1.2 > 1"):
+        patterns.router(0.7, 0.5)
+    with pytest.raises(PatternError, match="expected router"):
+        patterns.get("router(eta=0.5;gamma=1)")
+    with pytest.raises(PatternError, match="1 or 3 values"):
+        patterns.get("router(eta=0.5,0.5)")
+
+
+def test_router_presets_match_their_published_numbers():
+    """router-zou and router-best: eta is the leaderboard's band efficiency; chi shares the
+    wrong-pixel light 2 * sum(crosstalk) in proportion to 1 - eta (library docstring)."""
+    import numpy as np
+
+    published = {
+        "router-zou": ((0.5587, 0.5607, 0.4289), (0.1928, 0.3467, 0.1432)),
+        "router-best": ((0.5511, 0.5937, 0.6561), (0.1354, 0.2709, 0.1439)),
+    }
+    for name, (eta, crosstalk) in published.items():
+        p = patterns.get(name)
+        assert np.allclose(p.metadata["eta"], eta)
+        chi = np.asarray(p.metadata["chi"])
+        assert chi.sum() == pytest.approx(2 * sum(crosstalk), abs=2e-3)
+        assert np.allclose(
+            chi / chi.sum(), (1 - np.asarray(eta)) / (1 - np.asarray(eta)).sum(), atol=1e-3
+        )
+        assert (p.kernels.sum((2, 3)) <= 1).all()

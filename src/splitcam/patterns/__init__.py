@@ -11,7 +11,7 @@ from pathlib import Path
 
 from .core import COLOURS, Pattern, PatternError, kernel_offsets
 from .files import load, save
-from .library import BUILTIN_FACTORIES
+from .library import BUILTIN_FACTORIES, parse_router, router
 from .measures import PatternMeasures, measure, pixel_response
 
 __all__ = [
@@ -25,6 +25,7 @@ __all__ = [
     "measure",
     "names",
     "pixel_response",
+    "router",
     "save",
 ]
 
@@ -46,10 +47,13 @@ def get(name: str | Path | Pattern) -> Pattern:
     for builtin, factory in BUILTIN_FACTORIES.items():
         if builtin.lower() == key.strip().lower():
             return factory()
+    modelled = parse_router(key)
+    if modelled is not None:
+        return modelled
     path = Path(key)
     if path.suffix.lower() in (".json", ".toml") or path.exists():
         return load(path)
     raise PatternError(
         f"unknown pattern {key!r}; valid names: {', '.join(names())} "
-        f"(or the path of a .json/.toml pattern file)"
+        f"(or the path of a .json/.toml pattern file, or router(eta=R,G,B;chi=R,G,B))"
     )

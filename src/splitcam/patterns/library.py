@@ -170,6 +170,146 @@ def _pattern_quad() -> Pattern:
     )
 
 
+# Which colour each pixel of A's RGGB arrangement collects (SPEC section 2).
+_A_COLOURS = np.array([[0, 1], [1, 2]])
+
+
+def router(
+    eta: float | tuple[float, float, float],
+    chi: float | tuple[float, float, float] = 0.0,
+    *,
+    name: str | None = None,
+    description: str = "",
+    reference: str = "",
+) -> Pattern:
+    """A Bayer-type colour router with losses and crosstalk, on pattern A's geometry (SPEC 15).
+
+    For each colour ``c``: ``w = eta_c * w_A + chi_c * x_A``, where ``w_A`` is A's kernel (all
+    light of colour ``c`` to the nearest pixel(s) of colour ``c``) and ``x_A`` spreads light
+    evenly over the taps of A's 3x3 neighbourhood that are *not* pixels of colour ``c``. The rest,
+    ``1 - eta_c - chi_c``, is lost. ``router(1, 0)`` is A.
+
+    Args:
+        eta: Band efficiencies (R, G, B), or one for all: the share of each colour's light that
+            reaches pixels of that colour.
+        chi: Crosstalk (R, G, B), or one for all: the share that reaches pixels of other colours.
+        name: The pattern's name (default ``router(eta=...;chi=...)``).
+
+    Raises:
+        PatternError: Values outside [0, 1], or ``eta_c + chi_c > 1`` (light would be created).
+    """
+    from .core import PatternError
+
+    def three(v, what: str) -> np.ndarray:
+        arr = np.broadcast_to(np.asarray(v, dtype=np.float64), (3,)).copy()
+        if not np.all(np.isfinite(arr)) or arr.min() < 0 or arr.max() > 1:
+            raise PatternError(f"router {what} must be 3 values in [0, 1], got {arr.tolist()}")
+        return arr
+
+    e, x = three(eta, "eta"), three(chi, "chi")
+    over = np.flatnonzero(e + x > 1 + 1e-12)
+    if over.size:
+        c = int(over[0])
+        raise PatternError(
+            f"router colour {'RGB'[c]}: eta + chi = {e[c] + x[c]:g} > 1 (a router cannot send on "
+            f"more light than arrives)"
+        )
+    a = _pattern_a()
+    kernels = np.zeros_like(a.kernels)
+    for s in range(4):
+        i, j = divmod(s, 2)  # A's layout [[0, 1], [2, 3]]
+        for c in range(3):
+            other = np.array(
+                [
+                    [_A_COLOURS[(i + u) % 2, (j + v) % 2] != c for v in (-1, 0, 1)]
+                    for u in (-1, 0, 1)
+                ],
+                dtype=np.float64,
+            )
+            kernels[s, c] = e[c] * a.kernels[s, c] + x[c] * other / other.sum()
+    label = name or (
+        "router(eta="
+        + ",".join(f"{v:g}" for v in e)
+        + ";chi="
+        + ",".join(f"{v:g}" for v in x)
+        + ")"
+    )
+    return Pattern(
+        name=label,
+        layout=a.layout,
+        kernels=kernels,
+        provenance="router model (SPEC section 15)",
+        description=description
+        or f"Bayer-type router with band efficiency {', '.join(f'{v:g}' for v in e)} and "
+        f"crosstalk {', '.join(f'{v:g}' for v in x)} (R, G, B) on pattern A's geometry",
+        reference=reference,
+        metadata={"eta": e.tolist(), "chi": x.tolist()},
+    )
+
+
+def parse_router(spec: str) -> Pattern | None:
+    """``router(eta=0.56,0.56,0.43;chi=0.42,0.41,0.54)`` (or one value each, ``chi`` optional)
+    as a :func:`router`; None for any other text.
+
+    Raises:
+        PatternError: A ``router(...)`` that cannot be read (the message shows the syntax).
+    """
+    from .core import PatternError
+
+    text = spec.strip().replace(" ", "")
+    if not (text.lower().startswith("router(") and text.endswith(")")):
+        return None
+    syntax = "expected router(eta=R,G,B;chi=R,G,B), e.g. router(eta=0.56,0.56,0.43;chi=0.1)"
+    values: dict[str, list[float]] = {}
+    for part in filter(None, text[len("router(") : -1].split(";")):
+        key, _, rest = part.partition("=")
+        try:
+            values[key.lower()] = [float(v) for v in rest.split(",")]
+        except ValueError:
+            raise PatternError(f"cannot read {spec!r}: {syntax}") from None
+    if set(values) - {"eta", "chi"} or "eta" not in values:
+        raise PatternError(f"cannot read {spec!r}: {syntax}")
+    if any(len(v) not in (1, 3) for v in values.values()):
+        raise PatternError(f"cannot read {spec!r}: give 1 or 3 values (R, G, B) each; {syntax}")
+    return router(values["eta"], values.get("chi", [0.0]))
+
+
+# Calibration of the router presets (SPEC 15) to the invrs-gym Bayer-sorter leaderboard
+# (github.com/invrs-io/leaderboard, challenges/bayer_sorter/leaderboard.txt, full-wave FMM
+# simulations). There, efficiency_c is the in-band light of colour c reaching the pixel(s) of
+# colour c, which is eta_c here; crosstalk_p is the out-of-band light landing in pixel p, a
+# mean over the two other bands, so the light landing on wrong-colour pixels totals
+# 2 * sum_p crosstalk_p (in units of one colour's incident light). The leaderboard does not say
+# how it divides among the colours: here in proportion to each colour's light not routed right,
+# chi_c = (1 - eta_c) * 2 sum_p crosstalk_p / sum_c (1 - eta_c).
+_ZOU = {"eta": (0.5587, 0.5607, 0.4289), "chi": (0.4151, 0.4132, 0.5371)}
+_BEST = {"eta": (0.5511, 0.5937, 0.6561), "chi": (0.4120, 0.3729, 0.3156)}
+
+
+def _router_zou() -> Pattern:
+    return router(
+        **_ZOU,
+        name="router-zou",
+        description="Zou et al.'s fabricated metasurface Bayer router, full-wave: band efficiency "
+        "R/G/B 0.559/0.561/0.429, pixel crosstalk 0.193/0.347/0.143 (invrs-gym leaderboard, "
+        "220607_zou_00) mapped to eta = efficiency, chi = 0.415/0.413/0.537 (the wrong-pixel "
+        "light 2 x sum of crosstalk = 1.365, shared in proportion to 1 - eta)",
+        reference="Zou et al., Nat. Commun. 13, 3288 (2022); invrs-io/leaderboard bayer_sorter",
+    )
+
+
+def _router_best() -> Pattern:
+    return router(
+        **_BEST,
+        name="router-best",
+        description="Best Bayer-sorter design of the invrs-gym leaderboard (eval metric 0.551, "
+        "240325_mfschubert_49ca0bd2), full-wave: band efficiency R/G/B 0.551/0.594/0.656, pixel "
+        "crosstalk 0.135/0.271/0.144 mapped to eta = efficiency, chi = 0.412/0.373/0.316 (the "
+        "wrong-pixel light 1.100, shared in proportion to 1 - eta)",
+        reference="invrs-io/leaderboard, challenges/bayer_sorter (2024)",
+    )
+
+
 BUILTIN_FACTORIES = {
     "A": _pattern_a,
     "B": _pattern_b,
@@ -179,4 +319,6 @@ BUILTIN_FACTORIES = {
     "bayer": _pattern_bayer,
     "rgbw": _pattern_rgbw,
     "quad": _pattern_quad,
+    "router-zou": _router_zou,
+    "router-best": _router_best,
 }
