@@ -1,7 +1,8 @@
 """The universal network against the physics network, side by side in one run: training step
 time at the same batch and precision, and peak memory of a tiled 12-megapixel reconstruction.
 
-    python benchmarks/bench_universal.py [--threads 2] [--batch 8] [--steps 12] [--skip-large]
+    python benchmarks/bench_universal.py [--threads 2] [--batch 8] [--steps 12]
+        [--skip-large | --only-large]
 
 Prints median seconds per training step (batch of 64x64 patches, Adam, MSE, sigma ~ U[0, 30])
 for the physics network on pattern D, the universal network on pattern D, and the universal
@@ -95,13 +96,15 @@ def main() -> None:
     parser.add_argument("--batch", type=int, default=8)
     parser.add_argument("--steps", type=int, default=12)
     parser.add_argument("--skip-large", action="store_true")
+    parser.add_argument("--only-large", action="store_true", help="only the memory part")
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
     print(machine())
-    print(f"training step, batch {args.batch} of 64x64, median of {args.steps - 2} steps")
-    print("| precision | physics (D) | universal (D) | ratio | universal (random) | ratio |")
-    print("|---|---|---|---|---|---|")
-    for fast in (False, True):
+    if not args.only_large:
+        print(f"training step, batch {args.batch} of 64x64, median of {args.steps - 2} steps")
+        print("| precision | physics (D) | universal (D) | ratio | universal (random) | ratio |")
+        print("|---|---|---|---|---|---|")
+    for fast in () if args.only_large else (False, True):
         base = step_time("physics", False, args.batch, args.steps, fast)
         same = step_time("universal", False, args.batch, args.steps, fast)
         rand = step_time("universal", True, args.batch, args.steps, fast)

@@ -13,7 +13,7 @@ export OMP_NUM_THREADS=1
 #    that left B and E out of its mix.
 python $RESULTS/heldout.py universal --threads 1 --out $RESULTS/heldout.md &
 python $RESULTS/heldout.py universal --threads 1 \
-    --patterns B,E,rgbw,quad,$PAT/random-router.toml,$PAT/random-scatter.toml \
+    --patterns B,E,rgbw,quad,router-zou,$PAT/random-router.toml,$PAT/random-scatter.toml \
     --extra "without B, E=${HOLDOUT:-runs/universal-holdout}" --out $RESULTS/unseen.md &
 wait
 
