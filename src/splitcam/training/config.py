@@ -48,8 +48,9 @@ def _opt(default: Any, help: str, *, flag: str | None = None) -> Any:
 class PatternConfig:
     name: str = _opt(
         "D",
-        "pattern name (A-E, bayer) or pattern file; random: a new pattern every step, drawn by "
-        "splitcam.patterns.random and mixed with --mix (for --arch universal)",
+        "pattern name (`splitcam patterns` lists them), pattern file or router(eta=..;chi=..); "
+        "random: a new pattern every step, drawn by splitcam.patterns.random and mixed with "
+        "--mix (for --arch universal, best with --loss log_mse: experiments/universal.toml)",
         flag="pattern",
     )
     mix: list[str] = _opt(
