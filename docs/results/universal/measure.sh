@@ -34,13 +34,3 @@ splitcam design --pattern D --objective network --data $DATA --out $RESULTS/D-ne
 python $RESULTS/heldout.py universal --threads 2 \
     --patterns D,$RESULTS/D-closed-form.toml,$RESULTS/D-network.toml --out $RESULTS/design.md
 
-# 5. A pattern it never saw with the period of a shipped network (the closed-form design from
-#    D): fine-tuned for 10 minutes from the universal network and from the shipped D network.
-splitcam train --pattern $RESULTS/D-closed-form.toml --init-from universal --data $DATA \
-    --threads 1 --val-every 200 --out runs/ft-designed-universal --quiet &
-splitcam train --pattern $RESULTS/D-closed-form.toml --init-from D --data $DATA --threads 1 \
-    --time-limit 10 --lr 3e-4 --val-every 200 --out runs/ft-designed-D --quiet &
-wait
-python $RESULTS/heldout.py universal --threads 2 --patterns $RESULTS/D-closed-form.toml \
-    --extra "from universal=runs/ft-designed-universal" --extra "from D=runs/ft-designed-D" \
-    --out $RESULTS/fine-tuned-designed.md
