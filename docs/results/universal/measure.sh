@@ -14,7 +14,7 @@ export OMP_NUM_THREADS=1
 python $RESULTS/heldout.py universal --threads 1 --out $RESULTS/heldout.md &
 python $RESULTS/heldout.py universal --threads 1 \
     --patterns B,E,rgbw,quad,router-zou,$PAT/random-router.toml,$PAT/random-scatter.toml \
-    --extra "without B, E=${HOLDOUT:-runs/universal-holdout}" --out $RESULTS/unseen.md &
+    --extra "without B, E=${HOLDOUT:-$RESULTS/models/universal-holdout.json}" --out $RESULTS/unseen.md &
 wait
 
 # 3. Fine-tuning for 10 minutes (the default budget) on a library pattern and on one it never

@@ -65,7 +65,14 @@ def sigma_chart(
 
     fig = Figure(figsize=(12, 4.6))
     ax1, ax2 = fig.subplots(1, 2)
-    group = {label: (patterns_of or {}).get(label, label) for label, _ in curves}
+    group: dict[str, str] = {}
+    seen: set[tuple[str, str]] = set()
+    for label, _ in curves:
+        key = (patterns_of or {}).get(label, label)
+        if (key, method_kind(label)) in seen:  # two networks of one pattern name: apart
+            key = label
+        seen.add((key, method_kind(label)))
+        group[label] = key
     keys = list(dict.fromkeys(group.values()))
     colour_of = dict(zip(keys, _palette(len(keys)), strict=True))
     measured: set[float] = set()
