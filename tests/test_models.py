@@ -630,12 +630,7 @@ def test_provenance_records_each_thread_count_of_a_resumed_run(image_folder, tmp
 
 def _one_pattern_models() -> list[str]:
     """Shipped models of one pattern (a model for any pattern has a test of its own)."""
-    return [
-        name
-        for name in model_names()
-        if json.loads((models_module.MODELS_DIR / f"{name}.json").read_text())["network"]["arch"]
-        != "universal"
-    ]
+    return [name for name in model_names() if not models_module.model_serves_any_pattern(name)]
 
 
 @pytest.mark.parametrize("name", _one_pattern_models())

@@ -343,11 +343,16 @@ def test_fine_tuning_from_a_universal_model(tiny_universal, tmp_path, capsys):
         if not torch.equal(v, source.network.state_dict()[k])
     ]
     assert changed  # trained on from the model's weights
-    # No --steps: the default fine-tuning budget, announced.
-    run2 = tmp_path / "ft2"
-    assert main([*args, *tiny, "--out", str(run2), "--quiet", "--time-limit", "0.002"]) == 0
-    assert main([*args, *tiny, "--out", str(tmp_path / "ft3"), "--quiet", "--steps", "1"]) == 0
+    # No --steps, --time-limit or --lr: the default fine-tuning budget and rate, announced.
+    from splitcam.cli import FINE_TUNE_LR, FINE_TUNE_MINUTES, _fine_tuning
+
     capsys.readouterr()
+    implied = _fine_tuning(str(model), {})
+    assert implied["run.time_limit"] == FINE_TUNE_MINUTES and implied["optim.lr"] == FINE_TUNE_LR
+    assert f"for {FINE_TUNE_MINUTES:g} minutes" in capsys.readouterr().out
+    given = _fine_tuning(str(model), {"run.time_limit": 1.0, "optim.lr": 1e-3})
+    assert "run.time_limit" not in given and "optim.lr" not in given
+    assert _fine_tuning("D", {}) == {}  # a network of one pattern implies nothing
 
 
 def test_design_against_a_frozen_network(tiny_universal):

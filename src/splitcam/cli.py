@@ -31,6 +31,7 @@ def _pattern_or_model(spec: str):
     """A pattern by name or file, or the pattern of a shipped model of one pattern (``A-opt``:
     its learned kernels)."""
     from . import patterns
+    from .recon.networks import serves_any_pattern
     from .training.models import load_model, model_names
 
     try:
@@ -38,8 +39,8 @@ def _pattern_or_model(spec: str):
     except patterns.PatternError:
         if spec not in model_names():
             raise
-        system, meta = load_model(spec)
-        if getattr(system.network, "period", 0) is None:
+        system, _ = load_model(spec)
+        if serves_any_pattern(system.network):
             raise ValueError(f"model {spec} serves any pattern; it has none to show") from None
         return system.sensor.to_pattern(spec)
 
@@ -177,12 +178,13 @@ def _design_network(args: argparse.Namespace) -> dict:
     of training patches from ``--data`` (all but the held-out last images, as training holds
     out), and a fixed batch of patches of the held-out ones to score before and after."""
     from .data.patches import ImageCache, PatchSampler, list_images
+    from .recon.networks import serves_any_pattern
     from .training.models import load_model
 
     if not args.data:
         raise ValueError("--objective network needs training images: --data DIR")
     system, _ = load_model(args.model)
-    if getattr(system.network, "period", 0) is not None:
+    if not serves_any_pattern(system.network):
         raise ValueError(f"--model {args.model} serves one pattern; give a network for any pattern")
     files = list_images(args.data)
     hold = min(32, max(1, len(files) // 10)) if len(files) >= 2 else 0
@@ -450,18 +452,10 @@ def _model_methods(
     model reconstructs only the patterns that no shipped network serves, and says so."""
     from . import patterns
     from .methods import build_model
+    from .training.models import model_serves_any_pattern
 
-    single, universal = [], []
-    for spec in models:
-        method = None
-        try:
-            method = build_model(spec, **options)
-        except ValueError as exc:
-            if "reconstructs any pattern" not in str(exc):
-                raise
-            universal.append(spec)
-        if method is not None:
-            single.append(method)
+    universal = [spec for spec in models if model_serves_any_pattern(spec)]
+    single = [build_model(spec, **options) for spec in models if spec not in universal]
     for spec in universal:
         wanted = list(pattern_specs)
         if main_job:

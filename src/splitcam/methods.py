@@ -31,6 +31,7 @@ from .recon.base import NetworkReconstructor, Reconstructor
 from .recon.closed_form import closed_form_lmmse
 from .recon.demosaic import ClassicalDemosaic
 from .recon.lmmse import LMMSE, shipped_lmmse
+from .recon.networks import serves_any_pattern
 from .training.checkpoint import CHECKPOINT_NAME, load_system, read_meta, resolve
 from .training.models import check_unambiguous, load_model, model_names
 
@@ -87,8 +88,7 @@ def _network_method(
     (``period`` None) with ``pattern``, labelled ``<label>-<pattern>``; ``fingerprint`` holds
     what, beyond the weights, identifies its results (the pattern's values). A network of any
     pattern fine-tuned on one (``own_pattern``) reconstructs that one unless told another."""
-    fixed = getattr(system.network, "period", 0) is not None
-    if fixed or (own_pattern and pattern is None):
+    if not serves_any_pattern(system.network) or (own_pattern and pattern is None):
         method = NetworkReconstructor(
             system.network, system.sensor.to_pattern(), label, tile=tile, precision=precision
         )

@@ -25,6 +25,7 @@ from splitcam.data.imageio import read_image
 from splitcam.data.patches import list_images
 from splitcam.evaluation.protocol import mean_psnr
 from splitcam.methods import build_method
+from splitcam.recon.networks import serves_any_pattern
 from splitcam.training.models import load_model, model_names
 
 SIGMAS = [0.0, 15.0]
@@ -35,7 +36,7 @@ def shipped_for(pattern: patterns.Pattern) -> str | None:
     """The shipped single-pattern model whose pattern is this one, if any."""
     for name in model_names():
         system, _ = load_model(name)
-        if system.network.period is not None and system.sensor.to_pattern().equals(pattern):
+        if not serves_any_pattern(system.network) and system.sensor.to_pattern().equals(pattern):
             return name
     return None
 

@@ -46,6 +46,7 @@ __all__ = [
     "ReconNet",
     "UniversalReconNet",
     "build_network",
+    "serves_any_pattern",
 ]
 
 
@@ -496,6 +497,12 @@ class UniversalReconNet(_WithStatistics):
             "kernel_size": self.kernel_size,
             "embed": self.embed,
         }
+
+
+def serves_any_pattern(network: nn.Module) -> bool:
+    """Whether a network reconstructs any pattern it is told the kernels of (it has no period of
+    its own), rather than the one pattern it was trained for."""
+    return isinstance(network, UniversalReconNet)
 
 
 def noise_level_map(

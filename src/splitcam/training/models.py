@@ -31,7 +31,7 @@ from ..data.tensorfiles import load_pair, paired_paths, save_pair
 from ..patterns import Pattern
 from ..physics.sensor import SplitterSensor
 from ..physics.system import ImagingSystem
-from ..recon.networks import build_network
+from ..recon.networks import UniversalReconNet, build_network
 from . import checkpoint as ckpt_io
 
 __all__ = [
@@ -41,6 +41,7 @@ __all__ = [
     "export_model",
     "load_model",
     "model_names",
+    "model_serves_any_pattern",
     "provenance_of",
     "resolve_model",
 ]
@@ -74,6 +75,21 @@ def check_unambiguous(spec: str | os.PathLike[str], flag: str) -> None:
             f"{flag} {text} is ambiguous: the shipped model {text} and the {kind} ./{text}; "
             f"write ./{text} for the {kind}, or --model {text} for the shipped model"
         )
+
+
+def model_serves_any_pattern(spec: str | os.PathLike[str]) -> bool:
+    """Whether a shipped model or model file is a network for any pattern (``universal``), read
+    from its JSON header (the weights are not loaded).
+
+    Raises:
+        ModelError: As :func:`resolve_model`, or a header that cannot be read.
+    """
+    path = resolve_model(spec)
+    try:
+        arch = json.loads(path.read_text(encoding="utf-8"))["network"]["arch"]
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise ModelError(f"model {str(path)!r} is damaged: {exc}") from None
+    return arch == UniversalReconNet.arch
 
 
 def resolve_model(spec: str | os.PathLike[str]) -> Path:
