@@ -3,8 +3,8 @@ overrides, and are written resolved into every run folder.
 
 Defaults follow the paper's recipe (SPEC section 6: batch 80 of 64x64 patches, Adam, MSE,
 ``sigma ~ U[0, 30]``, 10^6 steps, 10 blocks of 64 features) except where measurement chose
-better per CPU-hour (docs/results/convergence.md): the physics-informed network and Adam peaking
-at 5e-4 after 100 warm-up steps with cosine decay. ``--arch paper --schedule constant --lr 1e-4``
+better per CPU-hour (docs/results/convergence/): the physics-informed network and Adam peaking
+at 1e-3 after 100 warm-up steps with cosine decay. ``--arch paper --schedule constant --lr 1e-4``
 is the paper's.
 """
 
@@ -119,12 +119,12 @@ class DataConfig:
         "probability that a batch's patches end part-way through a period (rows, and "
         "independently columns), as images of odd size do; teaches the network that edge "
         "(0.5 against 0: +0.63 dB on odd-sized whole images, +0.12 on whole periods, "
-        "docs/results/convergence_30min_partial.md)",
+        "docs/results/convergence/30min_partial.md)",
     )
     batch_size: int = _opt(
         8,
         "patches per step (the paper: 80; 8 learns most per CPU-hour, "
-        "docs/results/convergence_5min_lr.md)",
+        "docs/results/convergence/5min_lr.md)",
     )
     max_images: int | None = _opt(None, "use at most this many training images")
 
@@ -139,7 +139,7 @@ class OptimConfig:
     lr: float = _opt(
         1e-3,
         "peak Adam learning rate (the paper: 1e-4, constant; 1e-3 with warm-up and cosine "
-        "decay measured best per CPU-hour, docs/results/convergence_5min_lr.md)",
+        "decay measured best per CPU-hour, docs/results/convergence/5min_lr.md)",
     )
     schedule: str = _opt(
         "cosine", "constant (the paper's) or cosine: decay to 0 over the steps or time limit"
@@ -384,9 +384,55 @@ class TrainConfig:
         return path
 
 
+#: The top-level key that makes a configuration file extend another (:func:`read_config_file`).
+EXTENDS = "extends"
+
+
 def read_config_file(path: str | Path) -> dict[str, Any]:
-    """Parse a TOML, YAML or JSON configuration file into a dict."""
-    path = Path(path)
+    """Parse a TOML, YAML or JSON configuration file into a dict.
+
+    A file may start from another: a top-level ``extends = "recipe.toml"`` (a path relative to
+    the file) reads that file first and lays this one's settings over it, table by table (a
+    setting this file gives replaces the other's; a list is one setting). The other file may
+    extend a third, and so on; a cycle or a missing file is an error naming the files.
+    """
+    return _read_extended(Path(path), ())
+
+
+def _read_extended(path: Path, chain: tuple[Path, ...]) -> dict[str, Any]:
+    data = _parse_config_file(path)
+    base = data.pop(EXTENDS, None)
+    if base is None:
+        return data
+    if not isinstance(base, str) or not base:
+        raise ConfigError(
+            f"config file {str(path)!r}: {EXTENDS} must name a config file (a string), got {base!r}"
+        )
+    chain = (*chain, path)
+    parent = path.parent / base
+    if parent.resolve() in {p.resolve() for p in chain}:
+        cycle = " -> ".join(str(p) for p in (*chain, parent))
+        raise ConfigError(f"config file {str(path)!r}: {EXTENDS} makes a cycle: {cycle}")
+    if not parent.is_file():
+        raise ConfigError(
+            f"config file {str(path)!r} extends {base!r}, but {str(parent)!r} does not exist"
+        )
+    return _merge(_read_extended(parent, chain), data)
+
+
+def _merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
+    """``base`` with ``over`` laid over it: tables merged key by key, any other value replaced."""
+    out = dict(base)
+    for key, value in over.items():
+        if isinstance(value, dict) and isinstance(out.get(key), dict):
+            out[key] = _merge(out[key], value)
+        else:
+            out[key] = value
+    return out
+
+
+def _parse_config_file(path: Path) -> dict[str, Any]:
+    """One configuration file as written (``extends`` not followed)."""
     try:
         text = path.read_text(encoding="utf-8")
     except OSError as exc:
