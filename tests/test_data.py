@@ -10,7 +10,7 @@ import pytest
 import torch
 from PIL import Image
 
-from splitcam.data.imageio import read_image, write_image
+from splitcam.data.images import read_image, write_image
 from splitcam.data.patches import ImageCache, PatchSampler, list_images, load_validation
 
 TRAIN = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "train"

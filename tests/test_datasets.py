@@ -1,4 +1,6 @@
-"""Tests for splitcam.data.testsets: test sets, the bundled images, verified downloads.
+"""Tests of the test sets: the registry (splitcam.data.registry), verified downloads
+(splitcam.data.download), and finding and loading test sets and the bundled images
+(splitcam.data.testsets).
 
 Downloads are served by a local HTTP server on 127.0.0.1 from the shared data folder (or from
 temporary folders laid out like the public sources), or copied from local folders; nothing goes
@@ -16,6 +18,8 @@ import importlib.resources
 import logging
 import re
 import socket
+import subprocess
+import sys
 import threading
 import urllib.parse
 import urllib.request
@@ -26,8 +30,9 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from splitcam.data import testsets as datasets
-from splitcam.data.testsets import ChecksumError, DownloadError
+import splitcam.data.download as downloading
+from splitcam.data import registry, testsets
+from splitcam.data.download import ChecksumError, DownloadError, download
 
 
 class _Handler(http.server.BaseHTTPRequestHandler):
@@ -101,8 +106,8 @@ def serve() -> Iterator:
 @pytest.fixture(autouse=True)
 def _no_env(monkeypatch: pytest.MonkeyPatch) -> None:
     """A user's SPLITCAM_DATA or SPLITCAM_MIRROR must not change what the tests see."""
-    monkeypatch.delenv(datasets.DATA_ENV, raising=False)
-    monkeypatch.delenv(datasets.MIRROR_ENV, raising=False)
+    monkeypatch.delenv(registry.DATA_ENV, raising=False)
+    monkeypatch.delenv(registry.MIRROR_ENV, raising=False)
 
 
 def _contents(folder: Path) -> list[str]:
@@ -120,8 +125,8 @@ def _git_blob(data: bytes) -> str:
     return hashlib.sha1(b"blob %d\0" % len(data) + data).hexdigest()
 
 
-def _entry(dataset: str, name: str) -> datasets._File:
-    return next(f for f in datasets._DATASETS[dataset].files if f.name == name)
+def _entry(dataset: str, name: str) -> registry.DatasetFile:
+    return next(f for f in registry.datasets()[dataset].files if f.name == name)
 
 
 def _registry_rows() -> list[dict[str, str]]:
@@ -165,27 +170,28 @@ def test_registry_lists_every_file_with_well_formed_hashes() -> None:
         assert len({row[column] for row in rows}) == len(rows), column
 
     # The module serves exactly these rows, and keeps no hashes of its own.
-    assert datasets.DATASET_NAMES == ("kodak24", "mcmaster")
-    loaded = [(d.name, f) for d in datasets._DATASETS.values() for f in d.files]
+    assert registry.dataset_names() == ("kodak24", "mcmaster")
+    loaded = [(d.name, f) for d in registry.datasets().values() for f in d.files]
     assert [
         (name, f.name, f.source_path, f.sha256, f.git_blob, f.pixels_sha256 or "-")
         for name, f in loaded
     ] == [tuple(row.values()) for row in rows]
-    assert all(f.converted for f in datasets._DATASETS["mcmaster"].files)
-    assert not any(f.converted for f in datasets._DATASETS["kodak24"].files)
-    source = Path(datasets.__file__).read_text()
-    assert not re.search(r"[0-9a-f]{64}", source)
-    assert not any(row["git_blob"] in source for row in rows)
+    assert all(f.converted for f in registry.datasets()["mcmaster"].files)
+    assert not any(f.converted for f in registry.datasets()["kodak24"].files)
+    for module in (registry, downloading, testsets):
+        source = Path(module.__file__).read_text()
+        assert not re.search(r"[0-9a-f]{64}", source), module.__name__
+        assert not any(row["git_blob"] in source for row in rows), module.__name__
 
 
 def test_registry_matches_shared_data(shared_data: Path) -> None:
-    for name in datasets.DATASET_NAMES:
+    for name in registry.dataset_names():
         folder = shared_data / name
         lines = (folder / "MANIFEST.sha256").read_text().splitlines()
         manifest = {file: digest for digest, file in (line.split(maxsplit=1) for line in lines)}
         with open(folder / "SOURCES.tsv", newline="") as fh:
             sources = {row["file"]: row for row in csv.DictReader(fh, delimiter="\t")}
-        dataset = datasets._DATASETS[name]
+        dataset = registry.datasets()[name]
         assert {f.name for f in dataset.files} == set(sources)
         assert {f.name for f in dataset.files} == set(manifest) - {"SOURCES.tsv"}
         ((repo, commit),) = {(row["source_repo"], row["source_commit"]) for row in sources.values()}
@@ -200,7 +206,7 @@ def test_registry_matches_shared_data(shared_data: Path) -> None:
             data = (folder / entry.name).read_bytes()
             assert hashlib.sha256(data).hexdigest() == entry.sha256
             if entry.converted:
-                assert datasets._pixels_sha256(folder / entry.name) == entry.pixels_sha256
+                assert downloading._pixels_sha256(folder / entry.name) == entry.pixels_sha256
             else:
                 # The SHA-256 pooch checks pins the same bytes as the published git blob id.
                 assert _git_blob(data) == entry.git_blob
@@ -208,18 +214,18 @@ def test_registry_matches_shared_data(shared_data: Path) -> None:
 
 def test_registry_parser_rejects_malformed_tables() -> None:
     text = importlib.resources.files("splitcam.data").joinpath("registry.tsv").read_text()
-    assert datasets._parse_registry(text) == datasets._DATASETS
+    assert registry.parse_registry(text) == registry.datasets()
     kodim01 = _entry("kodak24", "kodim01.png")
     with pytest.raises(RuntimeError, match="malformed hash in row kodak24/kodim01.png"):
-        datasets._parse_registry(text.replace(kodim01.sha256, kodim01.sha256[:-1]))
+        registry.parse_registry(text.replace(kodim01.sha256, kodim01.sha256[:-1]))
     mcm03 = _entry("mcmaster", "03.png")
     with pytest.raises(RuntimeError, match="mcmaster/03.png is converted but has no pixel"):
-        datasets._parse_registry(text.replace(mcm03.pixels_sha256 or "?", "-"))
+        registry.parse_registry(text.replace(mcm03.pixels_sha256 or "?", "-"))
     with pytest.raises(RuntimeError, match="expected the columns"):
-        datasets._parse_registry(text.replace("pixels_sha256\n", "pixels\n"))
+        registry.parse_registry(text.replace("pixels_sha256\n", "pixels\n"))
     kodak_only = "\n".join(line for line in text.splitlines() if not line.startswith("mcmaster"))
     with pytest.raises(RuntimeError, match="no files listed for mcmaster"):
-        datasets._parse_registry(kodak_only)
+        registry.parse_registry(kodak_only)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -229,7 +235,7 @@ def test_registry_parser_rejects_malformed_tables() -> None:
 def test_download_from_http_mirror(shared_data: Path, serve, tmp_path: Path) -> None:
     server = serve(shared_data)
     wanted = ["kodim01.png", "kodim19.png", "07.png"]
-    paths = datasets.download(
+    paths = download(
         ["kodak24", "mcmaster"], tmp_path, mirror=server.url + "/", progress=False, files=wanted
     )
     assert paths == [
@@ -246,7 +252,7 @@ def test_download_from_http_mirror(shared_data: Path, serve, tmp_path: Path) -> 
     ]
     assert _contents(tmp_path / "kodak24") == ["kodim01.png", "kodim19.png"]
     assert _contents(tmp_path / "mcmaster") == ["07.png"]
-    names = [name for name, _ in datasets.resolve("kodak24", root=tmp_path)]
+    names = [name for name, _ in testsets.resolve("kodak24", root=tmp_path)]
     assert names == ["kodim01", "kodim19"]
 
 
@@ -254,13 +260,13 @@ def test_download_from_http_mirror(shared_data: Path, serve, tmp_path: Path) -> 
 def test_download_from_local_mirror(
     how: str, shared_data: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    monkeypatch.setenv(datasets.DATA_ENV, str(tmp_path))
+    monkeypatch.setenv(registry.DATA_ENV, str(tmp_path))
     if how == "env-folder":
-        monkeypatch.setenv(datasets.MIRROR_ENV, str(shared_data))
+        monkeypatch.setenv(registry.MIRROR_ENV, str(shared_data))
         mirror = None
     else:
         mirror = shared_data.resolve().as_uri()
-    (path,) = datasets.download("mcmaster", mirror=mirror, progress=False, files=["07.png"])
+    (path,) = download("mcmaster", mirror=mirror, progress=False, files=["07.png"])
     assert path == tmp_path / "mcmaster" / "07.png"
     assert path.read_bytes() == (shared_data / "mcmaster" / "07.png").read_bytes()
     assert _contents(tmp_path / "mcmaster") == ["07.png"]
@@ -279,11 +285,11 @@ def test_download_from_public_source_layout(
 ) -> None:
     server = serve(_public_layout(tmp_path, shared_data))
     monkeypatch.setitem(
-        datasets._DATASETS,
+        registry.datasets(),
         "kodak24",
-        dataclasses.replace(datasets._DATASETS["kodak24"], base_url=server.url + "/"),
+        dataclasses.replace(registry.datasets()["kodak24"], base_url=server.url + "/"),
     )
-    (path,) = datasets.download("kodak24", tmp_path / "data", progress=False, files=["kodim03.png"])
+    (path,) = download("kodak24", tmp_path / "data", progress=False, files=["kodim03.png"])
     assert path.read_bytes() == (shared_data / "kodak24" / "kodim03.png").read_bytes()
     assert server.log == ["/testsets/Set24/kodim03.png"]
     assert _contents(tmp_path / "data" / "kodak24") == ["kodim03.png"]
@@ -294,13 +300,13 @@ def _serve_mcmaster_tiff(
 ) -> _Server:
     """Serve the folder above ``testsets/McMaster/`` as McMaster's source, with ``name``'s git
     blob id registered as ``blob``."""
-    dataset = datasets._DATASETS["mcmaster"]
+    dataset = registry.datasets()["mcmaster"]
     files = tuple(
         dataclasses.replace(f, git_blob=blob) if f.name == name else f for f in dataset.files
     )
     server = serve(tiff.parents[2])
     monkeypatch.setitem(
-        datasets._DATASETS,
+        registry.datasets(),
         "mcmaster",
         dataclasses.replace(dataset, base_url=server.url + "/", files=files),
     )
@@ -318,7 +324,7 @@ def test_mcmaster_tiff_is_verified_and_converted(
     Image.fromarray(reference).save(tiff, compression="packbits")
     server = _serve_mcmaster_tiff(tiff, "02.png", _git_blob(tiff.read_bytes()), serve, monkeypatch)
     out = tmp_path / "data"
-    (path,) = datasets.download("mcmaster", out, progress=False, files=["02.png"])
+    (path,) = download("mcmaster", out, progress=False, files=["02.png"])
     assert path == out / "mcmaster" / "02.png"
     assert server.log == ["/testsets/McMaster/2.tif"]
     assert np.array_equal(np.asarray(Image.open(path)), reference)
@@ -327,14 +333,14 @@ def test_mcmaster_tiff_is_verified_and_converted(
     # A PNG encoded differently still counts as present, by its pixels.
     Image.fromarray(reference).save(path, compress_level=1)
     server.log.clear()
-    datasets.download("mcmaster", out, progress=False, files=["02.png"])
+    download("mcmaster", out, progress=False, files=["02.png"])
     assert server.log == []
 
     # Different bytes (a changed TIFF) are refused by the blob id before decoding.
     Image.fromarray(reference).save(tiff, compression="tiff_lzw")
     path.unlink()
     with pytest.raises(ChecksumError, match="mcmaster/02.png.*git blob id") as info:
-        datasets.download("mcmaster", out, progress=False, files=["02.png"])
+        download("mcmaster", out, progress=False, files=["02.png"])
     assert _git_blob(tiff.read_bytes()) in str(info.value)
     assert _contents(out / "mcmaster") == []
 
@@ -351,7 +357,7 @@ def test_mcmaster_tiff_with_other_pixels_is_refused(
     _serve_mcmaster_tiff(tiff, "05.png", _git_blob(tiff.read_bytes()), serve, monkeypatch)
     out = tmp_path / "data"
     with pytest.raises(DownloadError, match="mcmaster/05.png.*pixel SHA-256") as info:
-        datasets.download("mcmaster", out, progress=False, files=["05.png"])
+        download("mcmaster", out, progress=False, files=["05.png"])
     assert not isinstance(info.value, ChecksumError)
     assert _contents(out / "mcmaster") == []
 
@@ -368,7 +374,7 @@ def test_tampered_file_is_refused_and_deleted(
     mirror = serve(tmp_path / "site").url if how == "http" else str(tmp_path / "site")
     out = tmp_path / "data"
     with pytest.raises(ChecksumError) as info:
-        datasets.download("kodak24", out, mirror=mirror, progress=False, files=["kodim05.png"])
+        download("kodak24", out, mirror=mirror, progress=False, files=["kodim05.png"])
     message = str(info.value)
     assert "kodak24/kodim05.png" in message
     assert _entry("kodak24", "kodim05.png").sha256 in message
@@ -381,14 +387,14 @@ def test_present_files_are_skipped_and_bad_ones_replaced(
 ) -> None:
     server = serve(shared_data)
     wanted = ["kodim07.png", "kodim08.png"]
-    datasets.download("kodak24", tmp_path, mirror=server.url, progress=False, files=wanted)
+    download("kodak24", tmp_path, mirror=server.url, progress=False, files=wanted)
     assert len(server.log) == 2
     server.log.clear()
-    datasets.download("kodak24", tmp_path, mirror=server.url, progress=False, files=wanted)
+    download("kodak24", tmp_path, mirror=server.url, progress=False, files=wanted)
     assert server.log == []
 
     (tmp_path / "kodak24" / "kodim08.png").write_bytes(b"not the image")
-    paths = datasets.download("kodak24", tmp_path, mirror=server.url, progress=False, files=wanted)
+    paths = download("kodak24", tmp_path, mirror=server.url, progress=False, files=wanted)
     assert server.log == ["/kodak24/kodim08.png"]
     assert paths[1].read_bytes() == (shared_data / "kodak24" / "kodim08.png").read_bytes()
     assert _contents(tmp_path / "kodak24") == wanted
@@ -401,12 +407,10 @@ def test_broken_connection_leaves_nothing_and_retry_starts_over(
     server.cut_once.add("/kodak24/kodim02.png")
     out = tmp_path / "data"
     with pytest.raises(DownloadError, match="kodak24/kodim02.png"):
-        datasets.download("kodak24", out, mirror=server.url, progress=False, files=["kodim02.png"])
+        download("kodak24", out, mirror=server.url, progress=False, files=["kodim02.png"])
     assert _contents(out / "kodak24") == []
 
-    (path,) = datasets.download(
-        "kodak24", out, mirror=server.url, progress=False, files=["kodim02.png"]
-    )
+    (path,) = download("kodak24", out, mirror=server.url, progress=False, files=["kodim02.png"])
     assert path.read_bytes() == (shared_data / "kodak24" / "kodim02.png").read_bytes()
     assert server.log == ["/kodak24/kodim02.png"] * 2
 
@@ -420,9 +424,7 @@ def test_progress_bars_without_pooch_log(
     logger = pooch.get_logger()
     # As after an earlier pooch download: the logger has cached that INFO messages go out.
     assert logger.isEnabledFor(logging.INFO)
-    (path,) = datasets.download(
-        "kodak24", tmp_path, mirror=server.url, progress=True, files=["kodim09.png"]
-    )
+    (path,) = download("kodak24", tmp_path, mirror=server.url, progress=True, files=["kodim09.png"])
     assert path.read_bytes() == (shared_data / "kodak24" / "kodim09.png").read_bytes()
     err = capfd.readouterr().err
     assert "download" in err and "kodak24/kodim09.png" in err
@@ -436,7 +438,7 @@ def test_network_error_leaves_no_final_file(tmp_path: Path) -> None:
         port = sock.getsockname()[1]
     # Nothing listens on the port any more: the connection is refused.
     with pytest.raises(DownloadError, match="kodak24/kodim01.png") as info:
-        datasets.download(
+        download(
             "kodak24",
             tmp_path,
             mirror=f"http://127.0.0.1:{port}",
@@ -452,15 +454,13 @@ def test_http_error_is_reported(serve, tmp_path: Path) -> None:
     (tmp_path / "empty").mkdir()
     server = serve(tmp_path / "empty")
     with pytest.raises(DownloadError, match="kodak24/kodim01.png .*HTTP 404"):
-        datasets.download(
-            "kodak24", tmp_path, mirror=server.url, progress=False, files=["kodim01.png"]
-        )
+        download("kodak24", tmp_path, mirror=server.url, progress=False, files=["kodim01.png"])
 
 
 def test_missing_file_in_local_mirror_is_reported(tmp_path: Path) -> None:
     (tmp_path / "mirror").mkdir()
     with pytest.raises(DownloadError, match="kodak24/kodim01.png"):
-        datasets.download(
+        download(
             "kodak24",
             tmp_path / "data",
             mirror=str(tmp_path / "mirror"),
@@ -472,13 +472,13 @@ def test_missing_file_in_local_mirror_is_reported(tmp_path: Path) -> None:
 
 def test_download_rejects_unknown_names(tmp_path: Path) -> None:
     with pytest.raises(ValueError, match="unknown dataset.*kodak24, mcmaster"):
-        datasets.download(["kodak"], tmp_path)
+        download(["kodak"], tmp_path)
     with pytest.raises(ValueError, match="01.png"):
-        datasets.download("kodak24", tmp_path, files=["01.png"])
+        download("kodak24", tmp_path, files=["01.png"])
     with pytest.raises(ValueError, match="neither a URL"):
-        datasets.download("kodak24", tmp_path, mirror=str(tmp_path / "missing"))
+        download("kodak24", tmp_path, mirror=str(tmp_path / "missing"))
     with pytest.raises(ValueError, match="unsupported scheme 'ftp://'"):
-        datasets.download("kodak24", tmp_path, mirror="ftp://127.0.0.1/data")
+        download("kodak24", tmp_path, mirror="ftp://127.0.0.1/data")
 
 
 def test_cli_download_and_list(
@@ -486,11 +486,11 @@ def test_cli_download_and_list(
 ) -> None:
     server = serve(shared_data)
     parser = argparse.ArgumentParser(prog="splitcam")
-    datasets.add_cli(parser.add_subparsers(dest="command", required=True))
+    testsets.add_cli(parser.add_subparsers(dest="command", required=True))
     # Pre-populate all but one file so the command downloads one and verifies the rest.
     folder = tmp_path / "mcmaster"
     folder.mkdir()
-    for entry in datasets._DATASETS["mcmaster"].files[1:]:
+    for entry in registry.datasets()["mcmaster"].files[1:]:
         (folder / entry.name).symlink_to(shared_data / "mcmaster" / entry.name)
     args = parser.parse_args(
         ["data", "download", "mcmaster", "--to", str(tmp_path), "--mirror", server.url, "--quiet"]
@@ -516,24 +516,24 @@ def test_resolve_dataset_names(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) 
     _write_png(tmp_path / "kodak24" / "kodim02.png", 0)
     _write_png(tmp_path / "kodak24" / "kodim01.png", 1)
     expected = [(f"kodim0{i}", tmp_path / "kodak24" / f"kodim0{i}.png") for i in (1, 2)]
-    assert datasets.resolve("kodak24", root=tmp_path) == expected
-    monkeypatch.setenv(datasets.DATA_ENV, str(tmp_path))
-    assert datasets.resolve("kodak24") == expected
-    assert datasets.data_root() == tmp_path
-    monkeypatch.delenv(datasets.DATA_ENV)
+    assert testsets.resolve("kodak24", root=tmp_path) == expected
+    monkeypatch.setenv(registry.DATA_ENV, str(tmp_path))
+    assert testsets.resolve("kodak24") == expected
+    assert registry.data_root() == tmp_path
+    monkeypatch.delenv(registry.DATA_ENV)
     monkeypatch.setenv("HOME", str(tmp_path / "home"))
-    assert datasets.data_root() == tmp_path / "home" / ".cache" / "splitcam" / "datasets"
+    assert registry.data_root() == tmp_path / "home" / ".cache" / "splitcam" / "datasets"
 
 
 def test_resolve_missing_dataset_says_how_to_get_it(tmp_path: Path) -> None:
     with pytest.raises(FileNotFoundError) as info:
-        datasets.resolve("mcmaster", root=tmp_path)
+        testsets.resolve("mcmaster", root=tmp_path)
     message = str(info.value)
     assert "splitcam data download mcmaster --to DIR" in message
-    assert datasets.DATA_ENV in message
+    assert registry.DATA_ENV in message
     assert str(tmp_path) in message
     with pytest.raises(FileNotFoundError, match="neither a folder nor a dataset"):
-        datasets.resolve("no_such_set", root=tmp_path)
+        testsets.resolve("no_such_set", root=tmp_path)
 
 
 def test_resolve_folders(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
@@ -553,30 +553,30 @@ def test_resolve_folders(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Non
         ("c", folder / "c.tiff"),
         ("d", folder / "d.bmp"),
     ]
-    assert datasets.resolve(str(folder)) == expected
-    assert datasets.resolve(folder) == expected
+    assert testsets.resolve(str(folder)) == expected
+    assert testsets.resolve(folder) == expected
     monkeypatch.chdir(tmp_path)
     # A plain word that is no dataset under the root but a folder here is that folder.
-    assert datasets.resolve("mine", root=tmp_path / "root") == [
+    assert testsets.resolve("mine", root=tmp_path / "root") == [
         (name, Path("mine") / path.name) for name, path in expected
     ]
-    assert datasets.resolve("./mine") == [(n, Path("mine") / p.name) for n, p in expected]
+    assert testsets.resolve("./mine") == [(n, Path("mine") / p.name) for n, p in expected]
 
 
 def test_resolve_folder_errors(tmp_path: Path) -> None:
     with pytest.raises(FileNotFoundError, match="does not exist"):
-        datasets.resolve(tmp_path / "missing")
+        testsets.resolve(tmp_path / "missing")
     with pytest.raises(FileNotFoundError, match="no image files"):
-        datasets.resolve(tmp_path)
+        testsets.resolve(tmp_path)
     _write_png(tmp_path / "x.png", 0)
     Image.fromarray(np.zeros((4, 4, 3), np.uint8)).save(tmp_path / "x.jpg")
     with pytest.raises(ValueError, match="x.jpg, x.png"):
-        datasets.resolve(tmp_path)
+        testsets.resolve(tmp_path)
 
 
 def test_load_images(tmp_path: Path) -> None:
     pixels = _write_png(tmp_path / "img.png", 3, size=(6, 7))
-    ((name, image),) = datasets.load_images(tmp_path)
+    ((name, image),) = testsets.load_images(tmp_path)
     assert name == "img"
     assert image.shape == (3, 6, 7)
     assert str(image.dtype) == "torch.float32"
@@ -589,28 +589,104 @@ def test_default_images_need_no_network(monkeypatch: pytest.MonkeyPatch) -> None
 
     monkeypatch.setattr(urllib.request, "urlopen", refuse)
     monkeypatch.setattr(socket.socket, "connect", refuse)
-    images = datasets.default_images()
+    images = testsets.default_images()
     assert len(images) >= 4
     names = [name for name, _ in images]
     assert {"skimage/astronaut", "skimage/chelsea", "skimage/coffee", "skimage/rocket"} <= set(
         names
     )
-    assert names == [n for n in datasets.DEFAULT_IMAGE_NAMES if n in names]
+    assert names == [n for n in testsets.DEFAULT_IMAGE_NAMES if n in names]
     for name, image in images:
         assert image.ndim == 3 and image.shape[0] == 3, name
         assert str(image.dtype) == "torch.float32", name
         assert 0.0 <= float(image.min()) and float(image.max()) <= 1.0, name
         # Colour, not greyscale stored as RGB.
         assert float((image[0] - image[1]).abs().max()) > 0.1, name
-    assert datasets.load_images(None)[0][0] == names[0]
+    assert testsets.load_images(None)[0][0] == names[0]
 
 
 def test_default_images_match_skimage_loaders() -> None:
     import skimage.data
 
-    ((name, image),) = datasets.default_images(["astronaut"])
+    ((name, image),) = testsets.default_images(["astronaut"])
     assert name == "skimage/astronaut"
     expected = skimage.data.astronaut().astype(np.float32) / 255
     np.testing.assert_array_equal(image.permute(1, 2, 0).numpy(), expected)
     with pytest.raises(ValueError, match="skimage/astronaut"):
-        datasets.default_images(["camera"])
+        testsets.default_images(["camera"])
+
+
+def test_load_datasets(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    for folder, seed in (("first", 0), ("second", 10)):
+        (tmp_path / folder).mkdir()
+        for i in range(3):
+            _write_png(tmp_path / folder / f"img{i}.png", seed + i, size=(7, 9))
+    spec = f"{tmp_path / 'first'}, {tmp_path / 'second'}/"
+    whole = testsets.load_datasets(spec)
+    assert [name for name, _ in whole] == ["first", "second"]
+    assert [[n for n, _ in images] for _, images in whole] == [["img0", "img1", "img2"]] * 2
+    assert all(image.shape == (3, 7, 9) for _, images in whole for _, image in images)
+
+    cropped = testsets.load_datasets(spec, max_images=2, max_size=4)
+    assert [name for name, _ in cropped] == ["first-4px", "second-4px"]
+    for (_, images), (_, full) in zip(cropped, whole, strict=True):
+        assert [n for n, _ in images] == ["img0", "img1"]
+        for (_, image), (_, original) in zip(images, full[:2], strict=True):
+            assert image.shape == (3, 4, 4)
+            assert image.equal(testsets.centre_crop(original, 4))
+
+    # No spec, or "default": the bundled images as the one test set "skimage".
+    bundled = [("skimage/a", whole[0][1][0][1]), ("skimage/b", whole[0][1][1][1])]
+    monkeypatch.setattr(testsets, "default_images", lambda: bundled)
+    for default in (None, "", "default"):
+        assert testsets.load_datasets(default) == [("skimage", bundled)]
+    ((name, images),) = testsets.load_datasets(None, max_images=1, max_size=6)
+    assert name == "skimage-6px" and [n for n, _ in images] == ["skimage/a"]
+
+    for size in (1, 0, -3):
+        with pytest.raises(ValueError, match=f"max_size must be at least 2 pixels, got {size}"):
+            testsets.load_datasets(spec, max_size=size)
+    with pytest.raises(FileNotFoundError, match="neither a folder nor a dataset"):
+        testsets.load_datasets("no_such_set")
+
+
+# ---------------------------------------------------------------------------------------------
+# What importing costs
+
+
+def _fresh_modules(code: str) -> set[str]:
+    """The modules a fresh interpreter has loaded after running ``code``."""
+    script = f"import sys\n{code}\nprint(' '.join(sys.modules))"
+    result = subprocess.run(
+        [sys.executable, "-c", script], capture_output=True, text=True, check=True
+    )
+    return set(result.stdout.split())
+
+
+def test_registry_and_download_import_neither_torch_nor_numpy() -> None:
+    # The command line builds its parser from the registry: no numpy, no torch, and the
+    # registry file is read on first use, not at import.
+    loaded = _fresh_modules(
+        "import splitcam.data.registry as r\n"
+        "assert r.datasets.cache_info().currsize == 0\n"
+        "assert r.dataset_names() == ('kodak24', 'mcmaster')\n"
+        "import splitcam.data.download"
+    )
+    assert {"splitcam.data.registry", "splitcam.data.download"} <= loaded
+    assert not {"torch", "numpy", "pooch", "PIL"} & loaded
+
+
+def test_data_package_imports_its_names_on_first_use() -> None:
+    import splitcam.data as data
+    from splitcam.data import images, patches, raw
+
+    assert "torch" not in _fresh_modules("import splitcam.data")
+    assert data.read_image is images.read_image
+    assert data.write_raw is raw.write_raw
+    assert data.ImageCache is patches.ImageCache
+    assert data.load_images is testsets.load_images
+    assert set(data.__all__) <= set(dir(data))
+    assert {"registry", "download", "testsets", "images", "raw"} <= set(dir(data))
+    assert data.registry is registry
+    with pytest.raises(AttributeError, match="no attribute 'nothing'"):
+        data.nothing  # noqa: B018

@@ -1,4 +1,5 @@
-"""Tests of splitcam.data.imageio: colour image round trips, refusals and raw sensor images."""
+"""Tests of the image files: colour image round trips and refusals (splitcam.data.images), raw
+sensor images (splitcam.data.raw), and the names splitcam.data.imageio gathers from both."""
 
 from __future__ import annotations
 
@@ -11,17 +12,14 @@ import pytest
 import torch
 from PIL import Image
 
-from splitcam.data.imageio import (
-    RAW_OFFSET_KEY,
-    RAW_SCALE_KEY,
+from splitcam.data.images import (
     ImageReadError,
     decode_image,
     read_image,
     read_image_uint8,
-    read_raw,
     write_image,
-    write_raw,
 )
+from splitcam.data.raw import RAW_OFFSET_KEY, RAW_SCALE_KEY, read_raw, write_raw
 
 
 def _rgb8(height: int = 13, width: int = 17, seed: int = 0) -> np.ndarray:
@@ -354,3 +352,13 @@ def test_raw_errors(tmp_path: Path) -> None:
         write_raw(tmp_path / "r.png", np.zeros((2, 2)), scale=0.0)
     with pytest.raises(ValueError, match=r"\(H, W\)"):
         write_raw(tmp_path / "r.png", np.zeros((2, 2, 3)))
+
+
+def test_imageio_gathers_the_image_and_raw_names() -> None:
+    from splitcam.data import imageio, images
+    from splitcam.data import raw as raw_files
+
+    for name in imageio.__all__:
+        module = images if name in images.__all__ else raw_files
+        assert getattr(imageio, name) is getattr(module, name), name
+    assert set(imageio.__all__) == set(images.__all__) | set(raw_files.__all__)

@@ -1,15 +1,53 @@
-"""Data: image and raw files (:mod:`.imageio`), training patches (:mod:`.patches`), and the test
-sets with their download (:mod:`.testsets`)."""
+"""Data: colour image files (:mod:`.images`), raw sensor files (:mod:`.raw`), training patches
+(:mod:`.patches`), the test sets (:mod:`.testsets`), their registry (:mod:`.registry`) and their
+download (:mod:`.download`).
 
-from .imageio import read_image, read_raw, write_image, write_raw
-from .patches import ImageCache, PatchSampler, list_images, load_validation
-from .testsets import default_images, download, load_images
+The names below are imported from their modules on first use, so importing one light module
+(such as :mod:`.registry`, which needs only the standard library) does not import torch.
+``splitcam.data.download`` is the download module; its function is
+:func:`splitcam.data.download.download`.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from .images import read_image, write_image
+    from .patches import ImageCache, PatchSampler, list_images, load_validation
+    from .raw import read_raw, write_raw
+    from .testsets import default_images, load_images
+
+# Each exported name and the module (in this package) that defines it.
+_EXPORTS = {
+    "ImageCache": "patches",
+    "PatchSampler": "patches",
+    "default_images": "testsets",
+    "list_images": "patches",
+    "load_images": "testsets",
+    "load_validation": "patches",
+    "read_image": "images",
+    "read_raw": "raw",
+    "write_image": "images",
+    "write_raw": "raw",
+}
+
+_SUBMODULES = (
+    "download",
+    "images",
+    "imageio",
+    "patches",
+    "raw",
+    "registry",
+    "tensorfiles",
+    "testsets",
+)
 
 __all__ = [
     "ImageCache",
     "PatchSampler",
     "default_images",
-    "download",
     "list_images",
     "load_images",
     "load_validation",
@@ -18,3 +56,18 @@ __all__ = [
     "write_image",
     "write_raw",
 ]
+
+
+def __getattr__(name: str) -> Any:
+    if name in _EXPORTS:
+        value = getattr(importlib.import_module(f".{_EXPORTS[name]}", __name__), name)
+    elif name in _SUBMODULES:
+        value = importlib.import_module(f".{name}", __name__)
+    else:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted({*globals(), *_EXPORTS, *_SUBMODULES})

@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from .imageio import IMAGE_SUFFIXES, ImageReadError, decode_image
+from .images import IMAGE_SUFFIXES, ImageReadError, decode_image
 
 __all__ = [
     "ImageCache",
@@ -361,7 +361,7 @@ class PatchSampler:
             code: Dihedral code per patch, see :func:`dihedral` (ignored unless ``augment``).
 
         Returns:
-            float32 patches in [0, 1], the same values :func:`~splitcam.data.imageio.read_image`
+            float32 patches in [0, 1], the same values :func:`~splitcam.data.images.read_image`
             gives for those pixels.
 
         Shape:

@@ -1,242 +1,48 @@
-"""Test image sets: named datasets, image folders, the bundled default images, and downloads.
+"""Test image sets: named datasets, image folders and the bundled default images.
 
 Three kinds of test set are understood:
 
 - **Dataset names**, ``kodak24`` and ``mcmaster``: folders under a data root. The root is the
   ``root`` argument, else the ``SPLITCAM_DATA`` environment variable, else
-  ``~/.cache/splitcam/datasets``. ``splitcam data download kodak24 mcmaster --to DIR`` fills it.
+  ``~/.cache/splitcam/datasets`` (:func:`splitcam.data.registry.data_root`).
+  ``splitcam data download kodak24 mcmaster --to DIR`` fills it (:mod:`splitcam.data.download`).
 - **Folders** of PNG, JPEG, TIFF or BMP images.
 - **The default images** (:func:`default_images`): colour photographs that ship inside
   scikit-image, so an evaluation runs on a fresh machine without any download.
 
-Downloads and their checks
---------------------------
-Every file is fetched from the public address the dataset is published at, pinned to a commit
-(:data:`_SOURCES`), and checked against the hashes in the registry file ``registry.tsv`` that
-ships beside this module. The transfers go through `pooch <https://www.fatiando.org/pooch>`_
-(:func:`pooch.retrieve`), which downloads to a temporary file in the dataset folder, checks its
-SHA-256 and only then moves it to its final name.
-
-- **Kodak24** (``kodim01.png`` ... ``kodim24.png``): GitHub ``cszn/IRCNN``,
-  ``testsets/Set24/kodimNN.png``. The files are used as published, so pooch checks the downloaded
-  bytes against the registered SHA-256. The registered git blob id describes the same bytes (the
-  tests check that), so it needs no second check.
-- **McMaster** (``01.png`` ... ``18.png``): GitHub ``cszn/FFDNet``, ``testsets/McMaster/N.tif``.
-  The published files are TIFFs; ``N.tif`` becomes ``NN.png``. pooch cannot verify these: their
-  registered hashes are a git blob id (``sha1(b"blob <size>\\0" + bytes)``, as
-  ``git hash-object`` prints), which is no plain digest of the file, and a hash of the decoded
-  pixels, ``sha256(np.asarray(Image.open(f).convert("RGB"), np.uint8).tobytes())``. So pooch
-  downloads the TIFF into a scratch folder without a hash, and a pooch processor of ours checks
-  both hashes and writes the pixels as PNG. The pixel hash is what makes the PNG trustworthy: a
-  PNG encoder other than the one that made the reference files may write different bytes for the
-  same pixels, so an existing McMaster PNG counts as verified if either its file SHA-256 or its
-  pixel hash matches.
-
-A mirror (``mirror=`` or the ``SPLITCAM_MIRROR`` environment variable) replaces the public
-addresses by ``<mirror>/<dataset>/<file name>``, i.e. a server holding copies of the dataset
-folders (PNG for both sets). Files from a mirror must have the registered file SHA-256, which
-pooch checks. A mirror may also be a local folder or a ``file://`` URL; pooch has no downloader
-for those, so a small one of ours copies the file and pooch verifies and places it as usual.
-
-A file under its final name is always complete and verified: a failed check deletes the download
-and raises :class:`ChecksumError`. Files already present and verified are not downloaded again.
-Unlike earlier versions, an interrupted download is not resumed with an HTTP ``Range`` request
-(pooch has no support for it): running the command again downloads that file from the start,
-which costs little as no file is larger than about 1 MB.
+:func:`load_datasets` reads several test sets at once, as ``splitcam evaluate --datasets`` names
+them. The ``splitcam data`` command is built by :func:`add_cli` and run by :func:`cmd_data`.
 """
 
 from __future__ import annotations
 
 import argparse
-import csv
-import hashlib
-import importlib.resources
-import logging
 import os
-import re
-import shutil
-import sys
-import tempfile
-import urllib.parse
-import urllib.request
 from collections import Counter
-from collections.abc import Iterable, Iterator, Sequence
-from contextlib import contextmanager
-from dataclasses import dataclass
+from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, BinaryIO
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .. import __version__
-from .imageio import read_image
+from .download import download
+from .images import read_image
 from .patches import list_images
+from .registry import DATA_ENV, DEFAULT_ROOT, MIRROR_ENV, data_root, dataset_names, datasets
 
 if TYPE_CHECKING:
     import torch
 
 __all__ = [
-    "DATASET_NAMES",
-    "DATA_ENV",
     "DEFAULT_IMAGE_NAMES",
-    "MIRROR_ENV",
-    "ChecksumError",
-    "DownloadError",
     "add_cli",
     "centre_crop",
     "cmd_data",
-    "data_root",
     "default_images",
-    "download",
+    "load_datasets",
     "load_images",
     "resolve",
 ]
-
-DATA_ENV = "SPLITCAM_DATA"
-"""Environment variable naming the data root that dataset names are looked up in."""
-
-MIRROR_ENV = "SPLITCAM_MIRROR"
-"""Environment variable naming a mirror to download datasets from instead of the public sources."""
-
-_DEFAULT_ROOT = "~/.cache/splitcam/datasets"
-_CHUNK = 1 << 16
-_USER_AGENT = f"splitcam/{__version__}"
-_REGISTRY = "registry.tsv"
-
-
-class DownloadError(OSError):
-    """A dataset file could not be downloaded. The message names the file and what to do."""
-
-
-class ChecksumError(DownloadError):
-    """Downloaded data did not match its registered hash; the download has been deleted."""
-
-
-@dataclass(frozen=True)
-class _File:
-    """One file of a downloadable dataset, as listed in the registry.
-
-    Attributes:
-        name: File name in the dataset folder, and on a mirror.
-        source_path: Path of the published file inside the source repository.
-        sha256: SHA-256 of the file as kept in the dataset folder.
-        git_blob: Git blob id of the published file (``git hash-object``).
-        pixels_sha256: SHA-256 of the decoded RGB uint8 pixel buffer; set where the published file
-            is converted, as the converted file's bytes depend on the encoder.
-    """
-
-    name: str
-    source_path: str
-    sha256: str
-    git_blob: str
-    pixels_sha256: str | None = None
-
-    @property
-    def converted(self) -> bool:
-        """Whether the published file has another format than the stored one."""
-        return Path(self.source_path).suffix.lower() != Path(self.name).suffix.lower()
-
-
-@dataclass(frozen=True)
-class _Dataset:
-    """A downloadable dataset: where it is published and what its files must hash to."""
-
-    name: str
-    description: str
-    base_url: str
-    files: tuple[_File, ...]
-
-
-# Where each dataset is published: description, GitHub repository and the commit its files are
-# pinned to. The files and their hashes are in registry.tsv; both were taken from the verified
-# copies in the project's shared data folder (its MANIFEST.sha256 and SOURCES.tsv files).
-_SOURCES: dict[str, tuple[str, str, str]] = {
-    "kodak24": (
-        "Kodak Lossless True Color Image Suite, 24 images of 768x512 (PNG)",
-        "cszn/IRCNN",
-        "d9dcd537bdac3ae5b753296cd675db8a303c8f72",
-    ),
-    "mcmaster": (
-        "McMaster colour demosaicking set, 18 images of 500x500 (TIFF, stored as PNG)",
-        "cszn/FFDNet",
-        "e787f46df2f374ff3591186706229cb9a0591fea",
-    ),
-}
-
-_REGISTRY_COLUMNS = ("dataset", "file", "source_path", "sha256", "git_blob", "pixels_sha256")
-_SHA256 = re.compile(r"[0-9a-f]{64}")
-_SHA1 = re.compile(r"[0-9a-f]{40}")
-
-
-def _parse_registry(text: str) -> dict[str, _Dataset]:
-    """The datasets described by the text of a registry file.
-
-    The registry is our own tab-separated table rather than pooch's registry format, because
-    pooch's holds one hash per file, and a converted file needs three (see the module
-    documentation). Lines starting with ``#`` are comments.
-
-    Args:
-        text: Contents of a registry file; columns as in :data:`_REGISTRY_COLUMNS`.
-
-    Returns:
-        The datasets of :data:`_SOURCES`, in that order, with their files in registry order.
-
-    Raises:
-        RuntimeError: The table is malformed: wrong columns, an unknown dataset, a malformed
-            hash, a repeated file, a converted file without pixel hash, or a dataset with no file.
-    """
-    lines = [line for line in text.splitlines() if line.strip() and not line.startswith("#")]
-    reader = csv.DictReader(lines, delimiter="\t")
-    if tuple(reader.fieldnames or ()) != _REGISTRY_COLUMNS:
-        raise RuntimeError(
-            f"dataset registry: expected the columns {', '.join(_REGISTRY_COLUMNS)}, "
-            f"got {', '.join(reader.fieldnames or ())}"
-        )
-    files: dict[str, dict[str, _File]] = {name: {} for name in _SOURCES}
-    for row in reader:
-        label = f"{row['dataset']}/{row['file']}"
-        if None in row or None in row.values():
-            raise RuntimeError(f"dataset registry: row {label} does not have six columns")
-        pixels = None if row["pixels_sha256"] == "-" else row["pixels_sha256"]
-        entry = _File(row["file"], row["source_path"], row["sha256"], row["git_blob"], pixels)
-        if row["dataset"] not in files:
-            raise RuntimeError(f"dataset registry: unknown dataset in row {label}")
-        if entry.name in files[row["dataset"]]:
-            raise RuntimeError(f"dataset registry: {label} is listed twice")
-        if not (
-            _SHA256.fullmatch(entry.sha256)
-            and _SHA1.fullmatch(entry.git_blob)
-            and (pixels is None or _SHA256.fullmatch(pixels))
-        ):
-            raise RuntimeError(f"dataset registry: malformed hash in row {label}")
-        if entry.converted and pixels is None:
-            # Without it a converted file could not be verified at all.
-            raise RuntimeError(f"dataset registry: {label} is converted but has no pixel hash")
-        files[row["dataset"]][entry.name] = entry
-    empty = [name for name, entries in files.items() if not entries]
-    if empty:
-        raise RuntimeError(f"dataset registry: no files listed for {', '.join(empty)}")
-    return {
-        name: _Dataset(
-            name,
-            description,
-            f"https://raw.githubusercontent.com/{repository}/{commit}/",
-            tuple(files[name].values()),
-        )
-        for name, (description, repository, commit) in _SOURCES.items()
-    }
-
-
-def _read_registry() -> dict[str, _Dataset]:
-    """The datasets of the registry file shipped in this package (see :func:`_parse_registry`)."""
-    resource = importlib.resources.files(__package__).joinpath(_REGISTRY)
-    return _parse_registry(resource.read_text(encoding="utf-8"))
-
-
-_DATASETS: dict[str, _Dataset] = _read_registry()
-
-DATASET_NAMES: tuple[str, ...] = tuple(_DATASETS)
-"""Names of the datasets :func:`download` can fetch and :func:`resolve` looks up by name."""
 
 
 # Colour photographs bundled in scikit-image's package data: (name, file in skimage/data).
@@ -258,21 +64,6 @@ DEFAULT_IMAGE_NAMES: tuple[str, ...] = tuple(f"skimage/{name}" for name, _ in _S
 
 # ---------------------------------------------------------------------------------------------
 # Finding and loading test sets
-
-
-def data_root(root: str | os.PathLike[str] | None = None) -> Path:
-    """The folder dataset names are looked up in.
-
-    Args:
-        root: Use this folder. Default: ``$SPLITCAM_DATA`` if set and not empty, else
-            ``~/.cache/splitcam/datasets``.
-
-    Returns:
-        The folder, with ``~`` expanded. It need not exist.
-    """
-    if root is None:
-        root = os.environ.get(DATA_ENV) or _DEFAULT_ROOT
-    return Path(root).expanduser()
 
 
 def _list_folder(folder: Path) -> list[tuple[str, Path]]:
@@ -311,12 +102,13 @@ def resolve(
 
     Args:
         spec: A dataset name such as ``"kodak24"`` or ``"mcmaster"``, or a folder of images.
-        root: Data root for dataset names; see :func:`data_root`.
+        root: Data root for dataset names; see
+            :func:`~splitcam.data.registry.data_root`.
 
     Returns:
         ``(name, path)`` pairs sorted by name, where the name is the file name without its suffix.
         Only files directly inside the folder with one of the suffixes in
-        :data:`splitcam.data.imageio.IMAGE_SUFFIXES` count; hidden files are ignored.
+        :data:`splitcam.data.images.IMAGE_SUFFIXES` count; hidden files are ignored.
 
     Raises:
         FileNotFoundError: The dataset has not been downloaded, or the folder does not exist or
@@ -340,7 +132,7 @@ def resolve(
                 if os.environ.get(DATA_ENV)
                 else f" (the default; set ${DATA_ENV} to use another)"
             )
-            if spec in _DATASETS:
+            if spec in dataset_names():
                 raise FileNotFoundError(
                     f"dataset '{spec}' not found in {where}: download it with "
                     f"`splitcam data download {spec} --to DIR` and set {DATA_ENV}=DIR, "
@@ -348,7 +140,7 @@ def resolve(
                 )
             raise FileNotFoundError(
                 f"'{spec}' is neither a folder nor a dataset in {where}; give a folder of "
-                f"images or one of the datasets {', '.join(DATASET_NAMES)}"
+                f"images or one of the datasets {', '.join(dataset_names())}"
             )
     return _list_folder(folder)
 
@@ -368,7 +160,8 @@ def load_images(
     Args:
         spec: A dataset name or folder (see :func:`resolve`), or ``None`` for
             :func:`default_images`.
-        root: Data root for dataset names; see :func:`data_root`.
+        root: Data root for dataset names; see
+            :func:`~splitcam.data.registry.data_root`.
 
     Returns:
         ``(name, image)`` pairs sorted by name; each image is a float32 tensor in [0, 1]
@@ -379,7 +172,7 @@ def load_images(
 
     Raises:
         FileNotFoundError: See :func:`resolve`.
-        splitcam.data.imageio.ImageReadError: A file is not a readable colour image.
+        splitcam.data.images.ImageReadError: A file is not a readable colour image.
     """
     if spec is None:
         return default_images()
@@ -415,9 +208,9 @@ def default_images(names: Sequence[str] | None = None) -> list[tuple[str, torch.
 
     The files are read straight from scikit-image's package data, never downloaded, so this works
     offline on a fresh installation. With scikit-image 0.26 these are astronaut (512x512), chelsea
-    (451x300), coffee (600x400), hubble_deep_field (1000x872), immunohistochemistry (512x512),
-    motorcycle_left (741x500), retina (1411x1411) and rocket (640x427) (sizes as WxH). Greyscale,
-    synthetic and RGBA images are not included.
+    (451x300), coffee (600x400), immunohistochemistry (512x512), motorcycle_left (741x500) and
+    rocket (640x427) (sizes as WxH). Greyscale, synthetic and RGBA images are not included, nor
+    are the mostly black hubble_deep_field and retina.
 
     Args:
         names: Which images, as in :data:`DEFAULT_IMAGE_NAMES` (with or without the ``skimage/``
@@ -466,379 +259,44 @@ def default_images(names: Sequence[str] | None = None) -> list[tuple[str, torch.
     return images
 
 
-# ---------------------------------------------------------------------------------------------
-# Downloading
-
-
-def _git_blob_id(data: bytes) -> str:
-    return hashlib.sha1(b"blob %d\0" % len(data) + data).hexdigest()
-
-
-def _pixels_sha256(source: str | os.PathLike[str] | BinaryIO) -> str:
-    from PIL import Image
-
-    with Image.open(source) as im:
-        return hashlib.sha256(np.asarray(im.convert("RGB"), np.uint8).tobytes()).hexdigest()
-
-
-def _file_sha256(path: Path) -> str:
-    digest = hashlib.sha256()
-    with open(path, "rb") as fh:
-        while chunk := fh.read(1 << 20):
-            digest.update(chunk)
-    return digest.hexdigest()
-
-
-def _is_verified(path: Path, entry: _File) -> bool:
-    """Whether an existing dataset file has the expected content.
-
-    pooch would skip a present file whose SHA-256 matches by itself, but it cannot accept a
-    McMaster PNG that another encoder wrote with the same pixels, and for files converted on
-    download it has no hash of the stored file to check; so every file is checked here first.
-    """
-    if not path.is_file():
-        return False
-    if _file_sha256(path) == entry.sha256:
-        return True
-    if entry.pixels_sha256 is None:
-        return False
-    try:
-        return _pixels_sha256(path) == entry.pixels_sha256
-    except Exception:
-        # Whatever the decoder says about a damaged file, the answer is "download it again".
-        return False
-
-
-def _mirror_base(mirror: str) -> str:
-    """A mirror argument as a URL without a trailing slash; local folders become file:// URLs."""
-    if "://" not in mirror:
-        folder = Path(mirror).expanduser()
-        if not folder.is_dir():
-            raise ValueError(
-                f"mirror '{mirror}' is neither a URL (http://, https://, file://) nor a folder"
-            )
-        return folder.resolve().as_uri()
-    scheme = urllib.parse.urlsplit(mirror).scheme.lower()
-    if scheme not in ("http", "https", "file"):
-        raise ValueError(
-            f"mirror '{mirror}' has the unsupported scheme '{scheme}://'; give an http://, "
-            "https:// or file:// URL, or a folder"
-        )
-    return mirror.rstrip("/")
-
-
-def _tqdm(**kwargs: Any) -> Any:
-    from tqdm.auto import tqdm
-
-    return tqdm(**kwargs)
-
-
-@contextmanager
-def _pooch_quiet() -> Iterator[None]:
-    """Hold back pooch's log messages for the duration of a download.
-
-    pooch logs every file it fetches to stderr at INFO level, even when no progress is wanted,
-    and for a download without known hash (the McMaster TIFFs) it advises recording the file's
-    SHA-256, which does not apply here: those are checked by git blob id and pixels. Our progress
-    bars already show what is being fetched; warnings and errors still come through.
-
-    A filter does this rather than the logger's level: pooch's logger is not registered with the
-    logging module, so a change of level would not reset the answer it caches for INFO.
-    """
-    import pooch
-
-    logger = pooch.get_logger()
-    logger.addFilter(_warnings_only)
-    try:
-        yield
-    finally:
-        logger.removeFilter(_warnings_only)
-
-
-def _warnings_only(record: logging.LogRecord) -> bool:
-    return record.levelno >= logging.WARNING
-
-
-def _copy_local(url: str, output_file: str, pooch: object) -> None:
-    """A pooch downloader for ``file://`` URLs, which pooch has no downloader for.
-
-    pooch passes a temporary file in the dataset folder as ``output_file`` and, once this returns,
-    checks the copy's hash and moves it to its final name, exactly as for an HTTP download.
-
-    Raises:
-        OSError: The file cannot be read (e.g. it is missing from the mirror).
-    """
-    source = urllib.request.url2pathname(urllib.parse.urlsplit(url).path)
-    shutil.copyfile(source, output_file)
-
-
-def _http_error(exc: OSError) -> str:
-    """What went wrong in a failed transfer, in words; HTTP errors by their status."""
-    response = getattr(exc, "response", None)  # set on requests' HTTPError
-    if response is not None and getattr(response, "status_code", None) is not None:
-        return f"HTTP {response.status_code} {response.reason}"
-    return str(exc) or type(exc).__name__
-
-
-_POOCH_MISMATCH = re.compile(r"expected (?:sha256:)?([0-9a-f]{64}) but got ([0-9a-f]{64})")
-
-
-def _retrieve(
-    url: str,
-    folder: Path,
-    fname: str,
-    known_hash: str | None,
-    label: str,
-    *,
-    timeout: float,
-    progress: bool,
-    processor: Any = None,
-) -> None:
-    """Fetch ``url`` to ``folder / fname`` with :func:`pooch.retrieve`, translating its errors.
+def load_datasets(
+    spec: str | None, max_images: int | None = None, max_size: int | None = None
+) -> list[tuple[str, list[tuple[str, torch.Tensor]]]]:
+    """Read the test sets of a comma-separated list of dataset names and folders.
 
     Args:
-        url: ``http(s)://`` or ``file://`` URL.
-        folder: Folder to place the file in.
-        fname: File name to place it under.
-        known_hash: ``"sha256:<hex>"`` the downloaded bytes must have, or ``None`` where the
-            processor verifies them.
-        label: ``<dataset>/<file>``, for messages and the progress bar.
-        timeout: Seconds to wait for the server on connecting and on each read.
-        progress: Show a progress bar of the bytes received.
-        processor: A pooch processor run on the downloaded file.
-
-    Raises:
-        ChecksumError: The downloaded bytes did not match ``known_hash`` (pooch has deleted them),
-            or the processor found a mismatch.
-        DownloadError: The transfer failed.
-    """
-    import pooch
-
-    bar = None
-    if url.startswith("file:"):
-        downloader: Any = _copy_local
-    else:
-        if progress:
-            # pooch fills in a bar object it is given; it tests whether it has one by the bar's
-            # truth value, which tqdm makes `total > 0`, so the bar starts with a dummy total.
-            bar = _tqdm(
-                total=1, unit="B", unit_scale=True, unit_divisor=1024, desc=label, leave=False
-            )
-        downloader = pooch.HTTPDownloader(
-            progressbar=bar if bar is not None else False,
-            chunk_size=_CHUNK,
-            timeout=timeout,
-            headers={"User-Agent": _USER_AGENT},
-        )
-    try:
-        pooch.retrieve(
-            url, known_hash, fname=fname, path=folder, downloader=downloader, processor=processor
-        )
-    except DownloadError:
-        raise  # from the processor: already says what is wrong
-    except OSError as exc:
-        # requests' exceptions are OSErrors too (including the ones that are also ValueErrors).
-        hint = (
-            "check the mirror folder"
-            if downloader is _copy_local
-            else "check the network connection (or the mirror address)"
-        )
-        raise DownloadError(
-            f"downloading {label} from {url} failed: {_http_error(exc)}; {hint} and run the "
-            "command again"
-        ) from None
-    except ValueError as exc:
-        # pooch reports a hash mismatch as ValueError, after deleting the download; its message
-        # names both hashes, which are picked out to keep ours short.
-        found = _POOCH_MISMATCH.search(str(exc))
-        detail = f"SHA-256 expected {found[1]}, got {found[2]}" if found else str(exc)
-        raise ChecksumError(
-            f"{label}: the data downloaded from {url} is not the expected file ({detail}); it "
-            "was deleted. Run the command again; if this persists, the source has changed or the "
-            "connection is altered"
-        ) from None
-    finally:
-        if bar is not None:
-            bar.close()  # pooch closes it only after a complete transfer
-
-
-class _TiffToPng:
-    """pooch processor: verify a downloaded McMaster TIFF and store its pixels as PNG.
-
-    This is our code because pooch can check only plain digests of the downloaded file, while a
-    published TIFF is pinned by its git blob id and the hash of its decoded pixels.
-
-    Args:
-        entry: The registry entry; ``entry.git_blob`` and ``entry.pixels_sha256`` are checked.
-        final: Where the PNG goes; it is written to a temporary file beside it and renamed, so it
-            appears complete or not at all.
-        label: ``<dataset>/<file>``, for messages.
-        url: The address the TIFF came from, for messages.
-    """
-
-    def __init__(self, entry: _File, final: Path, label: str, url: str) -> None:
-        self.entry, self.final, self.label, self.url = entry, final, label, url
-
-    def __call__(self, fname: str, action: str, pooch: object) -> str:
-        """Check the file at ``fname`` and write the PNG; returns the PNG's path.
-
-        Raises:
-            ChecksumError: The bytes do not have the registered git blob id.
-            DownloadError: The bytes are right but decode to other pixels here.
-        """
-        import io
-
-        from PIL import Image
-
-        data = Path(fname).read_bytes()
-        blob = _git_blob_id(data)
-        if blob != self.entry.git_blob:
-            raise ChecksumError(
-                f"{self.label}: the data downloaded from {self.url} is not the expected file "
-                f"(git blob id expected {self.entry.git_blob}, got {blob}); it was deleted. Run "
-                "the command again; if this persists, the source has changed or the connection "
-                "is altered"
-            )
-        try:
-            with Image.open(io.BytesIO(data)) as im:
-                pixels = np.asarray(im.convert("RGB"), np.uint8)
-        except Exception as exc:
-            raise DownloadError(
-                f"{self.label}: the downloaded file is correct but the image library (Pillow) "
-                f"cannot decode it here: {exc}"
-            ) from None
-        actual = hashlib.sha256(pixels.tobytes()).hexdigest()
-        if actual != self.entry.pixels_sha256:
-            # The bytes matched their git blob id, so only the decoder can disagree.
-            raise DownloadError(
-                f"{self.label}: the downloaded file is correct but decodes to different pixels "
-                f"here (pixel SHA-256 expected {self.entry.pixels_sha256}, got {actual}); the "
-                "image library (Pillow) may decode TIFF differently on this machine"
-            )
-        fd, tmp = tempfile.mkstemp(
-            dir=self.final.parent, prefix=f".{self.final.name}.", suffix=".tmp"
-        )
-        try:
-            with os.fdopen(fd, "wb") as fh:
-                Image.fromarray(pixels).save(fh, format="PNG", optimize=True)
-            os.replace(tmp, self.final)
-        except BaseException:
-            Path(tmp).unlink(missing_ok=True)
-            raise
-        return str(self.final)
-
-
-def _install(
-    dataset: _Dataset,
-    entry: _File,
-    folder: Path,
-    mirror: str | None,
-    timeout: float,
-    progress: bool,
-) -> None:
-    """Download, verify and (if needed) convert one file to ``folder / entry.name``."""
-    label = f"{dataset.name}/{entry.name}"
-    options: dict[str, Any] = {"timeout": timeout, "progress": progress}
-    if mirror is not None:
-        url = f"{mirror}/{urllib.parse.quote(dataset.name)}/{urllib.parse.quote(entry.name)}"
-        _retrieve(url, folder, entry.name, f"sha256:{entry.sha256}", label, **options)
-        return
-    url = dataset.base_url + urllib.parse.quote(entry.source_path)
-    if not entry.converted:
-        _retrieve(url, folder, entry.name, f"sha256:{entry.sha256}", label, **options)
-        return
-    # pooch keeps what it downloads under the name it is given, and a TIFF beside the PNGs would
-    # be read as a second image of the set; a hidden scratch folder (on the same file system, so
-    # the PNG's final rename stays atomic) keeps it out of sight and goes away in any case.
-    with tempfile.TemporaryDirectory(dir=folder, prefix=".download-") as scratch:
-        _retrieve(
-            url,
-            Path(scratch),
-            Path(entry.source_path).name,
-            None,
-            label,
-            processor=_TiffToPng(entry, folder / entry.name, label, url),
-            **options,
-        )
-
-
-def download(
-    names: str | Iterable[str],
-    to: str | os.PathLike[str] | None = None,
-    *,
-    mirror: str | None = None,
-    progress: bool = True,
-    timeout: float = 30,
-    files: Iterable[str] | None = None,
-) -> list[Path]:
-    """Download datasets into ``<to>/<dataset>``, verifying every file.
-
-    See the module documentation for the sources and the checks. Files already present and
-    verified are skipped; a file whose download was interrupted is downloaded again in full.
-
-    Args:
-        names: Dataset names (see :data:`DATASET_NAMES`), or one name.
-        to: Data root to download into. Default: :func:`data_root` (``$SPLITCAM_DATA`` or
-            ``~/.cache/splitcam/datasets``).
-        mirror: Base URL (or local folder) of a mirror serving ``<dataset>/<file name>``.
-            Default: ``$SPLITCAM_MIRROR`` if set, else the public sources.
-        progress: Show progress bars (on stderr).
-        timeout: Seconds to wait for the server on connecting and on each read.
-        files: Only these file names (e.g. ``["kodim01.png"]``); default all files.
+        spec: Comma-separated dataset names or folders (see :func:`resolve`); ``None``, ``""``
+            or ``"default"`` for the default images (:func:`default_images`), as the one test set
+            ``skimage``.
+        max_images: Keep only the first this many images of each test set (by name); ``None`` or
+            0 for all.
+        max_size: Cut every image to its centre, at most this many pixels a side
+            (:func:`centre_crop`); ``None`` for whole images. The test set's name then ends
+            in ``-<max_size>px``, which keeps results of whole and cropped images apart.
 
     Returns:
-        The paths of the requested files, all present and verified.
+        ``(test set name, [(image name, image)])`` in the order given; a test set is named by its
+        dataset name or its folder's last part. Images as in :func:`load_images`.
 
     Raises:
-        ValueError: An unknown dataset or file name, or an invalid mirror.
-        ChecksumError: Downloaded data did not match its hash (the download is deleted).
-        DownloadError: A network failure; nothing is left under the file's final name.
+        ValueError: ``max_size`` is less than 2.
+        FileNotFoundError: See :func:`resolve`.
     """
-    wanted = [names] if isinstance(names, str) else list(names)
-    unknown = [n for n in wanted if n not in _DATASETS]
-    if unknown:
-        raise ValueError(
-            f"unknown dataset(s) {', '.join(unknown)}; downloadable datasets: "
-            f"{', '.join(DATASET_NAMES)}"
-        )
-    if not wanted:
-        raise ValueError(f"no dataset given; choose from {', '.join(DATASET_NAMES)}")
-    datasets = [_DATASETS[n] for n in dict.fromkeys(wanted)]
-    jobs = [(d, f) for d in datasets for f in d.files]
-    if files is not None:
-        selected = set(files)
-        missing = selected - {f.name for _, f in jobs}
-        if missing:
-            raise ValueError(
-                f"file(s) {', '.join(sorted(missing))} are not in dataset(s) "
-                f"{', '.join(d.name for d in datasets)}"
-            )
-        jobs = [(d, f) for d, f in jobs if f.name in selected]
-
-    mirror = mirror if mirror is not None else os.environ.get(MIRROR_ENV) or None
-    base = _mirror_base(mirror) if mirror else None
-    root = data_root(to)
-    paths = []
-    bar = _tqdm(total=len(jobs), unit="file", desc="download", disable=not progress)
-    try:
-        with _pooch_quiet():
-            for dataset, entry in jobs:
-                folder = root / dataset.name
-                folder.mkdir(parents=True, exist_ok=True)
-                final = folder / entry.name
-                bar.set_postfix_str(f"{dataset.name}/{entry.name}", refresh=False)
-                if not _is_verified(final, entry):
-                    if final.exists() and progress:
-                        bar.write(
-                            f"{final}: content does not match its checksum; downloading again",
-                            file=sys.stderr,
-                        )
-                    _install(dataset, entry, folder, base, timeout, progress)
-                paths.append(final)
-                bar.update(1)
-    finally:
-        bar.close()
-    return paths
+    if max_size is not None and max_size < 2:
+        raise ValueError(f"max_size must be at least 2 pixels, got {max_size}")
+    if not spec or spec == "default":
+        named = [("skimage", default_images())]
+    else:
+        items = (s.strip() for s in spec.split(",") if s.strip())
+        named = [(Path(item).name or item, load_images(item)) for item in items]
+    out = []
+    for name, images in named:
+        images = images[:max_images] if max_images else images
+        if max_size is not None:
+            images = [(n, centre_crop(rgb, max_size)) for n, rgb in images]
+            name = f"{name}-{max_size}px"
+        out.append((name, images))
+    return out
 
 
 # ---------------------------------------------------------------------------------------------
@@ -874,13 +332,12 @@ def add_cli(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
         "names",
         nargs="*",
         metavar="DATASET",
-        help=f"datasets to download (default: all of {', '.join(DATASET_NAMES)})",
+        help=f"datasets to download (default: all of {', '.join(dataset_names())})",
     )
     p.add_argument(
         "--to",
         metavar="DIR",
-        help=f"data root; each dataset goes to DIR/<name> (default: ${DATA_ENV} or "
-        f"{_DEFAULT_ROOT})",
+        help=f"data root; each dataset goes to DIR/<name> (default: ${DATA_ENV} or {DEFAULT_ROOT})",
     )
     p.add_argument(
         "--mirror",
@@ -898,7 +355,7 @@ def add_cli(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
         description="Counts the files of each dataset under the data root.",
     )
     p.add_argument(
-        "--root", metavar="DIR", help=f"data root (default: ${DATA_ENV} or {_DEFAULT_ROOT})"
+        "--root", metavar="DIR", help=f"data root (default: ${DATA_ENV} or {DEFAULT_ROOT})"
     )
     parser.set_defaults(handler=cmd_data)
     return parser
@@ -907,7 +364,7 @@ def add_cli(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
 def cmd_data(args: argparse.Namespace) -> int:
     """Run ``splitcam data download`` or ``splitcam data list``; returns the exit status."""
     if args.data_action == "download":
-        names = args.names or list(DATASET_NAMES)
+        names = args.names or list(dataset_names())
         paths = download(
             names, args.to, mirror=args.mirror, progress=not args.quiet, timeout=args.timeout
         )
@@ -920,7 +377,7 @@ def cmd_data(args: argparse.Namespace) -> int:
         return 0
     root = data_root(args.root)
     print(f"data root: {root}")
-    for dataset in _DATASETS.values():
+    for dataset in datasets().values():
         folder = root / dataset.name
         present = sum(1 for f in dataset.files if (folder / f.name).is_file())
         state = (
