@@ -249,8 +249,7 @@ def test_max_size_scores_the_centre_of_each_image(tmp_path):
     those of the cropped image itself, and the dataset name keeps them apart from whole images."""
     import csv
 
-    from splitcam.cli import load_datasets
-    from splitcam.data.testsets import centre_crop, default_images
+    from splitcam.data.testsets import centre_crop, default_images, load_datasets
 
     rgb = torch.arange(3 * 7 * 9, dtype=torch.float32).reshape(3, 7, 9)
     assert torch.equal(centre_crop(rgb, 4), rgb[:, 1:5, 2:6])
@@ -280,5 +279,40 @@ def test_max_size_scores_the_centre_of_each_image(tmp_path):
     assert main(args) == 0
     rows = list(csv.DictReader((out / "per_image.csv").open()))
     assert {r["dataset"] for r in rows} == {"skimage-64px"}
-    with pytest.raises(SystemExit, match="at least 2"):
+    with pytest.raises(ValueError, match="at least 2"):
         load_datasets("default", 1, 1)
+
+
+def test_parsing_every_command_imports_no_torch():
+    """`splitcam --help` and each command's --help build the parsers only: no torch, numpy or
+    matplotlib is imported (checked in a fresh interpreter, where nothing is imported yet)."""
+    import subprocess
+    import sys
+
+    from splitcam.cli import COMMANDS
+
+    code = (
+        "import sys, contextlib, io\n"
+        "from splitcam.cli import build_parser\n"
+        "parser = build_parser()\n"
+        f"for argv in [['--help'], *[[c, '--help'] for c in {list(COMMANDS)!r}]]:\n"
+        "    with contextlib.redirect_stdout(io.StringIO()) as out:\n"
+        "        try:\n"
+        "            parser.parse_args(argv)\n"
+        "        except SystemExit:\n"
+        "            pass\n"
+        "    assert 'usage: splitcam' in out.getvalue(), argv\n"
+        "print(sorted(m for m in ('torch', 'numpy', 'matplotlib') if m in sys.modules))\n"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == "[]"
+
+
+def test_moved_names_say_where_they_went():
+    import splitcam.cli
+
+    with pytest.raises(AttributeError, match="splitcam.data.testsets.load_datasets"):
+        splitcam.cli.load_datasets  # noqa: B018
+    with pytest.raises(ImportError, match="splitcam.physics.optics"):
+        import splitcam.optics  # noqa: F401

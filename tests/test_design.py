@@ -1,4 +1,4 @@
-"""Pattern design on the closed-form LMMSE error (splitcam.recon.design, `splitcam design`)."""
+"""Pattern design on the closed-form LMMSE error (splitcam.design, `splitcam design`)."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ import torch
 from splitcam import patterns
 from splitcam.cli import main
 from splitcam.recon.closed_form import closed_form_mse
-from splitcam.recon.design import closed_form_psnr, design_pattern
+from splitcam.design import closed_form_psnr, design_pattern
 
 SIGMAS = [0.0, 15.0]
 

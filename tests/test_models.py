@@ -681,7 +681,7 @@ def test_the_main_job_scores_every_shipped_model_on_crops(trained_run, tmp_path,
     MAIN_JOB_MAX_SIZE centre crops of the built-in photos; `--max-size 0` scores them whole."""
     import csv
 
-    from splitcam.cli import MAIN_JOB_MAX_SIZE
+    from splitcam.cli.evaluate import MAIN_JOB_MAX_SIZE
 
     monkeypatch.setattr(models_module, "MODELS_DIR", tmp_path / "shipped")
     export_model(trained_run, tmp_path / "shipped" / "D", name="D")

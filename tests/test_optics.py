@@ -1,4 +1,4 @@
-"""Scalar wave optics from a metasurface height map to splitter kernels (splitcam.optics)."""
+"""Scalar wave optics from a metasurface height map to splitter kernels (splitcam.physics.optics)."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import torch
 
-from splitcam.optics import Optics, flat_profile, kernels_of, lens_profile, pattern_of
+from splitcam.physics.optics import Optics, flat_profile, kernels_of, lens_profile, pattern_of
 from splitcam.physics.sensor import SplitterSensor
 
 
@@ -111,7 +111,7 @@ def test_bayer_collection_of_known_patterns() -> None:
     """A colour filter keeps 1/4 of red and blue and 1/2 of green; pattern A routes every colour
     to its pixels (a perfect router)."""
     from splitcam import patterns
-    from splitcam.optics import bayer_collection
+    from splitcam.physics.optics import bayer_collection
 
     assert bayer_collection(patterns.get("bayer")) == pytest.approx([0.25, 0.5, 0.25])
     assert bayer_collection(patterns.get("A")) == pytest.approx([1.0, 1.0, 1.0])
@@ -122,7 +122,7 @@ def test_bayer_collection_of_known_patterns() -> None:
 def test_design_raises_the_closed_form_psnr_and_the_cli_writes_its_files(tmp_path, capsys):
     from splitcam import patterns
     from splitcam.cli import main
-    from splitcam.recon.design import design_metasurface
+    from splitcam.design import design_metasurface
 
     small = Optics(pitch=0.5, samples=4, distance=1.0, wavelengths=[450.0, 550.0, 650.0], guard=1)
     result = design_metasurface((2, 2), small, init="random", steps=8, lr=0.2)
@@ -165,7 +165,7 @@ def test_training_a_metasurface_with_the_network(tmp_path) -> None:
     reconstruction; the run's checkpoint holds the pattern it makes."""
     from conftest import blocky_images, tiny_config
 
-    from splitcam.optics import MetasurfaceSensor
+    from splitcam.physics.optics import MetasurfaceSensor
     from splitcam.training import build_system, load_system, train
 
     folder = blocky_images(tmp_path / "img", 4)
@@ -199,7 +199,7 @@ def test_training_a_metasurface_with_the_network(tmp_path) -> None:
 
 
 def test_profiles_by_name_or_file_and_their_errors(tmp_path) -> None:
-    from splitcam.optics import profile
+    from splitcam.physics.optics import profile
 
     optics = Optics()
     rand = profile("random", (2, 2), optics, seed=3)
@@ -218,7 +218,7 @@ def test_rggb_collection_is_the_sum_over_the_rggb_targets_and_differentiable() -
     """The tensor form equals a direct count on a random 2x2 pattern (every kernel entry whose
     landing pixel has the entry's colour in RGGB, a quarter per site), and its gradient reaches
     exactly those entries."""
-    from splitcam.optics import rggb_collection
+    from splitcam.physics.optics import rggb_collection
 
     gen = torch.Generator().manual_seed(0)
     kernels = torch.rand(4, 3, 3, 3, generator=gen, dtype=torch.float64).requires_grad_(True)
@@ -242,7 +242,7 @@ def test_rggb_collection_is_the_sum_over_the_rggb_targets_and_differentiable() -
 
 def test_routing_design_raises_the_rggb_collection(tmp_path, capsys) -> None:
     from splitcam.cli import main
-    from splitcam.recon.design import design_metasurface
+    from splitcam.design import design_metasurface
 
     small = Optics(pitch=0.5, samples=4, distance=1.0, wavelengths=[450.0, 550.0, 650.0], guard=1)
     result = design_metasurface((2, 2), small, init="random", steps=15, lr=0.1, objective="routing")

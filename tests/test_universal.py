@@ -344,22 +344,22 @@ def test_fine_tuning_from_a_universal_model(tiny_universal, tmp_path, capsys):
     ]
     assert changed  # trained on from the model's weights
     # No --steps, --time-limit or --lr: the default fine-tuning budget and rate, announced.
-    from splitcam.cli import FINE_TUNE_LR, FINE_TUNE_MINUTES, _fine_tuning
+    from splitcam.cli.train import FINE_TUNE_LR, FINE_TUNE_MINUTES, fine_tuning
 
     capsys.readouterr()
-    implied = _fine_tuning(str(model), {})
+    implied = fine_tuning(str(model), {})
     assert implied["run.time_limit"] == FINE_TUNE_MINUTES and implied["optim.lr"] == FINE_TUNE_LR
     assert f"for {FINE_TUNE_MINUTES:g} minutes" in capsys.readouterr().out
-    given = _fine_tuning(str(model), {"run.time_limit": 1.0, "optim.lr": 1e-3})
+    given = fine_tuning(str(model), {"run.time_limit": 1.0, "optim.lr": 1e-3})
     assert "run.time_limit" not in given and "optim.lr" not in given
-    assert _fine_tuning("D", {}) == {}  # a network of one pattern implies nothing
+    assert fine_tuning("D", {}) == {}  # a network of one pattern implies nothing
 
 
 def test_design_against_a_frozen_network(tiny_universal):
     """`design --objective network`: the pattern moves to raise the network's PSNR; gradients
     reach the logits through the frozen network."""
     from splitcam.data.patches import ImageCache, PatchSampler, list_images
-    from splitcam.recon.design import design_pattern, network_psnr
+    from splitcam.design import design_pattern, network_psnr
     from splitcam.training.models import load_model
 
     model, data = tiny_universal

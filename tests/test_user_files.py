@@ -361,7 +361,7 @@ def test_training_on_a_full_disk_fails_in_one_line(tmp_path, monkeypatch, capsys
 
 
 def test_optics_refuse_a_pillar_index_equal_to_the_spacer_and_negative_heights(tmp_path, capsys):
-    from splitcam.optics import Optics
+    from splitcam.physics.optics import Optics
 
     with pytest.raises(ValueError, match="above the spacer"):
         Optics(index=1.0)  # was a ZeroDivisionError in the lens profile

@@ -41,6 +41,19 @@ PAPER = {
 }
 PAPER_SIGMAS = ("0", "5", "10", "15", "20")
 
+#: The shipped model that reproduces each row of the paper's Tables 1-3 (and bayer beside them).
+PAPER_MODELS = {
+    "A": "A",
+    "B": "B",
+    "C": "C",
+    "D": "D",
+    "E": "E",
+    "bayer": "bayer",
+    "A optimised": "A-opt",
+    "D optimised": "D-opt",
+    "D optimised (random init.)": "D-opt-random",
+}
+
 
 def paper_row(pattern: patterns.Pattern) -> str | None:
     """The paper's row for a pattern: its name, or "X optimised" for one learned from X."""

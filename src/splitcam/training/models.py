@@ -295,3 +295,33 @@ def load_model(
             raise ModelError(f"model {str(meta_path)!r} holds NaN or infinite values in {key!r}")
     system = ImagingSystem(SplitterSensor(pattern), network)
     return system.to(device).eval(), meta
+
+
+def training_budget(meta: dict[str, Any]) -> str:
+    """One line of what a model's training cost, from its provenance: steps, batch, minutes
+    and devices (``"26000 steps of batch 8, 104 min of training on cpu (1 thread)"``)."""
+    prov = meta.get("provenance", {})
+    segs = prov.get("segments", [])
+    batch = "/".join(str(b) for b in dict.fromkeys(g.get("batch_size") for g in segs)) or "?"
+    devices = ", ".join(dict.fromkeys(str(g.get("device")) for g in segs)) or "?"
+    return (
+        f"{prov.get('total_steps', '?')} steps of batch {batch}, "
+        f"{prov.get('train_seconds', 0) / 60:.0f} min of training on {devices}"
+    )
+
+
+def model_summary(name: str, meta: dict[str, Any]) -> dict[str, str]:
+    """A row of ``splitcam models``: the model, its pattern (``any`` for a network for any
+    pattern), network, steps, batch, training time and devices."""
+    prov = meta.get("provenance", {})
+    segs = prov.get("segments", [])
+    trained_on = (meta.get("config") or {}).get("pattern", {}).get("name")
+    return {
+        "model": name,
+        "pattern": "any" if trained_on == "random" else meta["pattern"]["name"],
+        "network": meta["network"]["arch"],
+        "steps": str(prov.get("total_steps", "?")),
+        "batch": str(segs[-1].get("batch_size") if segs else "?"),
+        "train time": f"{prov.get('train_seconds', 0) / 60:.0f} min",
+        "device": ", ".join(dict.fromkeys(str(g.get("device")) for g in segs)),
+    }

@@ -187,3 +187,35 @@ def draw_height_maps(
     with atomic_path(out) as tmp:
         fig.savefig(tmp, dpi=120)
     return out
+
+
+def draw_design(
+    start: Pattern, designed: Pattern, path: str | os.PathLike[str], dpi: int = 110
+) -> Path:
+    """A designed pattern beside its start: two :func:`draw_pattern` figures side by side with
+    a thin rule between them, written as one PNG (what ``splitcam design`` draws).
+
+    Returns:
+        The path written.
+    """
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    halves = []
+    for pattern in (start, designed):
+        canvas = FigureCanvasAgg(draw_pattern(pattern, dpi=dpi))
+        canvas.draw()
+        halves.append(np.asarray(canvas.buffer_rgba())[..., :3])
+    height = max(h.shape[0] for h in halves)
+    halves = [
+        np.pad(h, ((0, height - h.shape[0]), (0, 0), (0, 0)), constant_values=255) for h in halves
+    ]
+    gap = np.full((height, 24, 3), 255, dtype=np.uint8)
+    gap[:, 11:13] = 160
+    image = np.concatenate([halves[0], gap, halves[1]], axis=1)
+    fig = Figure(figsize=(image.shape[1] / dpi, image.shape[0] / dpi), dpi=dpi)
+    fig.figimage(image)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=dpi)
+    return Path(path)
+

@@ -1,0 +1,80 @@
+"""The ``splitcam`` command: one module per command, each with ``register`` (its parser) and
+``run`` (its handler). Parsing imports no torch (the commands import the library when they run),
+so ``splitcam --help`` answers at once.
+
+Errors a user can cause (a bad pattern, an unreadable image, a missing folder) are printed as one
+line, ``splitcam <command>: error: ...``, with exit status 1; ``--debug`` shows the traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+from collections.abc import Sequence
+
+from .. import __version__
+
+#: The commands in the order ``splitcam --help`` lists them (module ``splitcam.cli.<name>``).
+COMMANDS = (
+    "patterns",
+    "simulate",
+    "train",
+    "design",
+    "evaluate",
+    "report",
+    "data",
+    "plot",
+    "models",
+    "sweep",
+    "study",
+    "optics",
+    "reproduce",
+    "reconstruct",
+)
+
+#: Names that moved from ``splitcam.cli`` into the library or a command module.
+_MOVED = {
+    "load_datasets": "splitcam.data.testsets.load_datasets",
+    "MAIN_JOB_MAX_SIZE": "splitcam.cli.evaluate.MAIN_JOB_MAX_SIZE",
+    "FINE_TUNE_MINUTES": "splitcam.cli.train.FINE_TUNE_MINUTES",
+    "FINE_TUNE_LR": "splitcam.cli.train.FINE_TUNE_LR",
+}
+
+
+def __getattr__(name: str):
+    if name in _MOVED:
+        raise AttributeError(f"splitcam.cli.{name} moved: use {_MOVED[name]}")
+    raise AttributeError(f"module 'splitcam.cli' has no attribute {name!r}")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The parser of every command (argparse only: no torch is imported)."""
+    parser = argparse.ArgumentParser(
+        prog="splitcam",
+        description="Design and evaluate colour image sensors built on metasurface colour "
+        "splitters.",
+    )
+    parser.add_argument("--version", action="version", version=f"splitcam {__version__}")
+    parser.add_argument("--debug", action="store_true", help="show tracebacks on errors")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    for name in COMMANDS:
+        importlib.import_module(f"{__name__}.{name}").register(sub)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the ``splitcam`` command; returns the exit status."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return args.run(args)
+    except KeyboardInterrupt:
+        print(f"splitcam {args.command}: interrupted", file=sys.stderr)
+        return 130
+    except (ValueError, OSError, TypeError) as exc:
+        if args.debug:
+            raise
+        message = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        print(f"splitcam {args.command}: error: {message}", file=sys.stderr)
+        return 1

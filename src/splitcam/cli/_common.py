@@ -1,0 +1,139 @@
+"""What several commands share: option groups, argument checks, the Markdown table."""
+
+from __future__ import annotations
+
+import argparse
+import os
+from collections.abc import Sequence
+from pathlib import Path
+
+
+def table(rows: list[dict[str, str]]) -> str:
+    """A Markdown table (also readable as plain text)."""
+    keys = list(rows[0])
+    widths = {k: max(len(k), *(len(r[k]) for r in rows)) for k in keys}
+    lines = ["| " + " | ".join(k.ljust(widths[k]) for k in keys) + " |"]
+    lines.append("|" + "|".join("-" * (widths[k] + 2) for k in keys) + "|")
+    lines += ["| " + " | ".join(r[k].ljust(widths[k]) for k in keys) + " |" for r in rows]
+    return "\n".join(lines)
+
+
+def pattern_or_model(spec: str):
+    """A pattern by name or file, or the pattern of a shipped model of one pattern (``A-opt``:
+    its learned kernels)."""
+    from .. import patterns
+    from ..recon.networks import serves_any_pattern
+    from ..training.models import load_model, model_names
+
+    try:
+        return patterns.get(spec)
+    except patterns.PatternError:
+        if spec not in model_names():
+            raise
+        system, _ = load_model(spec)
+        if serves_any_pattern(system.network):
+            raise ValueError(f"model {spec} serves any pattern; it has none to show") from None
+        return system.sensor.to_pattern(spec)
+
+
+def check_distinct(inputs: dict[str, str | None], outputs: dict[str, str | None]) -> None:
+    """Refuse an output file that is one of the command's inputs or another of its outputs
+    (the same file by any path): writing it would destroy what the user gave or just wrote."""
+
+    def same(a: Path, b: Path) -> bool:
+        if a.exists() and b.exists():
+            return os.path.samefile(a, b)
+        return a.resolve() == b.resolve()
+
+    seen: list[tuple[str, Path]] = []
+    given = [(flag, Path(p)) for flag, p in inputs.items() if p]
+    for flag, path in ((f, Path(p)) for f, p in outputs.items() if p):
+        for other, known in given:
+            if same(path, known):
+                raise ValueError(
+                    f"{flag} {path} is the file given as {other}: it would be overwritten; "
+                    f"choose another output file"
+                )
+        for other, known in seen:
+            if same(path, known):
+                raise ValueError(f"{flag} and {other} name the same file {path}; choose two files")
+        seen.append((flag, path))
+
+
+def add_method_options(p: argparse.ArgumentParser) -> None:
+    """Options of how methods are built and run, shared by `evaluate` and `reconstruct`."""
+    p.add_argument(
+        "--lmmse-train",
+        metavar="DIR",
+        help="fit LMMSE on these training images (default: the shipped fits)",
+    )
+    p.add_argument("--tile", type=int, default=512, help="tile size in pixels (default 512)")
+    add_precision(p, "auto")
+
+
+def add_precision(p: argparse.ArgumentParser, default: str) -> None:
+    """``--precision`` of network inference (``--fast``: the same as ``--precision bf16``)."""
+    p.add_argument(
+        "--precision",
+        choices=["auto", "fp32", "bf16"],
+        default=default,
+        help=f"network inference: auto = bfloat16 + channels-last where the hardware has it "
+        f"natively (about 3x faster there), fp32 = bit-exact float32 (default {default})",
+    )
+    p.add_argument(
+        "--fast", dest="precision", action="store_const", const="bf16", help=argparse.SUPPRESS
+    )
+
+
+def add_sensor_options(p: argparse.ArgumentParser) -> None:
+    """The photon model's sensor besides the exposure (splitcam.physics.noise.Exposure), shared
+    by `evaluate` and `study exposure`."""
+    p.add_argument("--read-noise", type=float, help="photon model: electrons (default 2)")
+    p.add_argument(
+        "--full-well", type=float, help="photon model: saturation, electrons (default: none)"
+    )
+    p.add_argument(
+        "--gain", type=float, help="photon model: ADC electrons per DN (default: no ADC)"
+    )
+    p.add_argument("--bits", type=int, help="photon model: ADC bits (default 12)")
+
+
+def sensor_settings(args: argparse.Namespace) -> dict:
+    """The keyword arguments of :class:`~splitcam.physics.noise.Exposure` from the options of
+    :func:`_add_sensor_options`."""
+    return {
+        "read_noise": 2.0 if args.read_noise is None else args.read_noise,
+        "full_well": args.full_well,
+        "gain": args.gain,
+        "bits": 12 if args.bits is None else args.bits,
+    }
+
+
+def sensor_flags_given(args: argparse.Namespace) -> list[str]:
+    """The photon-model sensor flags given on the command line."""
+    names = {"read_noise": "--read-noise", "full_well": "--full-well", "gain": "--gain"}
+    names["bits"] = "--bits"
+    return [flag for name, flag in names.items() if getattr(args, name, None) is not None]
+
+
+def model_methods(
+    models: Sequence[str], pattern_specs: Sequence[str], *, main_job: bool, options: dict
+) -> list:
+    """The methods of ``--model`` names: a model of one pattern as itself, a model for any
+    pattern (``universal``) once per pattern of ``--patterns``. In the main job the universal
+    model reconstructs only the patterns that no shipped network serves, and says so."""
+    from .. import patterns
+    from ..methods import build_model
+    from ..training.models import model_serves_any_pattern
+
+    universal = [spec for spec in models if model_serves_any_pattern(spec)]
+    single = [build_model(spec, **options) for spec in models if spec not in universal]
+    for spec in universal:
+        wanted = list(pattern_specs)
+        if main_job:
+            served = [m.pattern for m in single]
+            wanted = [p for p in wanted if not any(patterns.get(p).equals(s) for s in served)]
+            for p in wanted:
+                print(f"pattern {p} has no shipped network: reconstructed by the {spec} network")
+        single += [build_model(spec, pattern=p, **options) for p in wanted]
+    return single

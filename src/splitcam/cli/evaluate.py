@@ -1,0 +1,203 @@
+"""`splitcam evaluate`: score trained networks and baselines with the paper's protocol."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from ._common import (
+    add_method_options,
+    add_sensor_options,
+    model_methods,
+    sensor_flags_given,
+    sensor_settings,
+)
+
+#: The main job (``splitcam evaluate`` with no method named) scores centre crops of this size of
+#: the built-in photos, which keeps every shipped network on all six scenes within about 3 minutes
+#: on a 2-core CPU in float32 (whole photos take several times longer).
+MAIN_JOB_MAX_SIZE = 256
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "evaluate",
+        help="score trained runs and baselines with the paper's protocol",
+        description="Simulates every test image with each method's pattern, adds the same "
+        "deterministic noise for every method, reconstructs, and scores PSNR, SSIM and "
+        "CIEDE2000 on 8-bit images. With no --checkpoint, --model or --method (the main job): "
+        "the shipped network of every pattern and the training-free baselines (LMMSE for every "
+        "pattern, bayer + Malvar 2004).",
+    )
+    p.add_argument(
+        "--checkpoint",
+        action="append",
+        default=[],
+        metavar="RUN",
+        help="a trained run (repeatable)",
+    )
+    p.add_argument(
+        "--method",
+        action="append",
+        metavar="NAME",
+        help="baseline: bilinear, malvar2004, menon2007 (bayer) or lmmse (repeatable)",
+    )
+    p.add_argument(
+        "--model",
+        action="append",
+        default=[],
+        metavar="NAME",
+        help="a shipped model (A-E, bayer, A-opt, D-opt, D-opt-random; `splitcam models`) or a "
+        "model file (repeatable)",
+    )
+    p.add_argument(
+        "--patterns",
+        type=lambda s: [x for x in s.split(",") if x],
+        default=["A", "B", "C", "D", "E", "bayer"],
+        help="patterns for lmmse, comma-separated names or files (default: all)",
+    )
+    p.add_argument(
+        "--datasets",
+        default="default",
+        help="comma-separated: kodak24, mcmaster, folders; default: the sample photos "
+        "shipped with scikit-image",
+    )
+    p.add_argument(
+        "--sigmas",
+        type=float,
+        nargs="+",
+        help="Gaussian noise levels, 8-bit units (default: 0 5 10 15 20, or none with --photons)",
+    )
+    p.add_argument(
+        "--photons",
+        type=float,
+        nargs="+",
+        metavar="N",
+        help="photon-model exposures too: full-light photo-electrons of a lossless pixel (shot "
+        "and read noise, the same photon flux for every pattern; rows N<photons>)",
+    )
+    add_sensor_options(p)
+    p.add_argument("--max-images", type=int, help="use at most N images per dataset")
+    p.add_argument(
+        "--max-size",
+        type=int,
+        metavar="N",
+        help="score the centre N x N pixels of each image (dataset named NAME-Npx); default: "
+        f"whole images, except the main job (no method named, built-in photos): "
+        f"{MAIN_JOB_MAX_SIZE}; 0: whole images there too",
+    )
+    p.add_argument(
+        "--crop",
+        type=int,
+        default=0,
+        help="border pixels left out of the scores (default 0, as in the paper)",
+    )
+    p.add_argument("--out", default="results", help="output folder (default: results)")
+    p.add_argument(
+        "--save-images",
+        action="store_true",
+        help="write reconstructions and zoomed side-by-side crops",
+    )
+    p.add_argument(
+        "--zoom",
+        action="append",
+        metavar="IMAGE[:TOP,LEFT,SIZE][@SIGMA]",
+        help="image (and region, and noise level) for zoomed side-by-side crops (default: the "
+        "most detailed region of the first image of each dataset, at every level)",
+    )
+    add_method_options(p)
+    p.add_argument(
+        "--restart",
+        action="store_true",
+        help="recompute everything instead of continuing the results in --out",
+    )
+    p.add_argument("--quiet", action="store_true")
+    p.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..data.testsets import load_datasets
+    from ..evaluation.protocol import evaluate, parse_zoom
+    from ..evaluation.tables import markdown_tables, summarise
+    from ..methods import build_methods
+    from ..training.models import model_names
+
+    zooms = [parse_zoom(z) for z in args.zoom or ()]  # bad syntax fails before any work
+    chosen = args.checkpoint or args.method or args.model
+    options = {"tile": args.tile, "precision": args.precision}
+    # Built-in defaults (the main job): every shipped network, and the training-free baselines,
+    # on centre crops of the built-in photos (within 3 minutes on a 2-core CPU).
+    models = args.model if chosen else model_names()
+    max_size = args.max_size
+    if max_size is None and not chosen and args.datasets == "default":
+        max_size = MAIN_JOB_MAX_SIZE
+    specs = [
+        *args.checkpoint,
+        *(args.method or ([] if chosen else ["lmmse", "malvar2004"])),
+    ]
+    methods = model_methods(models, args.patterns, main_job=not chosen, options=options)
+    methods += build_methods(
+        specs,
+        patterns_for_lmmse=args.patterns,
+        lmmse_train=args.lmmse_train,
+        tile=args.tile,
+        precision=args.precision,
+        progress=not args.quiet,
+    )
+    from ..physics.noise import Exposure
+
+    if not args.photons and sensor_flags_given(args):
+        raise ValueError(
+            f"{', '.join(sensor_flags_given(args))} describe the photon model's sensor and have "
+            f"no effect without --photons (the exposures to score)"
+        )
+    exposures = [Exposure(n, **sensor_settings(args)) for n in args.photons or ()]  # checked first
+    paper_sigmas = [0.0, 5.0, 10.0, 15.0, 20.0]  # SPEC section 7
+    sigmas = args.sigmas if args.sigmas is not None else [] if exposures else paper_sigmas
+    datasets = load_datasets(args.datasets, args.max_images, max_size or None)
+    try:
+        rows = evaluate(
+            methods,
+            datasets,
+            [*sigmas, *exposures],
+            args.out,
+            save_images=args.save_images,
+            zoom_images=zooms if args.zoom else None,
+            crop=args.crop,
+            progress=not args.quiet,
+            resume=not args.restart,
+            # the main job (no method named) also draws the zoomed side-by-side crops
+            zoom_only=not chosen and not args.save_images,
+        )
+    except KeyboardInterrupt:
+        print(
+            f"splitcam evaluate: interrupted; the results so far are in "
+            f"{args.out}/per_image.csv: run the same command again to continue",
+            file=sys.stderr,
+        )
+        return 130
+    # What the folder holds: this evaluation's rows and those of others kept beside them.
+    from ..evaluation.tables import CSV_NAME, read_rows
+
+    kept = read_rows(Path(args.out) / CSV_NAME)
+    summary = summarise(kept)
+    print(markdown_tables(summary))
+    if len(kept) > len(rows):
+        others = sorted({r.method for r in kept} - {r.method for r in rows})
+        print(f"(the table keeps the earlier results in {args.out} of: {', '.join(others)})")
+    written = "per_image.csv, summary.json and table.md"
+    chart = Path(args.out) / "sigma_curves.png"
+    if len({r.level for r in kept}) > 1:
+        from ..viz.charts import sigma_chart
+
+        curves = [(name, entry["all"]) for name, entry in summary.items()]
+        sigma_chart(curves, chart, patterns_of={n: e["pattern"] for n, e in summary.items()})
+        written += ", sigma_curves.png"
+    else:
+        chart.unlink(missing_ok=True)  # an earlier chart would not match the table
+    zoom = Path(args.out) / "zoom"
+    if (not chosen or args.save_images) and zoom.is_dir() and any(zoom.iterdir()):
+        written += " and the zoomed crops in zoom/"
+    print(f"wrote {args.out}/{written}")
+    return 0

@@ -1,0 +1,113 @@
+"""`splitcam optics`: the pattern a metasurface makes, or design one."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "optics",
+        help="the pattern a metasurface makes (scalar wave optics), or design one",
+        description="Computes the splitter kernels that a metasurface height map makes above "
+        "the sensor (angular spectrum propagation, spectral integration; splitcam.physics.optics) and "
+        "writes the pattern file, its figure and the height map (.npy). With --design, "
+        "optimises the height map from --profile for the closed-form LMMSE first.",
+    )
+    p.add_argument(
+        "--profile", default="lens", help="flat, lens, random, or a height map .npy (µm)"
+    )
+    p.add_argument("--period", default="2x2", help="router period (default 2x2)")
+    p.add_argument("--pitch", type=float, default=1.0, help="pixel pitch, µm (default 1)")
+    p.add_argument("--distance", type=float, default=2.0, help="to the photodiodes, µm")
+    p.add_argument("--samples", type=int, default=8, help="grid points per pixel (default 8)")
+    p.add_argument("--index", type=float, default=2.0, help="pillar index (default 2.0)")
+    p.add_argument("--spacer-index", type=float, default=1.0)
+    p.add_argument("--max-height", type=float, default=1.2, help="µm (default 1.2)")
+    p.add_argument("--kernel", type=int, default=3, help="kernel size (odd, default 3)")
+    p.add_argument("--design", action="store_true", help="optimise the height map")
+    p.add_argument(
+        "--objective",
+        choices=["lmmse", "routing"],
+        default="lmmse",
+        help="with --design: the closed-form LMMSE of the reconstruction (default), or the "
+        "mean RGGB collection efficiency of a Bayer-type router (2x2)",
+    )
+    p.add_argument("--steps", type=int, default=200)
+    p.add_argument("--lr", type=float, default=0.1)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--out", required=True, help="pattern file (.toml or .json)")
+    p.add_argument("--quiet", action="store_true")
+    p.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from .. import patterns
+    from ..io import atomic_path
+    from ..physics.optics import Optics, bayer_collection, pattern_of, profile
+    from ..viz.patterns import draw_height_maps, draw_pattern
+
+    period = tuple(int(v) for v in args.period.lower().split("x"))
+    if len(period) != 2 or min(period) < 1:
+        raise ValueError(f"--period must be like 2x2, got {args.period!r}")
+    optics = Optics(
+        pitch=args.pitch,
+        distance=args.distance,
+        samples=args.samples,
+        index=args.index,
+        spacer_index=args.spacer_index,
+        max_height=args.max_height,
+        kernel_size=(args.kernel, args.kernel),
+    )
+    out = Path(args.out)
+    height = profile(args.profile, period, optics, args.seed)
+    if args.design:
+        from ..design import design_metasurface
+
+        result = design_metasurface(
+            period,
+            optics,
+            init=height if args.profile not in ("flat", "lens") else args.profile,
+            steps=args.steps,
+            lr=args.lr,
+            seed=args.seed,
+            name=out.stem,
+            progress=not args.quiet,
+            objective=args.objective,
+        )
+        height, pattern = result.height, result.pattern
+        for s in result.psnr_before:
+            print(
+                f"sigma {s:g}: closed-form LMMSE {result.psnr_before[s]:.2f} -> "
+                f"{result.psnr_after[s]:.2f} dB"
+            )
+        print(f"{len(result.history)} steps in {result.seconds:.1f} s")
+    else:
+        pattern = pattern_of(height, period, optics, name=out.stem)
+    patterns.save(pattern, out)
+    with atomic_path(out.with_suffix(".npy")) as tmp:
+        np.save(tmp, height.cpu().numpy())
+    fig = draw_pattern(pattern, out.with_suffix(".png"))
+    del fig
+    heights_png = out.with_name(out.stem + "_height.png")
+    draw_height_maps(
+        [(f"{out.stem}: height (µm)", height.cpu().numpy())],
+        heights_png,
+        period=period,
+        pitch=optics.pitch,
+        max_height=optics.max_height,
+    )
+    collected = pattern.kernels.sum((2, 3))
+    for i, row in enumerate(collected):
+        print(f"pixel {i}: collected R {row[0]:.3f}, G {row[1]:.3f}, B {row[2]:.3f} of its light")
+    if period == (2, 2):
+        r, g, b = bayer_collection(pattern)
+        print(f"collection efficiency into RGGB pixels: R {r:.1%}, G {g:.1%}, B {b:.1%}")
+    print(
+        f"wrote {out}, {out.with_suffix('.npy')} (height map, µm), {out.with_suffix('.png')} "
+        f"and {heights_png}"
+    )
+    return 0

@@ -1,0 +1,49 @@
+"""`splitcam patterns`: list, draw or export splitter patterns."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from ._common import pattern_or_model, table
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "patterns",
+        help="list, draw or export splitter patterns",
+        description="`splitcam patterns` prints the design-principle measures of every pattern; "
+        "`patterns show D --out d.png` draws one; `patterns export D --out d.toml` writes its "
+        "pattern file (a starting point for your own).",
+    )
+    p.add_argument("action", nargs="?", choices=["list", "show", "export"], default="list")
+    p.add_argument("names", nargs="*", metavar="PATTERN", help="pattern names or files")
+    p.add_argument("--out", help="output file (PNG for show, .json/.toml for export)")
+    p.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from .. import patterns
+
+    if args.action == "list":
+        names = args.names or patterns.names()
+        rows = []
+        for name in names:
+            p = pattern_or_model(name)
+            rows.append({**patterns.measure(p).row(), "provenance": p.provenance})
+        print(table(rows))
+        return 0
+    if len(args.names) != 1:
+        raise ValueError(f"'patterns {args.action}' takes one pattern name or file")
+    pattern = pattern_or_model(args.names[0])
+    if args.action == "show":
+        from ..viz.patterns import draw_pattern
+
+        out = Path(args.out or f"pattern_{pattern.name}.png")
+        draw_pattern(pattern, out)
+        print(f"wrote {out}")
+    else:
+        out = Path(args.out or f"{pattern.name}.toml")
+        patterns.save(pattern, out)
+        print(f"wrote {out}")
+    return 0

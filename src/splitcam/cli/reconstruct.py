@@ -1,0 +1,129 @@
+"""`splitcam reconstruct`: a colour image from a raw image (or a simulated one)."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from ._common import add_method_options, check_distinct
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "reconstruct",
+        help="reconstruct a colour image with a trained run or a baseline",
+        description="--image: simulate the sensor on a colour image (with --sigma noise), then "
+        "reconstruct; --raw: reconstruct a raw image (.png written by `simulate`, or .npy). "
+        "Large images are processed in overlapping tiles.",
+    )
+    p.add_argument(
+        "--method", help="lmmse, bilinear, malvar2004, menon2007, or a run folder / checkpoint file"
+    )
+    p.add_argument("--checkpoint", help="run folder or checkpoint file (same as --method RUN)")
+    p.add_argument("--model", help="a shipped model (`splitcam models` lists them) or model file")
+    p.add_argument(
+        "--pattern",
+        help="pattern name or file: for --method lmmse and a network for any pattern, and of a "
+        "--raw file that does not record it",
+    )
+    p.add_argument("--image", help="colour image to simulate and reconstruct")
+    p.add_argument("--raw", help="raw image to reconstruct")
+    p.add_argument(
+        "--sigma",
+        type=float,
+        help="noise sigma: added to --image (default 0); of --raw, needed only if the file does "
+        "not record it (raw files from `splitcam simulate` do)",
+    )
+    add_method_options(p)
+    p.add_argument(
+        "--out",
+        required=True,
+        help="output image: .png, .tif/.tiff or .jpg, or .npy (float32 H x W x 3, unclipped)",
+    )
+    p.add_argument(
+        "--bits", type=int, choices=[8, 16], default=8, help="bits per channel of PNG/TIFF (8)"
+    )
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    import torch
+
+    from .. import patterns
+    from ..data.imageio import read_image, read_raw, read_raw_meta, write_image
+    from ..methods import build_method, build_model
+    from ..physics.sensor import SplitterSensor
+    from ..physics.system import simulate
+
+    if (args.image is None) == (args.raw is None):
+        raise ValueError("give exactly one of --image (simulate, then reconstruct) or --raw")
+    check_distinct({"--image": args.image, "--raw": args.raw}, {"--out": args.out})
+    given = [x for x in (args.method, args.checkpoint, args.model) if x]
+    if len(given) != 1:
+        raise ValueError(
+            "give one of --model (a shipped model, e.g. D), --method (lmmse, malvar2004, ...) "
+            "or --checkpoint (a run folder)"
+        )
+    spec = given[0]
+    sigma, pattern = args.sigma, args.pattern
+    recorded = None
+    if args.raw:
+        # What simulate recorded in the raw file: the noise level, and the pattern (which must
+        # agree with whatever the command is told or the method was trained for).
+        made = read_raw_meta(args.raw)
+        if made is not None:
+            recorded = patterns.Pattern.from_dict(made.get("pattern"), source=str(args.raw))
+            if sigma is not None and sigma != made.get("sigma"):
+                raise ValueError(
+                    f"--sigma {sigma:g} contradicts the noise level recorded in {args.raw} "
+                    f"(sigma {made.get('sigma'):g}); leave --sigma out"
+                )
+            if pattern is not None and not patterns.get(pattern).equals(recorded):
+                raise ValueError(
+                    f"--pattern {pattern} contradicts the pattern recorded in {args.raw} "
+                    f"({recorded.name}); leave --pattern out"
+                )
+            sigma, pattern = float(made.get("sigma", 0.0)), pattern or recorded
+        elif sigma is None or pattern is None:
+            raise ValueError(
+                f"{args.raw} does not record how it was made (not written by `splitcam "
+                f"simulate`): give its noise level (--sigma) and its pattern (--pattern)"
+            )
+    sigma = 0.0 if sigma is None else sigma
+    method = (
+        build_model(spec, pattern=pattern, tile=args.tile, precision=args.precision)
+        if args.model
+        else build_method(
+            spec,
+            pattern=pattern,
+            lmmse_train=args.lmmse_train,
+            tile=args.tile,
+            precision=args.precision,
+            progress=not args.quiet,
+        )
+    )
+    if pattern is not None and not patterns.get(pattern).equals(method.pattern):
+        name = pattern.name if isinstance(pattern, patterns.Pattern) else pattern
+        where = f"the raw image's pattern {name}" if recorded is not None else f"--pattern {name}"
+        raise ValueError(f"{where} differs from the pattern of {spec} ({method.pattern.name})")
+    if args.image:
+        rgb = torch.from_numpy(read_image(args.image)).permute(2, 0, 1)[None]
+        raw = simulate(SplitterSensor(method.pattern), rgb, Path(args.image).stem, sigma)
+    else:
+        raw = torch.from_numpy(read_raw(args.raw))[None, None]
+    if hasattr(method, "progress"):
+        method.progress = not args.quiet
+    with torch.no_grad():
+        out = method.reconstruct(raw, sigma)
+    if Path(args.out).suffix.lower() == ".npy":  # float32 (H, W, 3), unclipped
+        import numpy as np
+
+        from ..io import atomic_path
+
+        with atomic_path(args.out) as tmp:
+            np.save(tmp, out[0].permute(1, 2, 0).float().numpy())
+    else:
+        write_image(args.out, out[0].clamp(0, 1), bits=args.bits)
+    print(f"{method.name}: wrote {args.out} ({out.shape[-1]}x{out.shape[-2]})")
+    return 0

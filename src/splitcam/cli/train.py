@@ -1,0 +1,105 @@
+"""`splitcam train`: train a reconstruction network (optionally with the pattern)."""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+
+#: Default budget (minutes) and peak learning rate of fine-tuning a network for any pattern to
+#: one pattern (docs/results/universal/README.md: 3e-4 against 1e-3 side by side).
+FINE_TUNE_MINUTES = 10.0
+FINE_TUNE_LR = 3e-4
+
+
+def fine_tuning(init_from: str, overrides: dict) -> dict:
+    """Settings implied by ``--init-from`` a network for any pattern (``universal``) when
+    ``--arch`` is left out: its architecture, unless ``--steps`` or ``--time-limit`` is given a
+    budget of :data:`FINE_TUNE_MINUTES`, and unless ``--lr`` is given :data:`FINE_TUNE_LR`."""
+    from ..training.trainer import source_network
+
+    network = source_network(init_from)
+    if not network or network.get("arch") != "universal":
+        return {}
+    implied = {
+        "network.arch": "universal",
+        "network.features": network.get("features", 64),
+        "network.blocks": network.get("blocks", 10),
+    }
+    if "optim.steps" not in overrides and "run.time_limit" not in overrides:
+        implied["run.time_limit"] = FINE_TUNE_MINUTES
+        print(f"fine-tuning {init_from} for {FINE_TUNE_MINUTES:g} minutes (--time-limit)")
+    if "optim.lr" not in overrides:
+        implied["optim.lr"] = FINE_TUNE_LR
+    return implied
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "train",
+        help="train a reconstruction network (optionally with the pattern)",
+        description="Train the reconstruction network for a pattern, or the pattern and the "
+        "network jointly (--learn-pattern). Settings: defaults (the paper's recipe) < --config "
+        "FILE (TOML/YAML/JSON) < flags. Ctrl-C saves a checkpoint and exits; --resume "
+        "continues a run.",
+    )
+    p.add_argument("--config", help="TOML, YAML or JSON configuration file")
+    p.add_argument("--resume", action="store_true", help="continue the run in --out")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    from ..training.config import train_flags
+
+    # One flag per setting of the typed config, with its help and default from there. Every
+    # default here is None, "not given": the config file's (or the dataclass's) value stays.
+    for flag in train_flags():
+        name = "--" + flag.name.replace("_", "-")
+        text = flag.help.replace("%", "%%")
+        if flag.kind is bool:  # --learn-pattern / --no-learn-pattern
+            p.add_argument(name, action=argparse.BooleanOptionalAction, default=None, help=text)
+        else:
+            nargs = "+" if flag.many else None
+            p.add_argument(name, type=flag.kind, nargs=nargs, default=None, help=text)
+    p.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..training import TrainConfig, train
+    from ..training.config import train_flags
+    from ..training.sweep import STOPPED
+    from ..training.trainer import resume_config
+
+    if args.resume and not args.config:
+        # Continue with the run's own settings (those of its checkpoint, or the config.json of a
+        # run killed before its first one); flags given now override them.
+        config = resume_config(args.out or TrainConfig().run.out)
+    else:
+        config = TrainConfig.from_file(args.config) if args.config else TrainConfig()
+    # Flags left out keep the config file's (or the default) value.
+    overrides = {}
+    for flag in train_flags():
+        value = getattr(args, flag.name, None)
+        if value is not None:
+            overrides[flag.key] = value
+    photon_only = sorted(k for k in overrides if k.startswith("noise.") and k != "noise.model")
+    model = overrides.get("noise.model", config.noise.model)
+    if photon_only and model != "photon":
+        flags = ", ".join("--" + k.split(".", 1)[1].replace("_", "-") for k in photon_only)
+        raise ValueError(f"{flags}: settings of the photon model; add --noise photon")
+    init_from = overrides.get("run.init_from", config.run.init_from)
+    if not args.resume and init_from and "network.arch" not in overrides:
+        overrides.update(fine_tuning(init_from, overrides))
+    config = config.override(overrides)
+    # Under torchrun, train() also ends the process group, the same way on every rank.
+    result = train(config, resume=args.resume, progress=not args.quiet)
+    if int(os.environ.get("RANK", "0")) != 0:
+        return 0  # under torchrun only rank 0 reports
+    summary = ", ".join(
+        f"{k} {v:.4g}"
+        for k, v in result.last_metrics.items()
+        if k in ("loss", "train_psnr", "val_psnr")
+    )
+    state = "interrupted at" if result.interrupted else "finished at"
+    print(f"{state} step {result.step}: {summary}; run folder {result.run_dir}")
+    if result.failure:
+        print(f"splitcam train: failed: {result.failure}", file=sys.stderr)
+        return 1
+    return STOPPED if result.interrupted else 0

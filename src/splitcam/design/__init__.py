@@ -1,0 +1,40 @@
+"""Pattern design: optimise a pattern's kernels (:mod:`.kernels`, for the closed-form LMMSE or a
+frozen network for any pattern) or a metasurface height map (:mod:`.metasurface`), both with the
+one loop of :mod:`.ascent`; defaults in :mod:`.defaults` (importable without torch).
+
+Design sits above reconstruction (its objectives are reconstructions) and below training, which
+starts a joint optimisation from a designed pattern. The names below load on first use, so
+``splitcam.design.defaults`` imports no torch.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import Any
+
+_EXPORTS = {
+    "DEFAULT_LR": "defaults",
+    "DEFAULT_SIGMAS": "defaults",
+    "DEFAULT_STEPS": "defaults",
+    "OBJECTIVES": "defaults",
+    "DesignResult": "kernels",
+    "closed_form_psnr": "kernels",
+    "design_pattern": "kernels",
+    "network_psnr": "kernels",
+    "training_patches": "kernels",
+    "MetasurfaceDesign": "metasurface",
+    "design_metasurface": "metasurface",
+    "ascend": "ascent",
+}
+
+__all__ = sorted(_EXPORTS)
+
+
+def __getattr__(name: str) -> Any:
+    if name not in _EXPORTS:
+        raise AttributeError(f"module 'splitcam.design' has no attribute {name!r}")
+    return getattr(importlib.import_module(f".{_EXPORTS[name]}", __name__), name)
+
+
+def __dir__() -> list[str]:
+    return __all__
