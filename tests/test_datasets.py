@@ -9,7 +9,6 @@ to the internet.
 
 from __future__ import annotations
 
-import argparse
 import csv
 import dataclasses
 import hashlib
@@ -485,8 +484,9 @@ def test_cli_download_and_list(
     shared_data: Path, serve, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     server = serve(shared_data)
-    parser = argparse.ArgumentParser(prog="splitcam")
-    testsets.add_cli(parser.add_subparsers(dest="command", required=True))
+    from splitcam.cli import build_parser
+
+    parser = build_parser()
     # Pre-populate all but one file so the command downloads one and verifies the rest.
     folder = tmp_path / "mcmaster"
     folder.mkdir()

@@ -68,7 +68,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
-        return args.run(args)
+        return args.handler(args)
     except KeyboardInterrupt:
         print(f"splitcam {args.command}: interrupted", file=sys.stderr)
         return 130

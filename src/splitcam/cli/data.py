@@ -56,7 +56,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         metavar="DIR",
         help=f"data root (default: ${registry.DATA_ENV} or {registry.DEFAULT_ROOT})",
     )
-    parser.set_defaults(run=run)
+    parser.set_defaults(handler=run)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -113,7 +113,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="recompute everything instead of continuing the results in --out",
     )
     p.add_argument("--quiet", action="store_true")
-    p.set_defaults(run=run)
+    p.set_defaults(handler=run)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -28,7 +28,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--force", action="store_true", help="replace an existing model of that name")
     p.add_argument("--storage", choices=["float16", "bfloat16", "float32"], default="float16")
     p.add_argument("--description", help="one line about the model")
-    p.set_defaults(run=run)
+    p.set_defaults(handler=run)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -11,8 +11,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         "optics",
         help="the pattern a metasurface makes (scalar wave optics), or design one",
         description="Computes the splitter kernels that a metasurface height map makes above "
-        "the sensor (angular spectrum propagation, spectral integration; splitcam.physics.optics) and "
-        "writes the pattern file, its figure and the height map (.npy). With --design, "
+        "the sensor (angular spectrum propagation, spectral integration; "
+        "splitcam.physics.optics) and writes the pattern file, its figure and the height map (.npy). With --design, "
         "optimises the height map from --profile for the closed-form LMMSE first.",
     )
     p.add_argument(
@@ -39,7 +39,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--out", required=True, help="pattern file (.toml or .json)")
     p.add_argument("--quiet", action="store_true")
-    p.set_defaults(run=run)
+    p.set_defaults(handler=run)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -19,7 +19,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("action", nargs="?", choices=["list", "show", "export"], default="list")
     p.add_argument("names", nargs="*", metavar="PATTERN", help="pattern names or files")
     p.add_argument("--out", help="output file (PNG for show, .json/.toml for export)")
-    p.set_defaults(run=run)
+    p.set_defaults(handler=run)
 
 
 def run(args: argparse.Namespace) -> int:

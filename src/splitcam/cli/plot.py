@@ -14,7 +14,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("run", nargs="+", help="run folder(s) (with metrics.jsonl)")
     p.add_argument("--out", help="PNG (default: RUN/curves.png, or runs_compared.png)")
-    p.set_defaults(run=run)
+    p.set_defaults(handler=run)
 
 
 def run(args: argparse.Namespace) -> int:

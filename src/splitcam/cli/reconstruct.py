@@ -44,7 +44,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--bits", type=int, choices=[8, 16], default=8, help="bits per channel of PNG/TIFF (8)"
     )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
-    p.set_defaults(run=run)
+    p.set_defaults(handler=run)
 
 
 def run(args: argparse.Namespace) -> int:

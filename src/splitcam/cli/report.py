@@ -16,7 +16,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("results", nargs="+", metavar="RESULTS", help="folders from `evaluate`")
     p.add_argument("--out", default="report", help="output folder (default: report)")
-    p.set_defaults(run=run)
+    p.set_defaults(handler=run)
 
 
 def run(args: argparse.Namespace) -> int:

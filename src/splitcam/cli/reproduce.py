@@ -27,7 +27,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     # float32 by default: the committed tables are float32, and a resumed run adds rows to them.
     add_precision(p, "fp32")
     p.add_argument("--quiet", action="store_true")
-    p.set_defaults(run=run)
+    p.set_defaults(handler=run)
 
 
 def run(args: argparse.Namespace) -> int:

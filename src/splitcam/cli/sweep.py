@@ -45,7 +45,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "without it they are skipped unless their run folder or snapshot is there",
     )
     p.add_argument("--dry-run", action="store_true", help="show what each experiment needs")
-    p.set_defaults(run=run)
+    p.set_defaults(handler=run)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -58,7 +58,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         else:
             nargs = "+" if flag.many else None
             p.add_argument(name, type=flag.kind, nargs=nargs, default=None, help=text)
-    p.set_defaults(run=run)
+    p.set_defaults(handler=run)
 
 
 def run(args: argparse.Namespace) -> int:

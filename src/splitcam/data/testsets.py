@@ -11,12 +11,11 @@ Three kinds of test set are understood:
   scikit-image, so an evaluation runs on a fresh machine without any download.
 
 :func:`load_datasets` reads several test sets at once, as ``splitcam evaluate --datasets`` names
-them. The ``splitcam data`` command is built by :func:`add_cli` and run by :func:`cmd_data`.
+them. The ``splitcam data`` command (:mod:`splitcam.cli.data`) downloads and lists them.
 """
 
 from __future__ import annotations
 
-import argparse
 import os
 from collections import Counter
 from collections.abc import Sequence
@@ -25,19 +24,16 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .download import download
 from .images import read_image
 from .patches import list_images
-from .registry import DATA_ENV, DEFAULT_ROOT, MIRROR_ENV, data_root, dataset_names, datasets
+from .registry import DATA_ENV, data_root, dataset_names
 
 if TYPE_CHECKING:
     import torch
 
 __all__ = [
     "DEFAULT_IMAGE_NAMES",
-    "add_cli",
     "centre_crop",
-    "cmd_data",
     "default_images",
     "load_datasets",
     "load_images",
@@ -301,91 +297,3 @@ def load_datasets(
 
 # ---------------------------------------------------------------------------------------------
 # Command line: `splitcam data ...`
-
-
-def add_cli(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
-    """Add the ``data`` command (``data download``, ``data list``) to a subparsers object.
-
-    Args:
-        subparsers: The object returned by ``ArgumentParser.add_subparsers()``.
-
-    Returns:
-        The ``data`` parser; its handler is :func:`cmd_data` (``set_defaults(handler=...)``).
-    """
-    parser = subparsers.add_parser(
-        "data",
-        help="download the test datasets (Kodak24, McMaster) or list them",
-        description="`splitcam data download kodak24 mcmaster --to DIR` downloads the datasets "
-        "into DIR/<name>, verifying every file; use them by name with SPLITCAM_DATA=DIR. "
-        "`splitcam data list` shows which are present.",
-    )
-    actions = parser.add_subparsers(dest="data_action", metavar="ACTION", required=True)
-    p = actions.add_parser(
-        "download",
-        help="download and verify datasets",
-        description="Downloads from the public sources pinned to a commit (or from a mirror) and "
-        "checks every file against the hashes in the package's dataset registry. Files already "
-        "present and verified are skipped; a file whose download was interrupted is downloaded "
-        "again when the command is run again.",
-    )
-    p.add_argument(
-        "names",
-        nargs="*",
-        metavar="DATASET",
-        help=f"datasets to download (default: all of {', '.join(dataset_names())})",
-    )
-    p.add_argument(
-        "--to",
-        metavar="DIR",
-        help=f"data root; each dataset goes to DIR/<name> (default: ${DATA_ENV} or {DEFAULT_ROOT})",
-    )
-    p.add_argument(
-        "--mirror",
-        metavar="URL",
-        help="download <URL>/<dataset>/<file> instead of the public sources; also "
-        f"a local folder (default: ${MIRROR_ENV} if set)",
-    )
-    p.add_argument(
-        "--timeout", type=float, default=30.0, help="network timeout in seconds (default: 30)"
-    )
-    p.add_argument("--quiet", action="store_true", help="no progress bars")
-    p = actions.add_parser(
-        "list",
-        help="list the datasets and whether they are present",
-        description="Counts the files of each dataset under the data root.",
-    )
-    p.add_argument(
-        "--root", metavar="DIR", help=f"data root (default: ${DATA_ENV} or {DEFAULT_ROOT})"
-    )
-    parser.set_defaults(handler=cmd_data)
-    return parser
-
-
-def cmd_data(args: argparse.Namespace) -> int:
-    """Run ``splitcam data download`` or ``splitcam data list``; returns the exit status."""
-    if args.data_action == "download":
-        names = args.names or list(dataset_names())
-        paths = download(
-            names, args.to, mirror=args.mirror, progress=not args.quiet, timeout=args.timeout
-        )
-        root = data_root(args.to)
-        for name in dict.fromkeys(names):
-            count = sum(1 for p in paths if p.parent.name == name)
-            print(f"{name}: {count} images in {root / name}")
-        if root.resolve() != data_root().resolve():
-            print(f"use them by name with {DATA_ENV}={root}")
-        return 0
-    root = data_root(args.root)
-    print(f"data root: {root}")
-    for dataset in datasets().values():
-        folder = root / dataset.name
-        present = sum(1 for f in dataset.files if (folder / f.name).is_file())
-        state = (
-            "complete"
-            if present == len(dataset.files)
-            else f"{present}/{len(dataset.files)} files"
-            if present
-            else "not downloaded"
-        )
-        print(f"  {dataset.name:10s} {state:16s} {dataset.description}")
-    return 0

@@ -27,13 +27,13 @@ import torch
 from ..data.imageio import write_image
 from ..io import write_text
 from ..patterns import Pattern, save
-from ..physics.noise import Exposure, check_level
+from ..physics.noise import Exposure, check_level, level_label
 from ..physics.sensor import SplitterSensor
 from ..physics.system import simulate
 from ..recon.base import Reconstructor
 from ..viz.zoom import check_region, zoom_figure
 from .metrics import SSIM_WINDOW, compute_all, mean_over_images
-from .tables import CSV_NAME, EvalRow, append_rows, level_label, read_rows, write_summary
+from .tables import CSV_NAME, EvalRow, append_rows, read_rows, write_summary
 
 __all__ = [
     "Zoom",
@@ -311,7 +311,7 @@ def evaluate(
             )
             outputs = {}
             photons = sigma.photons if isinstance(sigma, Exposure) else 0.0
-            level = level_label(0.0 if photons else sigma, photons)
+            level = level_label(sigma)
             for method in methods:
                 key = (method.name, dataset, image_name, level)
                 if key in done and not zoomed:
@@ -442,7 +442,7 @@ def _save_images(
     ``zoom_outputs`` (default: ``outputs``)."""
     safe = image.replace("/", "_")
     if isinstance(sigma, Exposure):
-        suffix, title = f"N{sigma.photons:g}", f"{sigma.photons:g} photo-electrons"
+        suffix, title = level_label(sigma), f"{sigma.photons:g} photo-electrons"
     else:
         suffix, title = f"sigma{sigma:g}", f"sigma {sigma:g}"
     for name, (pred, _) in outputs.items():

@@ -9,9 +9,9 @@ from pathlib import Path
 
 from .. import patterns
 from ..io import write_text
+from ..physics.noise import level_heading, level_key, parse_level_label
 from ..viz.charts import exposure_chart, sigma_chart
 from ..viz.patterns import draw_pattern
-from .tables import level_heading, level_order
 
 #: The paper's test sets: its numbers are means over all their images, whole.
 PAPER_DATASETS = {"kodak24": 24, "mcmaster": 18}
@@ -127,7 +127,7 @@ def make_report(results: list[str | os.PathLike], out: str | os.PathLike) -> Pat
         "section 2), so their gaps are not only a matter of training budget.",
         "",
     ]
-    sigmas = sorted({s for _, _, e, _ in entries for s in e["all"]}, key=level_order)
+    sigmas = sorted({s for _, _, e, _ in entries for s in e["all"]}, key=level_key)
     lines.append(
         "| result | method | pattern | images | "
         + " | ".join(level_heading(s) for s in sigmas)
@@ -189,11 +189,16 @@ def make_report(results: list[str | os.PathLike], out: str | os.PathLike) -> Pat
         ref: [(float(s), p) for s, (p, _) in zip(PAPER_SIGMAS, PAPER[ref], strict=True)]
         for ref in refs
     }
-    if any(not s.startswith("N") for s in sigmas):
+    if any(parse_level_label(s)[0] == "sigma" for s in sigmas):
         chart = sigma_chart(curves, out / "sigma_curves.png", references, patterns_of=kinds)
         lines += ["", "## PSNR and CIEDE2000 against noise", "", f"![curves]({chart.name})", ""]
     exposures = {
-        label: {float(s[1:]): st for s, st in per.items() if s.startswith("N")}
+        label: {
+            value: st
+            for s, st in per.items()
+            for kind, value in [parse_level_label(s)]
+            if kind == "photons"
+        }
         for label, per in curves
     }
     if any(exposures.values()):

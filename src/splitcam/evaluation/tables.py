@@ -13,6 +13,7 @@ from dataclasses import astuple, dataclass, fields
 from pathlib import Path
 
 from ..io import appending, atomic_path, write_text
+from ..physics.noise import Exposure, level_heading, level_key, level_label
 from .metrics import mean_over_images
 
 __all__ = [
@@ -20,8 +21,6 @@ __all__ = [
     "METRICS",
     "EvalRow",
     "append_rows",
-    "level_heading",
-    "level_label",
     "markdown_tables",
     "read_rows",
     "summarise",
@@ -69,28 +68,13 @@ class EvalRow:
     def level(self) -> str:
         """The noise level as it labels tables and summaries: ``"15"`` (sigma) or ``"N1000"``
         (photo-electrons)."""
-        return level_label(self.sigma, self.photons)
+        return level_label(Exposure(self.photons) if self.photons else self.sigma)
 
     def cells(self) -> list[str]:
         return [
             _FORMATS.get(f.name, "{}").format(v)
             for f, v in zip(fields(self), astuple(self), strict=True)
         ]
-
-
-def level_label(sigma: float, photons: float = 0.0) -> str:
-    """``"15"`` for a Gaussian sigma, ``"N1000"`` for an exposure of 1000 photo-electrons."""
-    return f"N{photons:g}" if photons else f"{sigma:g}"
-
-
-def level_order(label: str) -> tuple[int, float]:
-    """Gaussian levels first by sigma, then exposures by photo-electrons."""
-    return (1, float(label[1:])) if label.startswith("N") else (0, float(label))
-
-
-def level_heading(label: str) -> str:
-    """A table heading: ``σ=15`` or ``N=1000 e-``."""
-    return f"N={label[1:]} e⁻" if label.startswith("N") else f"σ={label}"
 
 
 def append_rows(path: str | os.PathLike, rows: Iterable[EvalRow]) -> None:
@@ -158,7 +142,7 @@ def summarise(rows: Sequence[EvalRow]) -> dict:
         for group in [*groups, "all"]:
             chosen = mine if group == "all" else [r for r in mine if r.dataset == group]
             per_sigma = {}
-            for level in sorted({r.level for r in chosen}, key=level_order):
+            for level in sorted({r.level for r in chosen}, key=level_key):
                 at = [r for r in chosen if r.level == level]
                 stats = {}
                 for metric in METRICS:

@@ -19,6 +19,10 @@ from typing import Any
 import torch
 
 __all__ = [
+    "level_heading",
+    "level_key",
+    "level_label",
+    "parse_level_label",
     "Exposure",
     "GaussianNoise",
     "PhotonNoise",
@@ -276,3 +280,44 @@ class PhotonNoise:
 
     def load_state_dict(self, state: dict[str, torch.Tensor]) -> None:
         self.generator.set_state(state["generator"])
+
+
+# The label of a noise level, the one convention of tables, metrics files and figures: "15" for
+# a Gaussian sigma of 15 (8-bit units), "N1000" for a photon-model exposure of 1000
+# photo-electrons. Everything that writes or reads such a label goes through these functions.
+
+
+def level_label(level: float | Exposure) -> str:
+    """``"15"`` for a Gaussian sigma, ``"N1000"`` for an :class:`Exposure` of 1000
+    photo-electrons (in ``metrics.jsonl`` keys ``val_psnr_<label>`` and result tables)."""
+    if isinstance(level, Exposure):
+        return f"N{level.photons:g}"
+    return f"{float(level):g}"
+
+
+def parse_level_label(label: str) -> tuple[str, float]:
+    """``("sigma", 15.0)`` for ``"15"``, ``("photons", 1000.0)`` for ``"N1000"``; also accepts
+    a metrics key such as ``"val_psnr_N1000"`` (the part after the last underscore).
+
+    Raises:
+        ValueError: Not a level label.
+    """
+    text = str(label).rsplit("_", 1)[-1]
+    kind, number = ("photons", text[1:]) if text.startswith("N") else ("sigma", text)
+    try:
+        return kind, float(number)
+    except ValueError:
+        raise ValueError(f"not a noise-level label (15 or N1000): {label!r}") from None
+
+
+def level_key(label: str) -> tuple[int, float]:
+    """Sort key: Gaussian levels first by sigma, then exposures by photo-electrons."""
+    kind, value = parse_level_label(label)
+    return (kind == "photons", value)
+
+
+def level_heading(label: str) -> str:
+    """A table heading or legend entry: ``σ=15`` or ``N=1000 e⁻``."""
+    kind, value = parse_level_label(label)
+    return f"N={value:g} e⁻" if kind == "photons" else f"σ={value:g}"
+

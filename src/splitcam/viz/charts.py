@@ -7,6 +7,7 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 from ..io import atomic_path
+from ..physics.noise import level_key, parse_level_label
 
 __all__ = ["exposure_chart", "sigma_chart"]
 
@@ -78,8 +79,10 @@ def sigma_chart(
     measured: set[float] = set()
     for label, per_sigma in curves:
         style = {"color": colour_of[group[label]], "ms": 4, **KIND_STYLES[method_kind(label)]}
-        sig = sorted((s for s in per_sigma if not s.startswith("N")), key=float)  # N...: exposures
-        xs = [float(s) for s in sig]
+        sig = sorted(
+            (s for s in per_sigma if parse_level_label(s)[0] == "sigma"), key=level_key
+        )
+        xs = [parse_level_label(s)[1] for s in sig]
         measured.update(xs)
         ax1.plot(xs, [per_sigma[s]["psnr"] for s in sig], label=label, **style)
         ax2.plot(xs, [per_sigma[s]["ciede2000"] for s in sig], label=label, **style)

@@ -10,6 +10,7 @@ from numbers import Real
 from pathlib import Path
 
 from ..io import atomic_path
+from ..physics.noise import level_heading, level_key
 
 
 def _valid(row: object) -> bool:
@@ -84,20 +85,15 @@ def plot_run(run: str | os.PathLike, out: str | os.PathLike | None = None) -> Pa
         label="training batches (noisy, all sigmas)",
     )
 
-    def level(key: str) -> tuple[int, float]:
-        """``val_psnr_15`` (sigma 15) or ``val_psnr_N100`` (photon model, exposure 100)."""
-        text = key.rsplit("_", 1)[1]
-        return (1, float(text[1:])) if text.startswith("N") else (0, float(text))
-
-    sigmas = sorted({k for r in val for k in r if k.startswith("val_psnr_")}, key=level)
+    # keys val_psnr_<level label>: val_psnr_15 (sigma 15), val_psnr_N100 (exposure 100)
+    sigmas = sorted({k for r in val for k in r if k.startswith("val_psnr_")}, key=level_key)
     for key in sigmas:
-        kind, value = level(key)
         ax2.plot(
             [r["step"] for r in val],
             [r.get(key, float("nan")) for r in val],
             marker="o",
             ms=3,
-            label=f"validation, {'exposure N' if kind else 'sigma'} {value:g}",
+            label=f"validation, {level_heading(key)}",
         )
     ax2.set_xlabel("step")
     ax2.set_ylabel("PSNR (dB)")
@@ -151,11 +147,11 @@ def compare_runs(runs: list[str | os.PathLike], out: str | os.PathLike) -> Path:
         val_minutes = [m for r, m in timed if "val_psnr" in r]
         keys = sorted(
             (k for k in rows[0] if k.startswith("val_psnr_")),
-            key=lambda k: float(k.rsplit("_", 1)[1]),
+            key=level_key,
         )
         for j, key in enumerate(keys):
             style = ["o-", "s--", "^:"][j % 3]
-            label = f"{Path(run).name}, sigma {key.rsplit('_', 1)[1]}"
+            label = f"{Path(run).name}, {level_heading(key)}"
             minutes = [m - val_minutes[0] for m in val_minutes]
             ax1.plot(minutes, [r[key] for r in rows], style, color=colours[i], ms=3, label=label)
             ax2.plot(
