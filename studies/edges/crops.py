@@ -1,12 +1,15 @@
 """Shipped networks against their LMMSE on held-out crops whose sides end on a whole period or
-part-way through one (docs/results/edges/README.md). Run from the repository root."""
+part-way through one (docs/results/edges/README.md). From the repository root:
+
+    python studies/edges/crops.py [MODEL...]      # default: C E B D
+"""
 
 import json
 import sys
 
 import torch
 
-from splitcam.data.imageio import read_image
+from splitcam.data.images import read_image
 from splitcam.data.patches import list_images
 from splitcam.data.testsets import centre_crop
 from splitcam.evaluation.protocol import mean_psnr

@@ -1,6 +1,6 @@
 """Score designed patterns against their starts with the closed-form LMMSE on held-out images.
 
-    python docs/results/design/heldout.py docs/results/design/*.toml [--train ../shared/data/train]
+    python studies/design/heldout.py docs/results/design/*.toml [--train ../shared/data/train]
 
 For every pattern file written by `splitcam design`, its start (``metadata.start``) and the
 designed pattern are each reconstructed by ``closed_form_lmmse(pattern)`` from the protocol's
@@ -20,12 +20,12 @@ from pathlib import Path
 import torch
 
 from splitcam import patterns
-from splitcam.data.imageio import read_image
+from splitcam.data.images import read_image
 from splitcam.data.patches import list_images
+from splitcam.design import closed_form_psnr
 from splitcam.evaluation.metrics import mean_over_images, psnr
 from splitcam.evaluation.protocol import mean_psnr, score_images
 from splitcam.recon.closed_form import closed_form_lmmse
-from splitcam.recon.design import closed_form_psnr
 
 SIGMAS = [0.0, 15.0]
 

@@ -1,6 +1,6 @@
 """Learning rate and steps of `design_pattern`: the objective along 600 steps from five starts.
 
-    python docs/results/design/sweep.py mse,psnr 0.05,0.1,0.02 > docs/results/design/sweep.txt
+    python studies/design/sweep.py mse,psnr 0.05,0.1,0.02 > docs/results/design/sweep.txt
 
 Each line: objective, lr, start, init, seed, wall time of the 600 steps, the objective (dB) at
 steps 0, 50, 100, 200, 300, 400 and 599, and the closed-form PSNR at sigma 0 and 15 at the end.
@@ -8,7 +8,7 @@ steps 0, 50, 100, 200, 300, 400 and 599, and the closed-form PSNR at sigma 0 and
 
 import sys
 
-from splitcam.recon.design import design_pattern
+from splitcam.design import design_pattern
 
 STEPS = 600
 STARTS = [("D", "support", 0), ("A", "support", 0), ("D", "exact", 0), ("A", "random", 0),

@@ -1,6 +1,6 @@
 """Where the held-out error of designed patterns comes from: the image borders.
 
-    python docs/results/design/border.py [FILES...]
+    python studies/design/border.py [FILES...]
 
 On the first 6 of the 32 held-out images, at sigma 0, the closed-form LMMSE of each pattern
 reconstructs (1) the raw image as the protocol simulates it (the scene is 0 outside the image
@@ -17,7 +17,7 @@ import torch
 import torch.nn.functional as F
 
 from splitcam import patterns
-from splitcam.data.imageio import read_image
+from splitcam.data.images import read_image
 from splitcam.data.patches import list_images
 from splitcam.evaluation.metrics import psnr
 from splitcam.physics.sensor import SplitterSensor

@@ -1,6 +1,9 @@
-"""net-C and net-E on Kodak24: the whole images against the same images one or two columns
-narrower, so that every row ends as the networks' training patches did (width = 1 mod 3) or on
-a whole period (docs/results/edges/README.md). Needs SPLITCAM_DATA."""
+"""Networks of 1x3-period patterns on Kodak24: the whole images against the same images one or
+two columns narrower, so that every row ends one column into a period (width = 1 mod 3) or on a
+whole period (docs/results/edges/README.md). From the repository root:
+
+    SPLITCAM_DATA=../shared/data python studies/edges/kodak.py [MODEL...]   # default: C E
+"""
 
 import sys
 
