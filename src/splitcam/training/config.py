@@ -75,7 +75,8 @@ class PatternConfig:
     metasurface: str | None = _opt(
         None,
         "learn a metasurface instead of free kernels (splitcam.physics.optics, default "
-        "geometry): its starting height map, random, lens or a .npy file (µm); the period is the pattern's",
+        "geometry): its starting height map, random, lens or a .npy file (µm); the period is "
+        "the pattern's",
     )
     design_steps: int = _opt(
         0,
