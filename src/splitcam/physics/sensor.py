@@ -56,6 +56,18 @@ def _check(x: torch.Tensor, channels: int, what: str) -> None:
 
 Layout = torch.Tensor | np.ndarray | tuple[tuple[int, ...], ...]
 
+#: Kernels within this of the pattern a sensor was built with count as that pattern in
+#: :meth:`SplitterSensor.to_pattern`: the float32 rounding of weights of at most 1 is below it.
+HELD_ATOL = 1e-7
+
+
+def _tensor(
+    array: np.ndarray, dtype: torch.dtype, device: torch.device | None = None
+) -> torch.Tensor:
+    """A pattern's array as a new tensor; ``np.array`` copies it first, so any view (a flipped
+    or strided one included) converts."""
+    return torch.tensor(np.array(array), dtype=dtype, device=device)
+
 
 def _layout_key(layout: Layout) -> tuple[tuple[int, ...], ...]:
     """The layout as a hashable tuple (the key of the index-table caches)."""
@@ -237,7 +249,10 @@ class SplitterSensor(nn.Module):
     """A sensor behind a fixed splitter (or filter) pattern: ``sensor(rgb)`` is Eq. 1.
 
     The kernels and layout are buffers, so ``.to(device)``, ``state_dict()`` and saving work;
-    computations follow the input's device and dtype.
+    computations follow the input's device and dtype. What the sensor reports
+    (:meth:`to_pattern`, its ``repr``, :attr:`period`) is read from those buffers, so a sensor
+    that loaded the state dict of another pattern of the same shapes reports that pattern's
+    layout and kernels (see :meth:`to_pattern` for its name).
 
     Args:
         pattern: A :class:`~splitcam.patterns.Pattern` or a registered name / pattern file path.
@@ -253,7 +268,7 @@ class SplitterSensor(nn.Module):
         super().__init__()
         pattern = get(pattern) if isinstance(pattern, str) else pattern
         self._meta = pattern
-        self.register_buffer("layout", torch.tensor(pattern.layout, dtype=torch.long))
+        self.register_buffer("layout", _tensor(pattern.layout, torch.long))
         # The layout as a tuple, read once: converting the buffer on every call would copy it
         # to the host (a device sync on GPUs). Refreshed if a state dict replaces the buffer.
         self._layout = _layout_key(pattern.layout)
@@ -263,7 +278,7 @@ class SplitterSensor(nn.Module):
         self._init_kernels(pattern)
 
     def _init_kernels(self, pattern: Pattern) -> None:
-        self.register_buffer("kernels", torch.tensor(pattern.kernels, dtype=torch.float64))
+        self.register_buffer("kernels", _tensor(pattern.kernels, torch.float64))
 
     @property
     def period(self) -> tuple[int, int]:
@@ -288,12 +303,58 @@ class SplitterSensor(nn.Module):
         """What each pixel phase sees, ``(Ph, Pw, 3, kh, kw)`` (see :func:`pixel_kernels`)."""
         return pixel_kernels(self.weights(), self._layout)
 
+    def _held(self) -> tuple[np.ndarray, np.ndarray]:
+        """The layout and kernels (float64) of the buffers, on the host."""
+        layout = self.layout.detach().cpu().numpy()
+        return layout, self.kernels.detach().to("cpu", torch.float64).numpy()
+
+    def _holds_constructor_pattern(self) -> bool:
+        """Whether the buffers hold the constructor's pattern (kernels to float32 precision)."""
+        layout, kernels = self._held()
+        built = self._meta
+        return (
+            layout.shape == built.layout.shape
+            and bool(np.array_equal(layout, built.layout))
+            and kernels.shape == built.kernels.shape
+            and bool(np.allclose(kernels, built.kernels, rtol=0, atol=HELD_ATOL))
+        )
+
+    def _held_name(self) -> str:
+        """The name :meth:`to_pattern` gives (without building the pattern)."""
+        if self._holds_constructor_pattern():
+            return self._meta.name
+        return f"{self._meta.name}-loaded"
+
     def to_pattern(self, name: str | None = None) -> Pattern:
-        """The pattern this sensor currently implements (renamed to ``name`` if given)."""
-        return self._meta if name is None else dataclasses.replace(self._meta, name=name)
+        """The pattern of the layout and kernels this sensor holds (renamed to ``name`` if given).
+
+        While the buffers hold the pattern the sensor was built with (kernels equal within
+        :data:`HELD_ATOL`, so a sensor cast to float32 and back still does), that pattern is
+        returned, with its name, provenance and description. Otherwise (a state dict of another
+        pattern was loaded, or the buffers were written) the result is a pattern of the buffers'
+        layout and kernels named ``"<built-with name>-loaded"``, provenance ``"loaded"``; a state
+        dict holds tensors only, so the loaded pattern's own name is not known here.
+
+        Raises:
+            PatternError: The buffers hold kernels that are no valid pattern (negative, or
+                summing to more than 1).
+        """
+        if self._holds_constructor_pattern():
+            held = self._meta
+        else:
+            layout, kernels = self._held()
+            held = Pattern(
+                name=f"{self._meta.name}-loaded",
+                layout=layout,
+                kernels=kernels,
+                provenance="loaded",
+                description=f"kernels loaded into a sensor built for pattern {self._meta.name}",
+                metadata={"built_for": self._meta.name},
+            )
+        return held if name is None else dataclasses.replace(held, name=name)
 
     def extra_repr(self) -> str:
-        return f"pattern={self._meta.name!r}, period={self.period}"
+        return f"pattern={self._held_name()!r}, period={self.period}"
 
 
 class LearnableSplitterSensor(SplitterSensor):
@@ -343,7 +404,7 @@ class LearnableSplitterSensor(SplitterSensor):
                 f"a colour filter), but learned kernels are a softmax that always sums to 1 "
                 f"(light conserved); start from a splitter pattern such as A or D instead"
             )
-        w = torch.tensor(pattern.kernels, dtype=torch.float64)
+        w = _tensor(pattern.kernels, torch.float64)
         if self._init == "support":
             z = torch.where(w > 0, self._support_logit, 0.0)
         elif self._init == "exact":
@@ -357,13 +418,19 @@ class LearnableSplitterSensor(SplitterSensor):
         return torch.softmax(z.reshape(*z.shape[:2], -1), dim=-1).reshape(z.shape)
 
     def to_pattern(self, name: str | None = None) -> Pattern:
-        """Export the learned kernels (softmax in float64) as a fixed :class:`Pattern`."""
+        """Export the learned kernels (softmax in float64) as a fixed :class:`Pattern`.
+
+        Layout and kernels are the module's (the ``layout`` buffer and ``softmax(logits)``, so
+        after a ``load_state_dict`` those of the loaded state); the name (default
+        ``"<start>-learned"``), description and metadata name the starting pattern and
+        initialisation the sensor was built with.
+        """
         z = self.logits.detach().double().cpu()
         w = torch.softmax(z.reshape(*z.shape[:2], -1), dim=-1).reshape(z.shape)
         base = self._meta
         return Pattern(
             name=name or f"{base.name}-learned",
-            layout=base.layout,
+            layout=self.layout.detach().cpu().numpy(),
             kernels=w.numpy(),
             provenance="learned",
             description=f"learned from pattern {base.name} ({self._init} initialisation)",
@@ -381,7 +448,8 @@ class SwitchingSensor(SplitterSensor):
     What training one network over many patterns needs (:class:`~splitcam.patterns.random.
     PatternMix`): :meth:`set_pattern` swaps the layout and kernels, whatever their period and
     kernel size. Neither is saved in a ``state_dict`` (the pattern of a step is recomputed from
-    the step, not restored), so checkpoints of such a run hold only the network.
+    the step, not restored), so checkpoints of such a run hold only the network, and loading a
+    state dict leaves the pattern as it was: :meth:`to_pattern` is the pattern last set.
 
     Args:
         pattern: The first pattern.
@@ -397,7 +465,7 @@ class SwitchingSensor(SplitterSensor):
         device = self.kernels.device
         self._meta = pattern
         self._layout = _layout_key(pattern.layout)
-        layout = torch.tensor(pattern.layout, dtype=torch.long, device=device)
-        kernels = torch.tensor(pattern.kernels, dtype=torch.float64, device=device)
+        layout = _tensor(pattern.layout, torch.long, device=device)
+        kernels = _tensor(pattern.kernels, torch.float64, device=device)
         self.register_buffer("layout", layout, persistent=False)
         self.register_buffer("kernels", kernels, persistent=False)
