@@ -9,8 +9,8 @@ from pathlib import Path
 
 from splitcam import patterns
 from splitcam.data.patches import ImageCache
+from splitcam.io.weights import LMMSE_DIR
 from splitcam.recon.lmmse import LMMSE
-from splitcam.weights import HERE
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -20,7 +20,7 @@ def main() -> None:
     parser.add_argument("--train", default=str(ROOT.parent / "shared" / "data" / "train"))
     args = parser.parse_args()
     cache = ImageCache(args.train, min_size=48)
-    out = HERE / "lmmse"
+    out = LMMSE_DIR
     out.mkdir(parents=True, exist_ok=True)
     for name in patterns.names():
         t0 = time.perf_counter()

@@ -33,6 +33,7 @@ import torch
 
 from ..data.patches import ImageCache
 from ..data.tensorfiles import load_pair, save_pair
+from ..io.weights import IMAGE_STATISTICS
 from ..patterns import Pattern, get
 from ..physics.noise import Exposure
 from ..physics.sensor import pattern_pixel_kernels
@@ -61,7 +62,7 @@ DEFAULT_MAX_OFFSET = 16
 _RIDGE = 1e-8
 _FORMAT = "splitcam-image-statistics"
 _VERSION = 1
-SHIPPED_PATH = Path(__file__).resolve().parent.parent / "weights" / "image_statistics.json"
+SHIPPED_PATH = IMAGE_STATISTICS
 
 
 @dataclass(eq=False)

@@ -22,6 +22,7 @@ import torch.nn.functional as F
 
 from ..data.patches import ImageCache, PatchSampler
 from ..data.tensorfiles import load_pair, save_pair
+from ..io.weights import LMMSE_DIR
 from ..patterns import Pattern, PatternError, get
 from ..physics.noise import Exposure
 from ..physics.periodic import phase_conv, phase_map
@@ -508,7 +509,7 @@ class LMMSE:
 
 
 #: Folder of the shipped LMMSE fits (see ``scripts/fit_shipped_lmmse.py``).
-SHIPPED_DIR = Path(__file__).resolve().parent.parent / "weights" / "lmmse"
+SHIPPED_DIR = LMMSE_DIR
 
 
 def shipped_lmmse(pattern: Pattern | str) -> LMMSE:

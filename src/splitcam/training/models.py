@@ -28,6 +28,7 @@ from typing import Any
 import torch
 
 from ..data.tensorfiles import load_pair, paired_paths, save_pair
+from ..io.weights import MODELS_DIR
 from ..patterns import Pattern
 from ..physics.sensor import SplitterSensor
 from ..physics.system import ImagingSystem
@@ -49,7 +50,6 @@ __all__ = [
 FORMAT = "splitcam-model"
 VERSION = 1
 #: Where the shipped models live.
-MODELS_DIR = Path(__file__).resolve().parent.parent / "weights" / "models"
 STORAGE = {"float16": torch.float16, "bfloat16": torch.bfloat16, "float32": torch.float32}
 
 
