@@ -262,6 +262,7 @@ def test_training_under_the_photon_model(tmp_path) -> None:
         photons=[30.0, 1000.0],
         methods=[build_method(str(tmp_path / "run"))],
         progress=False,
+        domain="srgb",  # the network was trained on sRGB values
     )
     assert set(study) == {"D", "run"}
     assert study["run"][1000.0]["psnr"] > study["run"][30.0]["psnr"]
@@ -349,7 +350,9 @@ def test_evaluate_at_exposures_scores_what_the_exposure_study_scores(tmp_path) -
     levels = [5.0, Exposure(30.0, read_noise=2.0), Exposure(3000.0, read_noise=2.0)]
     rows = evaluate([closed_form_lmmse("D")], [("set", images)], levels, tmp_path, progress=False)
     assert {r.level for r in rows} == {"5", "N30", "N3000"}
-    study = exposure_study(images, patterns=["D"], photons=[30.0, 3000.0], progress=False)
+    study = exposure_study(
+        images, patterns=["D"], photons=[30.0, 3000.0], progress=False, domain="srgb"
+    )
     for n in (30.0, 3000.0):
         mine = [r.psnr for r in rows if r.photons == n]
         assert np.mean(mine) == pytest.approx(study["D"][n]["psnr"], rel=1e-12)

@@ -13,6 +13,12 @@ name means the same thing everywhere:
   :func:`splitcam.training.models.model_names`) or a model file: a trained network shipped with
   splitcam (``splitcam evaluate --model D``).
 
+Every method works in a light domain (SPEC section 13, the ``domain`` attribute): ``lmmse``
+in the one asked for (``srgb``: the shipped fit of a built-in pattern; ``linear``: the closed form
+from the shipped linear image statistics), classical demosaicking in either (fixed interpolation,
+no image statistics), a network in the one it was trained in (its config's ``data.domain``,
+``srgb`` where the config does not say), and asking a network for another is an error.
+
 >>> build_method("malvar2004").name
 'bayer+malvar2004'
 
@@ -21,21 +27,37 @@ This module sits above :mod:`splitcam.training` (it reads checkpoints) and below
 
 from __future__ import annotations
 
+import json
 import os
 from collections.abc import Sequence
 from pathlib import Path
 
 from . import patterns
 from .data.tensorfiles import meta_checksum
+from .physics.light import check_domain
 from .recon.base import NetworkReconstructor, Reconstructor
 from .recon.closed_form import closed_form_lmmse
 from .recon.demosaic import ClassicalDemosaic
 from .recon.lmmse import LMMSE, shipped_lmmse
 from .recon.networks import serves_any_pattern
 from .training.checkpoint import CHECKPOINT_NAME, load_system, read_meta, resolve
-from .training.models import check_unambiguous, load_model, model_names
+from .training.models import (
+    ModelError,
+    check_unambiguous,
+    load_model,
+    model_names,
+    resolve_model,
+)
 
-__all__ = ["DEMOSAICKING", "build_method", "build_methods", "build_model", "method_names"]
+__all__ = [
+    "DEMOSAICKING",
+    "build_method",
+    "build_methods",
+    "build_model",
+    "method_names",
+    "model_domain",
+    "trained_domain",
+]
 
 #: Classical demosaicking methods of the bayer pattern, by name.
 DEMOSAICKING = ClassicalDemosaic.METHODS
@@ -52,9 +74,13 @@ def build_model(
     pattern: str | os.PathLike | patterns.Pattern | None = None,
     tile: int | None = 512,
     precision: str = "auto",
+    domain: str | None = None,
 ) -> NetworkReconstructor:
     """A shipped model (by name) or a model file as a reconstruction method, labelled
     ``net-<name>`` (the same for every command).
+
+    Its ``domain`` is the light domain it was trained in (:func:`trained_domain`); ``domain``,
+    if given, must be that one.
 
     A model for any pattern (``universal``) needs ``pattern`` (a library name, a pattern file or
     a :class:`~splitcam.patterns.Pattern`) and is labelled ``net-<name>-<pattern>``; a model of
@@ -64,15 +90,52 @@ def build_model(
         ModelError: Unknown name (the message lists the shipped ones) or a damaged file.
         ValueError: A model for any pattern without ``pattern``.
         PatternError: An unknown pattern name or a bad pattern file (the message names it).
+        ValueError: ``domain`` is not the one the model was trained in.
     """
     system, meta = load_model(spec)
     name = meta.get("name") or Path(str(spec)).stem
     own = _trained_on_one_pattern(meta.get("config"))
     method = _network_method(system, f"net-{name}", pattern, tile, precision, own)
+    method.domain = _check_network_domain(f"net-{name}", meta.get("config"), domain)
     # Files written before their fields had a checksum: the fields themselves identify them.
     fields = "" if "meta_sha256" in meta else f":{meta_checksum(meta)}"
     method.fingerprint = f"model:{name}:{meta.get('sha256', '')}{fields}{method.fingerprint}"
     return method
+
+
+def trained_domain(config: dict | None) -> str:
+    """The light domain a network was trained in, from its run's (or model's) saved config:
+    ``data.domain``, ``srgb`` where the config does not record one."""
+    data = (config or {}).get("data") or {}
+    return check_domain(data.get("domain") or "srgb")
+
+
+def model_domain(spec: str | os.PathLike) -> str:
+    """The light domain a shipped model (by name) or model file was trained in, read from its
+    JSON header (:func:`trained_domain`; the weights are not loaded).
+
+    Raises:
+        ModelError: As :func:`~splitcam.training.models.resolve_model`, or a header that cannot
+            be read.
+    """
+    path = resolve_model(spec)
+    try:
+        config = json.loads(path.read_text(encoding="utf-8")).get("config")
+        return trained_domain(config if isinstance(config, dict) else None)
+    except (OSError, ValueError, AttributeError) as exc:
+        raise ModelError(f"model {str(path)!r} is damaged: {exc}") from None
+
+
+def _check_network_domain(label: str, config: dict | None, domain: str | None) -> str:
+    """The domain of a trained network; raises if ``domain`` (when given) is another."""
+    own = trained_domain(config)
+    if domain is not None and check_domain(domain) != own:
+        raise ValueError(
+            f"{label} was trained in the {own} domain and cannot reconstruct raw images of the "
+            f"{check_domain(domain)} domain (SPEC section 13): use --domain {own}, or a network "
+            f"trained with data.domain {check_domain(domain)}"
+        )
+    return own
 
 
 def _trained_on_one_pattern(config: dict | None) -> bool:
@@ -142,6 +205,7 @@ def build_method(
     tile: int | None = 512,
     precision: str = "auto",
     progress: bool = False,
+    domain: str | None = None,
 ) -> Reconstructor:
     """One reconstruction method from its name or a run folder / checkpoint file.
 
@@ -156,21 +220,36 @@ def build_method(
         precision: Network inference precision: ``auto`` (bfloat16 + channels-last where
             native), ``fp32`` or ``bf16`` (:class:`~splitcam.recon.base.NetworkReconstructor`).
         progress: Progress bars while fitting.
+        domain: The light domain (``srgb`` or ``linear``) of the raw images: the LMMSE's and
+            a classical demosaicker's (default ``srgb``); a network's must be this one
+            (default: whichever it was trained in).
 
     Raises:
-        ValueError: Unknown name (the message lists the valid ones), or ``lmmse`` without a
-            pattern.
+        ValueError: Unknown name (the message lists the valid ones), ``lmmse`` without a
+            pattern, a network trained in another domain than ``domain``, or ``lmmse_train``
+            in the linear domain.
     """
     key = str(spec).strip().lower()
+    if domain is not None:
+        domain = check_domain(domain)
     if key in DEMOSAICKING:
         method = ClassicalDemosaic(key)
         method.name = f"bayer+{key}"
+        method.domain = domain or "srgb"
         return method
     if key == "lmmse":
         if pattern is None:
             raise ValueError("method 'lmmse' needs a pattern (a name such as D, or a file)")
         resolved = patterns.get(pattern)
-        if lmmse_train is not None:
+        if domain == "linear":
+            if lmmse_train is not None:
+                raise ValueError(
+                    "the LMMSE fitted on training images (--lmmse-train) is of sRGB values; in "
+                    "the linear domain the LMMSE is the closed form from the shipped linear "
+                    "image statistics: leave --lmmse-train out"
+                )
+            lmmse = closed_form_lmmse(resolved, domain="linear")
+        elif lmmse_train is not None:
             lmmse = LMMSE.fit(resolved, lmmse_train, progress=progress)
         else:
             try:
@@ -179,18 +258,23 @@ def build_method(
                 lmmse = closed_form_lmmse(resolved)
         lmmse.pattern = resolved
         lmmse.name = f"lmmse-{_pattern_label(pattern, resolved)}"
+        lmmse.domain = domain or "srgb"
         return lmmse
     check_unambiguous(spec, "method")
+    options = {"pattern": pattern, "tile": tile, "precision": precision, "domain": domain}
     if isinstance(spec, str) and spec.strip() in model_names():
-        return build_model(spec.strip(), pattern=pattern, tile=tile, precision=precision)
+        return build_model(spec.strip(), **options)
     if _is_path(spec) and str(spec).endswith(".json") and Path(spec).is_file():
-        return build_model(spec, pattern=pattern, tile=tile, precision=precision)
+        return build_model(spec, **options)
     if _is_path(spec):
         path = resolve(spec)
-        system = load_system(path)
+        config = read_meta(path).get("config")
         label = path.parent.name if path.name == CHECKPOINT_NAME else path.stem
-        own = _trained_on_one_pattern(read_meta(path).get("config"))
+        trained_in = _check_network_domain(label, config, domain)
+        system = load_system(path)
+        own = _trained_on_one_pattern(config)
         method = _network_method(system, label, pattern, tile, precision, own)
+        method.domain = trained_in
         stat = path.stat()
         method.fingerprint = (
             f"{path.resolve()}:{stat.st_size}:{stat.st_mtime_ns}{method.fingerprint}"

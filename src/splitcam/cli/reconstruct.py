@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from ..io.domains import DOMAINS
 from ._common import add_method_options, check_distinct
 
 
@@ -34,11 +35,19 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="noise sigma: added to --image (default 0); of --raw, needed only if the file does "
         "not record it (raw files from `splitcam simulate` do)",
     )
+    p.add_argument(
+        "--domain",
+        choices=DOMAINS,
+        help="light domain of the raw image: srgb (the paper's protocol) or linear (--image is "
+        "decoded to linear radiance before the sensor; the estimate is encoded back to sRGB for "
+        "the output). Default: what a --raw file records, else the network's own, else srgb",
+    )
     add_method_options(p)
     p.add_argument(
         "--out",
         required=True,
-        help="output image: .png, .tif/.tiff or .jpg, or .npy (float32 H x W x 3, unclipped)",
+        help="output image: .png, .tif/.tiff or .jpg, or .npy (float32 H x W x 3, unclipped); "
+        "sRGB display values in either domain",
     )
     p.add_argument(
         "--bits", type=int, choices=[8, 16], default=8, help="bits per channel of PNG/TIFF (8)"
@@ -53,8 +62,10 @@ def run(args: argparse.Namespace) -> int:
     from .. import patterns
     from ..data.imageio import read_image, read_raw, read_raw_meta, write_image
     from ..methods import build_method, build_model
+    from ..physics.light import decode_scene, encode_estimate
     from ..physics.sensor import SplitterSensor
     from ..physics.system import simulate
+    from ..recon.base import method_domain
 
     if (args.image is None) == (args.raw is None):
         raise ValueError("give exactly one of --image (simulate, then reconstruct) or --raw")
@@ -66,7 +77,7 @@ def run(args: argparse.Namespace) -> int:
             "or --checkpoint (a run folder)"
         )
     spec = given[0]
-    sigma, pattern = args.sigma, args.pattern
+    sigma, pattern, domain = args.sigma, args.pattern, args.domain
     recorded = None
     if args.raw:
         # What simulate recorded in the raw file: the noise level, and the pattern (which must
@@ -84,7 +95,14 @@ def run(args: argparse.Namespace) -> int:
                     f"--pattern {pattern} contradicts the pattern recorded in {args.raw} "
                     f"({recorded.name}); leave --pattern out"
                 )
+            made_in = made.get("domain", "srgb")  # files that do not record it are of srgb
+            if domain is not None and domain != made_in:
+                raise ValueError(
+                    f"--domain {domain} contradicts the light domain recorded in {args.raw} "
+                    f"({made_in}); leave --domain out"
+                )
             sigma, pattern = float(made.get("sigma", 0.0)), pattern or recorded
+            domain = made_in
         elif sigma is None or pattern is None:
             raise ValueError(
                 f"{args.raw} does not record how it was made (not written by `splitcam "
@@ -92,7 +110,7 @@ def run(args: argparse.Namespace) -> int:
             )
     sigma = 0.0 if sigma is None else sigma
     method = (
-        build_model(spec, pattern=pattern, tile=args.tile, precision=args.precision)
+        build_model(spec, pattern=pattern, tile=args.tile, precision=args.precision, domain=domain)
         if args.model
         else build_method(
             spec,
@@ -101,21 +119,24 @@ def run(args: argparse.Namespace) -> int:
             tile=args.tile,
             precision=args.precision,
             progress=not args.quiet,
+            domain=domain,
         )
     )
+    domain = method_domain(method)  # a network's own where none was asked for
     if pattern is not None and not patterns.get(pattern).equals(method.pattern):
         name = pattern.name if isinstance(pattern, patterns.Pattern) else pattern
         where = f"the raw image's pattern {name}" if recorded is not None else f"--pattern {name}"
         raise ValueError(f"{where} differs from the pattern of {spec} ({method.pattern.name})")
     if args.image:
         rgb = torch.from_numpy(read_image(args.image)).permute(2, 0, 1)[None]
-        raw = simulate(SplitterSensor(method.pattern), rgb, Path(args.image).stem, sigma)
+        scene = decode_scene(rgb, domain)
+        raw = simulate(SplitterSensor(method.pattern), scene, Path(args.image).stem, sigma)
     else:
         raw = torch.from_numpy(read_raw(args.raw))[None, None]
     if hasattr(method, "progress"):
         method.progress = not args.quiet
     with torch.no_grad():
-        out = method.reconstruct(raw, sigma)
+        out = encode_estimate(method.reconstruct(raw, sigma), domain)
     if Path(args.out).suffix.lower() == ".npy":  # float32 (H, W, 3), unclipped
         import numpy as np
 
@@ -125,5 +146,6 @@ def run(args: argparse.Namespace) -> int:
             np.save(tmp, out[0].permute(1, 2, 0).float().numpy())
     else:
         write_image(args.out, out[0].clamp(0, 1), bits=args.bits)
-    print(f"{method.name}: wrote {args.out} ({out.shape[-1]}x{out.shape[-2]})")
+    where = "" if domain == "srgb" else f" ({domain} domain)"
+    print(f"{method.name}{where}: wrote {args.out} ({out.shape[-1]}x{out.shape[-2]})")
     return 0

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
+from ..io.domains import DOMAINS
 from ._common import add_sensor_options, model_methods, sensor_settings
 
 
@@ -15,7 +16,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         description="`splitcam study exposure`: PSNR and CIEDE2000 of the closed-form LMMSE of "
         "every pattern against exposure under the photon model (shot and read noise, the same "
         "photon flux for every pattern), the exposure below which each splitter beats the Bayer "
-        "filter, and the raw SNR of each pattern against the filter next to theory.",
+        "filter, and the raw SNR of each pattern against the filter next to theory; in linear "
+        "light by default.",
     )
     p.add_argument("study", choices=["exposure"])
     p.add_argument("--datasets", default="default")
@@ -30,6 +32,14 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--points", type=int, default=9, help="default exposures: how many")
     add_sensor_options(p)
+    p.add_argument(
+        "--domain",
+        choices=DOMAINS,
+        default="linear",
+        help="light domain: linear (default: scenes decoded to linear radiance before the sensor "
+        "and the photon noise, reconstructions encoded back to 8-bit sRGB before scoring) or "
+        "srgb (8-bit values taken as light, the paper's protocol)",
+    )
     p.add_argument("--model", action="append", default=[], help="a shipped model too")
     p.add_argument(
         "--checkpoint",
@@ -59,8 +69,9 @@ def run(args: argparse.Namespace) -> int:
     names = ", ".join(f"{d} ({len(i)})" for d, i in datasets)
     from ..methods import build_method
 
-    methods = model_methods(args.model, args.patterns, main_job=False, options={})
-    methods += [build_method(c) for c in args.checkpoint]
+    options = {"domain": args.domain}
+    methods = model_methods(args.model, args.patterns, main_job=False, options=options)
+    methods += [build_method(c, domain=args.domain) for c in args.checkpoint]
     results = exposure_study(
         images,
         patterns=args.patterns,
@@ -68,8 +79,13 @@ def run(args: argparse.Namespace) -> int:
         methods=methods,
         **sensor_settings(args),
         progress=not args.quiet,
+        domain=args.domain,
     )
-    snr = raw_snr_check(images, patterns=args.patterns) if "bayer" in args.patterns else None
+    snr = (
+        raw_snr_check(images, patterns=args.patterns, domain=args.domain)
+        if "bayer" in args.patterns
+        else None
+    )
     sensor = sensor_settings(args)
     note = (
         f"Images: {names}. Read noise {sensor['read_noise']:g} e-, "
@@ -78,7 +94,7 @@ def run(args: argparse.Namespace) -> int:
         + "Command: "
         f"`splitcam study exposure {' '.join(sys.argv[3:])}`"
     )
-    path = write_study(results, snr, args.out, note=note)
+    path = write_study(results, snr, args.out, note=note, domain=args.domain)
     print(path.read_text(encoding="utf-8"))
     print(f"wrote {path}, exposure.json and exposure.png")
     return 0

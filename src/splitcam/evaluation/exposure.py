@@ -8,6 +8,11 @@ every pattern, and finds the exposure below which each splitter beats the Bayer 
 :func:`raw_snr_check` compares the raw images' SNR of each pattern with the filter's before any
 reconstruction, against ``10 log10 k`` (shot-noise limited) and ``20 log10 k`` (read-noise
 limited) for a ``k``-fold signal gain.
+
+Both take a light domain (SPEC section 13); the default is ``linear``, where photons belong: the
+scenes are decoded to linear radiance before the sensor and the noise, the LMMSE filters come
+from the linear image statistics, and reconstructions are encoded back to 8-bit sRGB to be
+scored. ``srgb`` takes the display values as light (the paper's protocol).
 """
 
 from __future__ import annotations
@@ -24,12 +29,14 @@ import torch
 
 from ..io import write_text
 from ..patterns import get
+from ..physics.light import check_domain, decode_scene
 from ..physics.noise import Exposure, add_exposure_noise
 from ..physics.sensor import SplitterSensor
 from ..recon.base import Reconstructor
 from ..recon.closed_form import closed_form_lmmse
 from .metrics import mean_over_images
-from .protocol import Images, score, simulate_and_reconstruct
+from .protocol import Images, check_method_domains, score, simulate_and_reconstruct
+from .tables import domain_line
 
 __all__ = ["crossover", "exposure_study", "raw_snr_check", "write_study"]
 
@@ -49,13 +56,20 @@ def exposure_study(
     read_noise: float = 2.0,
     methods: Sequence[Reconstructor] = (),
     progress: bool = True,
+    domain: str = "linear",
     **settings: Any,
 ) -> dict[str, dict[float, dict[str, float]]]:
     """``{label: {photons: {"psnr", "ssim", "ciede2000"}}}``: the closed-form LMMSE of each
     pattern (label: the pattern's name) and each of ``methods`` (label: the method's name, e.g.
     a network trained with ``--noise photon``) on ``images`` at each exposure (means over
-    images). ``settings``: the other settings of :class:`~splitcam.physics.noise.Exposure`
-    (``full_well``, ``gain``, ``bits``)."""
+    images), in the light domain ``domain`` (default ``linear``; every method must be of it).
+    ``settings``: the other settings of :class:`~splitcam.physics.noise.Exposure`
+    (``full_well``, ``gain``, ``bits``).
+
+    Raises:
+        ValueError: A bad exposure setting, an unknown domain, or a method of another domain.
+    """
+    domain = check_method_domains(methods, domain)
     photons = list(photons or default_exposures())
     for n in photons:
         Exposure(n, read_noise=read_noise, **settings)  # bad values fail before any work
@@ -67,7 +81,7 @@ def exposure_study(
         total = (len(patterns) + len(methods)) * len(photons) * len(images)
         bar = tqdm(total=total, desc="exposure study")
     loaded = [get(p) for p in patterns]  # a pattern file is labelled by its pattern's name
-    todo = [(p.name, closed_form_lmmse(p)) for p in loaded]
+    todo = [(p.name, closed_form_lmmse(p, domain=domain)) for p in loaded]
     todo += [(m.name, m) for m in methods]
     for name, method in todo:
         sensor = SplitterSensor(method.pattern)
@@ -76,7 +90,9 @@ def exposure_study(
             exposure = Exposure(n, read_noise=read_noise, **settings)
             values: dict[str, list[float]] = {"psnr": [], "ssim": [], "ciede2000": []}
             for image_name, rgb in images:
-                pred = simulate_and_reconstruct(method, sensor, image_name, rgb, exposure)
+                pred = simulate_and_reconstruct(
+                    method, sensor, image_name, rgb, exposure, domain=domain
+                )
                 for key, value in score(pred, rgb).items():
                     values[key].append(value)
                 if bar is not None:
@@ -115,8 +131,10 @@ def raw_snr_check(
     shot_limited: float = 1e4,
     read_limited: float = 10.0,
     read_noise: float = 20.0,
+    domain: str = "linear",
 ) -> dict[str, dict[str, float]]:
-    """Raw SNR of each pattern against the Bayer filter, before reconstruction.
+    """Raw SNR of each pattern against the Bayer filter, before reconstruction, of the scenes
+    as light of ``domain`` (default ``linear``: decoded to radiance).
 
     SNR of a raw image: ``10 log10(mean clean^2 / mean noise^2)`` over all its pixels. ``k``: the
     pattern's mean raw signal over the filter's on the same images. Shot-limited: no read noise
@@ -127,6 +145,7 @@ def raw_snr_check(
     Returns:
         ``{pattern: {"k", "shot_gain_db", "shot_theory_db", "read_gain_db", "read_theory_db"}}``.
     """
+    domain = check_domain(domain)
     regimes = {
         "shot": Exposure(shot_limited, read_noise=0.0),
         "read": Exposure(read_limited, read_noise=read_noise, shot=False),
@@ -140,7 +159,7 @@ def raw_snr_check(
         count = 0
         for image_name, rgb in images:
             with torch.no_grad():
-                clean = sensor(rgb[None].double())
+                clean = sensor(decode_scene(rgb[None].double(), domain))
             clean_power += float((clean**2).sum())
             total += float(clean.sum())
             count += clean.numel()
@@ -169,9 +188,12 @@ def write_study(
     out: str | os.PathLike[str],
     *,
     note: str = "",
+    domain: str = "linear",
 ) -> Path:
     """``exposure.md`` (tables, crossovers, raw SNR check), ``exposure.json`` and
-    ``exposure.png`` (PSNR and CIEDE2000 against exposure) in ``out``."""
+    ``exposure.png`` (PSNR and CIEDE2000 against exposure) in ``out``; ``domain``: the light
+    domain the results are of, stated in both files."""
+    domain = check_domain(domain)
     from ..viz.charts import exposure_chart
 
     out = Path(out)
@@ -182,6 +204,7 @@ def write_study(
             {
                 "results": {p: {f"{n:g}": v for n, v in r.items()} for p, r in results.items()},
                 "raw_snr": snr,
+                "domain": domain,
             },
             indent=1,
         )
@@ -195,6 +218,8 @@ def write_study(
         "# Filters and splitters at equal exposure",
         "",
         note,
+        "",
+        domain_line([domain]),
         "",
         "Closed-form LMMSE of every pattern under the photon model (shot noise, read noise, "
         "the same photon flux for every pattern); `N`: photo-electrons a lossless, "

@@ -11,6 +11,13 @@ seeded by the image name and sigma), reconstructed through the
 :func:`evaluate` checks every argument before any work, appends each result to
 ``per_image.csv`` as soon as it is computed, and continues an interrupted evaluation of the same
 settings where it stopped.
+
+Every step takes a light domain (SPEC section 13). ``srgb`` is the paper's protocol: the test
+image's 8-bit values / 255 are the light. In ``linear`` the scene is decoded to linear radiance
+with the sRGB transfer function before the sensor and the noise, the method (which must be of
+the linear domain, :func:`~splitcam.recon.base.method_domain`) estimates radiance, and the
+estimate is encoded back to sRGB, clipped and scored against the original 8-bit image with the
+same metrics.
 """
 
 from __future__ import annotations
@@ -27,16 +34,18 @@ import torch
 from ..data.imageio import write_image
 from ..io import write_text
 from ..patterns import Pattern, save
+from ..physics.light import check_domain, decode_scene, encode_estimate
 from ..physics.noise import Exposure, check_level, level_label
 from ..physics.sensor import SplitterSensor
 from ..physics.system import simulate
-from ..recon.base import Reconstructor
+from ..recon.base import Reconstructor, method_domain
 from ..viz.zoom import check_region, zoom_figure
 from .metrics import SSIM_WINDOW, compute_all, mean_over_images
-from .tables import CSV_NAME, EvalRow, append_rows, read_rows, write_summary
+from .tables import CSV_NAME, EvalRow, append_rows, read_rows, result_label, write_summary
 
 __all__ = [
     "Zoom",
+    "check_method_domains",
     "evaluate",
     "mean_psnr",
     "parse_zoom",
@@ -49,23 +58,49 @@ Images = Sequence[tuple[str, torch.Tensor]]
 SETTINGS_NAME = "evaluation.json"
 
 
+def check_method_domains(methods: Sequence[Reconstructor], domain: str) -> str:
+    """``domain`` checked, and every method of it (:func:`~splitcam.recon.base.method_domain`).
+
+    Raises:
+        ValueError: An unknown domain, or a method of another one (the message names it).
+    """
+    domain = check_domain(domain)
+    wrong = [f"{m.name} ({method_domain(m)})" for m in methods if method_domain(m) != domain]
+    if wrong:
+        raise ValueError(
+            f"method(s) of another light domain than this evaluation's ({domain}): "
+            f"{', '.join(wrong)}; a method reconstructs raw images of the domain it was made "
+            f"for (SPEC section 13)"
+        )
+    return domain
+
+
 def simulate_and_reconstruct(
     method: Reconstructor,
     sensor: SplitterSensor,
     image_name: str,
     rgb: torch.Tensor,
     sigma: float | Exposure,
+    *,
+    domain: str = "srgb",
 ) -> torch.Tensor:
     """One step of the protocol: the noisy raw image of ``rgb`` (:func:`splitcam.physics.simulate`)
     and the method's reconstruction, clamped to [0, 1]. ``sigma`` is a Gaussian sigma or a
-    photon-model :class:`~splitcam.physics.noise.Exposure`.
+    photon-model :class:`~splitcam.physics.noise.Exposure`. In the ``linear`` domain the sensor
+    sees the scene's linear radiance and the estimate is encoded back to sRGB display values
+    before the clamp (SPEC section 13); the output is always of display values.
+
+    Raises:
+        ValueError: The method is not of ``domain``.
 
     Shape:
         - rgb: ``(3, H, W)``; output ``(3, H, W)`` float32 in [0, 1], on the CPU.
     """
-    raw = simulate(sensor, rgb[None], image_name, sigma)
+    domain = check_method_domains([method], domain)
+    raw = simulate(sensor, decode_scene(rgb[None], domain), image_name, sigma)
     with torch.no_grad():
-        return method.reconstruct(raw, sigma)[0].float().clamp(0, 1).cpu()
+        estimate = method.reconstruct(raw, sigma)[0].float()
+        return encode_estimate(estimate, domain).clamp(0, 1).cpu()
 
 
 def score(pred: torch.Tensor, rgb: torch.Tensor, *, crop: int = 0) -> dict[str, float]:
@@ -80,13 +115,16 @@ def score_images(
     *,
     crop: int = 0,
     sensor: SplitterSensor | None = None,
+    domain: str = "srgb",
 ) -> Iterator[tuple[str, float, torch.Tensor, dict[str, float]]]:
-    """``(image name, sigma, reconstruction, scores)`` for every image at every sigma."""
+    """``(image name, sigma, reconstruction, scores)`` for every image at every sigma, in the
+    light domain ``domain`` (:func:`simulate_and_reconstruct`)."""
+    domain = check_method_domains([method], domain)
     sensor = sensor if sensor is not None else SplitterSensor(method.pattern)
     for sigma in sigmas:
         level = check_level(sigma)
         for name, rgb in images:
-            pred = simulate_and_reconstruct(method, sensor, name, rgb, level)
+            pred = simulate_and_reconstruct(method, sensor, name, rgb, level, domain=domain)
             yield name, level, pred, score(pred, rgb, crop=crop)
 
 
@@ -96,11 +134,13 @@ def mean_psnr(
     sigmas: Sequence[float],
     *,
     sensor: SplitterSensor | None = None,
+    domain: str = "srgb",
 ) -> dict[float, float]:
     """Mean PSNR per sigma over ``images`` (infinite PSNRs left out, as in the tables); a noise
-    level may also be a photon-model :class:`~splitcam.physics.noise.Exposure`."""
+    level may also be a photon-model :class:`~splitcam.physics.noise.Exposure`. ``domain``:
+    the light domain (:func:`simulate_and_reconstruct`)."""
     scores: dict = {check_level(s): [] for s in sigmas}
-    for _, sigma, _, values in score_images(method, images, sigmas, sensor=sensor):
+    for _, sigma, _, values in score_images(method, images, sigmas, sensor=sensor, domain=domain):
         scores[sigma].append(values["psnr"])
     return {s: mean_over_images(v).mean for s, v in scores.items()}
 
@@ -171,16 +211,18 @@ def _zoom_at(zooms: list[Zoom], sigma: float | Exposure) -> Zoom | None:
     return (exact or [z for z in zooms if z.sigma is None] or [None])[0]
 
 
-def _fingerprint(method: Reconstructor, crop: int) -> str:
+def _fingerprint(method: Reconstructor, crop: int, domain: str = "srgb") -> str:
     """What a stored result depends on besides its key: the method's kind, its pattern's kernels
-    and the border crop, and bfloat16 inference where a network runs in it. A result is reused
-    on resume only if this is unchanged."""
+    and the border crop, bfloat16 inference where a network runs in it, and a light domain other
+    than srgb. A result is reused on resume only if this is unchanged."""
     from ..recon.base import fast_precision
 
     pattern: Pattern = method.pattern
     items = [type(method).__name__, pattern.to_dict(), crop, getattr(method, "fingerprint", None)]
     if fast_precision(getattr(method, "precision", "fp32"), "cpu"):
         items.append("bf16")  # float32 results keep the fingerprint they had before
+    if domain != "srgb":  # srgb results keep the fingerprint they had before
+        items.append(f"domain:{domain}")
     text = json.dumps(
         items,
         sort_keys=True,
@@ -202,6 +244,7 @@ def evaluate(
     resume: bool = True,
     zoom_only: bool = False,
     zoom_sigmas: Sequence[float] | None = None,
+    domain: str = "srgb",
 ) -> list[EvalRow]:
     """Score every method on every image at every noise level, writing results to ``out`` as it
     goes. A noise level is the paper's Gaussian sigma (8-bit units) or a photon-model
@@ -219,20 +262,26 @@ def evaluate(
     ``zoom_only`` draws the zoom figures without writing every reconstruction; ``zoom_sigmas``
     limits the zoom figures to those noise levels.
 
+    ``domain``: the light domain (SPEC section 13), ``srgb`` (the paper's protocol) or
+    ``linear`` (:func:`simulate_and_reconstruct`); every method must be of it. Each row records
+    it, and in the summary and tables a method's results of the linear domain are labelled
+    ``<method> (linear)``, so one folder keeps the results of both domains apart.
+
     With ``resume`` (default), results already in ``out/per_image.csv`` for the same method (same
-    pattern kernels), image, sigma and crop are kept and not recomputed: an interrupted
+    pattern kernels), image, sigma, crop and domain are kept and not recomputed: an interrupted
     evaluation continues where it stopped.
 
     Raises:
-        ValueError: No method, duplicate method names, a bad sigma or crop, exposures with
-            different sensor settings, or a zoom that names an unknown image or a region outside
-            it; all checked before any work.
+        ValueError: No method, duplicate method names, a method of another light domain, a bad
+            sigma, crop or domain, exposures with different sensor settings, or a zoom that
+            names an unknown image or a region outside it; all checked before any work.
     """
     if not methods:
         raise ValueError("expected at least one method to evaluate")
     names = [m.name for m in methods]
     if len(set(names)) != len(names):
         raise ValueError(f"expected distinct method names, got {names}")
+    domain = check_method_domains(methods, domain)
     sigmas = [check_level(s) for s in sigmas]
     if not sigmas:
         raise ValueError("expected at least one sigma")
@@ -256,7 +305,7 @@ def evaluate(
             f"a {crop}-pixel border crop: {', '.join(small[:5])}{' ...' if len(small) > 5 else ''}"
             f"; remove them from the folder"
         )
-    fingerprints = {m.name: _fingerprint(m, crop) for m in methods}
+    fingerprints = {result_label(m.name, domain): _fingerprint(m, crop, domain) for m in methods}
 
     out_dir = Path(out) if out is not None else None
     done: dict[tuple, EvalRow] = {}
@@ -313,12 +362,12 @@ def evaluate(
             photons = sigma.photons if isinstance(sigma, Exposure) else 0.0
             level = level_label(sigma)
             for method in methods:
-                key = (method.name, dataset, image_name, level)
+                key = (method.name, dataset, image_name, level, domain)
                 if key in done and not zoomed:
                     rows.append(done[key])
                     continue
                 pred = simulate_and_reconstruct(
-                    method, sensors[method.name], image_name, rgb, sigma
+                    method, sensors[method.name], image_name, rgb, sigma, domain=domain
                 )
                 scores = score(pred, rgb, crop=crop)
                 row = EvalRow(
@@ -329,6 +378,7 @@ def evaluate(
                     0.0 if photons else sigma,
                     **scores,
                     photons=photons,
+                    domain=domain,
                 )
                 rows.append(row)
                 outputs[method.name] = (pred, scores)
@@ -338,7 +388,8 @@ def evaluate(
                     if key not in done:
                         bar.update(1)
                     bar.set_postfix_str(
-                        f"{dataset}/{image_name} {'' if photons else 's'}{level} {method.name} "
+                        f"{dataset}/{image_name} {'' if photons else 's'}{level} "
+                        f"{result_label(method.name, domain)} "
                         f"{scores['psnr']:.2f} dB",
                         refresh=False,
                     )
@@ -352,6 +403,7 @@ def evaluate(
                     outputs if save_images else {},
                     this_zoom if zoomed else None,
                     zoom_outputs=outputs,
+                    domain=domain,
                 )
     finally:
         if bar is not None:
@@ -390,7 +442,9 @@ def _previous_rows(
     """What an earlier evaluation left in ``out_dir``: its rows that this one reuses (same
     method fingerprint, and for photon-model rows the same sensor settings), the rows of
     methods this one does not evaluate (kept, with their fingerprints), and those fingerprints.
-    Rows of a method evaluated again with other weights or pattern are superseded.
+    Rows of a method evaluated again with other weights or pattern are superseded. Methods are
+    told apart by their result labels (``fingerprints``' keys, :func:`result_label`): a method's
+    results of the other light domain are another method's here, and stay.
 
     Raises:
         ValueError: The folder's results were scored with another crop, or other photon sensor
@@ -411,7 +465,7 @@ def _previous_rows(
             f"this evaluation crops {crop}: choose another --out, or --restart to discard them"
         )
     same_sensor = settings.get("photon_sensor") == sensor_settings
-    others = [row for row in rows if row.method not in fingerprints]
+    others = [row for row in rows if row.label not in fingerprints]
     if not same_sensor and any(r.photons for r in others):
         raise ValueError(
             f"{out_dir} holds photon-model results of other sensor settings (read noise, full "
@@ -420,8 +474,8 @@ def _previous_rows(
     reused = {
         row.key: row
         for row in rows
-        if row.method in fingerprints
-        and before.get(row.method) == fingerprints[row.method]
+        if row.label in fingerprints
+        and before.get(row.label) == fingerprints[row.label]
         and (not row.photons or same_sensor)
     }
     prints = {m: f for m, f in before.items() if m not in fingerprints}
@@ -437,14 +491,18 @@ def _save_images(
     outputs: dict,
     zoom: Zoom | None,
     zoom_outputs: dict | None = None,
+    domain: str = "srgb",
 ) -> None:
     """Write each reconstruction in ``outputs`` and, with ``zoom``, the side-by-side zoom of
-    ``zoom_outputs`` (default: ``outputs``)."""
+    ``zoom_outputs`` (default: ``outputs``); file names of the linear domain end in
+    ``_linear``."""
     safe = image.replace("/", "_")
     if isinstance(sigma, Exposure):
         suffix, title = level_label(sigma), f"{sigma.photons:g} photo-electrons"
     else:
         suffix, title = f"sigma{sigma:g}", f"sigma {sigma:g}"
+    if domain != "srgb":
+        suffix, title = f"{suffix}_{domain}", f"{title}, {domain} light"
     for name, (pred, _) in outputs.items():
         path = out_dir / "images" / name / dataset / f"{safe}_{suffix}.png"
         path.parent.mkdir(parents=True, exist_ok=True)

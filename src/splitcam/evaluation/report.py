@@ -12,6 +12,7 @@ from ..io import write_text
 from ..physics.noise import level_heading, level_key, parse_level_label
 from ..viz.charts import exposure_chart, sigma_chart
 from ..viz.patterns import draw_pattern
+from .tables import ENTRY_FIELDS, domain_line, method_of_label
 
 #: The paper's test sets: its numbers are means over all their images, whole.
 PAPER_DATASETS = {"kodak24": 24, "mcmaster": 18}
@@ -68,10 +69,12 @@ def paper_row(pattern: patterns.Pattern) -> str | None:
 def comparable(method: str, entry: dict) -> bool:
     """Whether a result compares with the paper's numbers: a network (not the LMMSE or a
     classical demosaicker) scored on all of Kodak24 and McMaster, whole (cropped datasets are
-    named ``kodak24-256px``)."""
+    named ``kodak24-256px``), in the paper's light domain (srgb)."""
     if method.startswith("lmmse") or method.startswith("bayer+"):
         return False
-    sets = {k for k in entry if k not in ("all", "pattern")}
+    if entry.get("domain", "srgb") != "srgb":
+        return False
+    sets = {k for k in entry if k != "all" and k not in ENTRY_FIELDS}
     if sets != set(PAPER_DATASETS):
         return False
     return all(
@@ -100,7 +103,8 @@ def _load(results: list[str | os.PathLike]) -> list[tuple[str, str, dict, patter
                 f"again to rewrite it"
             ) from None
         for method, entry in summary.items():
-            pattern_file = folder / "patterns" / f"{method}.json"
+            name = method_of_label(method, entry.get("domain", "srgb"))
+            pattern_file = folder / "patterns" / f"{name}.json"
             pattern = (
                 patterns.load(pattern_file)
                 if pattern_file.is_file()
@@ -125,6 +129,8 @@ def make_report(results: list[str | os.PathLike], out: str | os.PathLike) -> Pat
         "for a network scored on all of Kodak24 and McMaster whole (what the paper's numbers "
         "are), (paper PSNR, difference ours − paper). B, C and E are modelled patterns (SPEC "
         "section 2), so their gaps are not only a matter of training budget.",
+        "",
+        domain_line(e.get("domain", "srgb") for _, _, e, _ in entries),
         "",
     ]
     sigmas = sorted({s for _, _, e, _ in entries for s in e["all"]}, key=level_key)
@@ -385,6 +391,8 @@ def paper_tables(
         f"Ours: mean over {n} images; cells are our PSNR dB / SSIM, then (the paper's PSNR, "
         "ours − paper). The paper trained 10^6 GPU steps of batch 80 on DIV2K; our budgets are "
         "below. B, C and E are modelled patterns (SPEC section 2).",
+        "",
+        domain_line(summary[m].get("domain", "srgb") for m in rows.values() if m in summary),
         "",
         "## Budget of each model",
         "",

@@ -1,6 +1,11 @@
 """Evaluation results as rows, files and tables: one row per method, image and sigma
 (:class:`EvalRow`), ``per_image.csv`` written row by row (so an interrupted evaluation keeps what
-it did), and the means per image set in the layout of the paper's Table 1."""
+it did), and the means per image set in the layout of the paper's Table 1.
+
+Every row records its light domain (SPEC section 13: ``srgb``, the paper's protocol, or
+``linear``); a file written without the ``domain`` column reads as ``srgb``. Results of one
+method in two domains are kept apart: in summaries and tables a method of the linear domain is
+labelled ``<method> (linear)`` (:func:`result_label`), and every table says its domain."""
 
 from __future__ import annotations
 
@@ -13,16 +18,21 @@ from dataclasses import astuple, dataclass, fields
 from pathlib import Path
 
 from ..io import appending, atomic_path, write_text
+from ..io.domains import DOMAINS
 from ..physics.noise import Exposure, level_heading, level_key, level_label
 from .metrics import mean_over_images
 
 __all__ = [
     "CSV_NAME",
+    "ENTRY_FIELDS",
     "METRICS",
     "EvalRow",
     "append_rows",
+    "domain_line",
     "markdown_tables",
+    "method_of_label",
     "read_rows",
+    "result_label",
     "summarise",
     "write_summary",
 ]
@@ -40,13 +50,25 @@ _FORMATS = {
 }
 
 
+def result_label(method: str, domain: str = "srgb") -> str:
+    """What labels a method's results of a light domain in summaries and tables: the method's
+    name in ``srgb``, ``"<name> (linear)"`` in ``linear``."""
+    return method if domain == "srgb" else f"{method} ({domain})"
+
+
+def method_of_label(label: str, domain: str = "srgb") -> str:
+    """The method's name of a :func:`result_label`."""
+    return label if domain == "srgb" else label.removesuffix(f" ({domain})")
+
+
 @dataclass(frozen=True)
 class EvalRow:
     """The scores of one method on one image at one noise level.
 
     The noise level is the paper's Gaussian ``sigma`` (8-bit units) when ``photons`` is 0, else
     the photon model's exposure ``photons`` (full-light photo-electrons; ``sigma`` is 0 and the
-    sensor's other settings are the evaluation's, in its ``evaluation.json``).
+    sensor's other settings are the evaluation's, in its ``evaluation.json``). ``domain``: the
+    light domain the scene was simulated and reconstructed in (scores are always of 8-bit sRGB).
     """
 
     method: str
@@ -58,11 +80,18 @@ class EvalRow:
     ssim: float
     ciede2000: float
     photons: float = 0.0
+    domain: str = "srgb"
 
     @property
-    def key(self) -> tuple[str, str, str, str]:
-        """What identifies the row in an evaluation: method, dataset, image, noise level."""
-        return (self.method, self.dataset, self.image, self.level)
+    def key(self) -> tuple[str, str, str, str, str]:
+        """What identifies the row in an evaluation: method, dataset, image, noise level,
+        light domain."""
+        return (self.method, self.dataset, self.image, self.level, self.domain)
+
+    @property
+    def label(self) -> str:
+        """The method's label in summaries and tables (:func:`result_label`)."""
+        return result_label(self.method, self.domain)
 
     @property
     def level(self) -> str:
@@ -92,8 +121,9 @@ def append_rows(path: str | os.PathLike, rows: Iterable[EvalRow]) -> None:
 
 
 def read_rows(path: str | os.PathLike) -> list[EvalRow]:
-    """Rows of a ``per_image.csv``; a last line cut short by a kill is dropped. Files written
-    before the ``photons`` column existed read as Gaussian rows.
+    """Rows of a ``per_image.csv``; a last line cut short by a kill is dropped. Files without
+    the ``domain`` column read as rows of the ``srgb`` domain; without the ``photons`` column
+    also, as Gaussian rows.
 
     Raises:
         ValueError: The file is not a per-image results file (the message names it).
@@ -104,14 +134,15 @@ def read_rows(path: str | os.PathLike) -> list[EvalRow]:
         lines = list(csv.reader(fh))
     if not lines:
         return []
-    if lines[0] not in (names, names[:-1]):
+    if lines[0] not in (names, names[:-1], names[:-2]):
         raise ValueError(f"{str(path)!r} is not a splitcam per-image results file")
+    numbers = slice(4, min(len(lines[0]), 9))  # sigma ... photons
     rows = []
     for cells in lines[1:]:
-        if len(cells) != len(lines[0]):
+        if len(cells) != len(lines[0]) or (len(cells) > 9 and cells[9] not in DOMAINS):
             continue  # a line cut short by a kill
         try:
-            rows.append(EvalRow(*cells[:4], *(float(v) for v in cells[4:])))
+            rows.append(EvalRow(*cells[:4], *(float(v) for v in cells[numbers]), *cells[9:]))
         except (TypeError, ValueError):
             continue  # a line cut short by a kill
     return rows
@@ -131,14 +162,16 @@ def write_summary(rows: Sequence[EvalRow], out_dir: str | os.PathLike) -> dict:
 
 
 def summarise(rows: Sequence[EvalRow]) -> dict:
-    """``{method: {dataset|"all": {level: {metric: mean, "n_images": n, "n_infinite": k}}}}``,
-    ``level`` as :attr:`EvalRow.level` (``"15"`` or ``"N1000"``)."""
+    """``{label: {"pattern": name, "domain": domain, dataset|"all": {level: {metric: mean,
+    "n_images": n, "n_infinite": k}}}}``, ``label`` the method's name, ``"<name> (linear)"``
+    for its results in the linear domain (:func:`result_label`), ``level`` as
+    :attr:`EvalRow.level` (``"15"`` or ``"N1000"``)."""
     summary: dict = {}
-    methods = list(dict.fromkeys(r.method for r in rows))
-    for method in methods:
-        mine = [r for r in rows if r.method == method]
+    labels = list(dict.fromkeys(r.label for r in rows))
+    for label in labels:
+        mine = [r for r in rows if r.label == label]
         groups = list(dict.fromkeys(r.dataset for r in mine))
-        entry: dict = {"pattern": mine[0].pattern}
+        entry: dict = {"pattern": mine[0].pattern, "domain": mine[0].domain}
         for group in [*groups, "all"]:
             chosen = mine if group == "all" else [r for r in mine if r.dataset == group]
             per_sigma = {}
@@ -153,19 +186,43 @@ def summarise(rows: Sequence[EvalRow]) -> dict:
                 stats["n_images"] = len(at)
                 per_sigma[level] = stats
             entry[group] = per_sigma
-        summary[method] = entry
+        summary[label] = entry
     return summary
+
+
+#: The fields of a summary entry that are not image sets.
+ENTRY_FIELDS = ("pattern", "domain")
+
+_DOMAIN_TEXT = {
+    "srgb": "srgb (the paper's protocol: the 8-bit sRGB values / 255 are the light the sensor "
+    "sees)",
+    "linear": "linear (scenes decoded to linear radiance before the sensor and the noise, "
+    "reconstructions encoded back to 8-bit sRGB before scoring; SPEC section 13)",
+}
+
+
+def domain_line(domains: Iterable[str]) -> str:
+    """The line that says which light domain(s) a table's results are in."""
+    found = list(dict.fromkeys(domains)) or ["srgb"]
+    if len(found) == 1:
+        return f"Light domain: {_DOMAIN_TEXT[found[0]]}."
+    marked = ", ".join(f"`<method> ({d})`" for d in found if d != "srgb")
+    return (
+        f"Light domains: rows labelled {marked} are of that domain, the others of srgb. "
+        + "; ".join(_DOMAIN_TEXT[d] for d in found)
+        + "."
+    )
 
 
 def markdown_tables(summary: dict) -> str:
     """PSNR/SSIM per sigma in the layout of the paper's Table 1 (one table per image set), and
     CIEDE2000 likewise."""
     methods = list(summary)
-    groups = list(dict.fromkeys(g for m in methods for g in summary[m] if g != "pattern"))
+    groups = list(dict.fromkeys(g for m in methods for g in summary[m] if g not in ENTRY_FIELDS))
     if len(groups) == 2:  # one image set: "all" would repeat it
         groups = groups[:1]
     sigmas = list(dict.fromkeys(s for m in methods for g in groups for s in summary[m].get(g, {})))
-    lines: list[str] = []
+    lines: list[str] = [domain_line(summary[m].get("domain", "srgb") for m in methods), ""]
     for group in groups:
         n = max(
             (

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-__all__ = ["IMAGE_STATISTICS", "LMMSE_DIR", "MODELS_DIR", "WEIGHTS_DIR"]
+__all__ = ["IMAGE_STATISTICS", "IMAGE_STATISTICS_LINEAR", "LMMSE_DIR", "MODELS_DIR", "WEIGHTS_DIR"]
 
 #: The package's weights folder.
 WEIGHTS_DIR = Path(__file__).resolve().parents[1] / "weights"
@@ -15,3 +15,5 @@ MODELS_DIR = WEIGHTS_DIR / "models"
 LMMSE_DIR = WEIGHTS_DIR / "lmmse"
 #: The pattern-independent image statistics of the closed-form LMMSE (``.json`` + tensors).
 IMAGE_STATISTICS = WEIGHTS_DIR / "image_statistics.json"
+#: The same statistics of linear radiance (training images decoded from sRGB, SPEC section 13).
+IMAGE_STATISTICS_LINEAR = WEIGHTS_DIR / "image_statistics_linear.json"

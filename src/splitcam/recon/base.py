@@ -5,6 +5,11 @@ reconstructs, and ``reconstruct(raw, sigma) -> rgb`` (:class:`Reconstructor`): c
 demosaicking (:mod:`splitcam.recon.demosaic`), the LMMSE filters (:mod:`splitcam.recon.lmmse`)
 and trained networks (:class:`NetworkReconstructor`) alike. The evaluation protocol, the CLI and
 the Python API only ever talk to this interface; :mod:`splitcam.methods` builds one from a name.
+
+A method also works in a light domain (SPEC section 13), its ``domain`` attribute: ``srgb`` (the
+raw image is of display values and the estimate is of display values, the paper's protocol) or
+``linear`` (the raw image is of linear radiance and so is the estimate). A method without the
+attribute is of ``srgb`` (:func:`method_domain`).
 """
 
 from __future__ import annotations
@@ -15,6 +20,7 @@ import torch
 from torch import nn
 
 from ..patterns import Pattern
+from ..physics.light import check_domain
 from ..physics.noise import check_level, check_sigma
 from ..physics.sensor import pattern_pixel_kernels
 
@@ -26,6 +32,7 @@ __all__ = [
     "check_raw",
     "check_sigma",
     "fast_precision",
+    "method_domain",
 ]
 
 #: Network precision settings: ``auto`` (bfloat16 + channels-last where the hardware runs it
@@ -95,6 +102,10 @@ class Reconstructor(Protocol):
     Attributes:
         name: Short label for tables, e.g. ``"lmmse"`` or ``"malvar2004"``.
         pattern: The sensor pattern whose raw images the method reconstructs.
+
+    An optional ``domain`` attribute (``"srgb"`` or ``"linear"``, read by
+    :func:`method_domain`; ``"srgb"`` where absent) says whether raw images and estimates are
+    of display values or of linear radiance.
     """
 
     name: str
@@ -117,6 +128,16 @@ class Reconstructor(Protocol):
         ...
 
 
+def method_domain(method: object) -> str:
+    """The light domain a reconstruction method works in: its ``domain`` attribute, ``srgb``
+    where it has none.
+
+    Raises:
+        ValueError: The attribute is not a known domain.
+    """
+    return check_domain(getattr(method, "domain", None) or "srgb")
+
+
 class NetworkReconstructor:
     """A trained network (with the pattern it was trained for) as a :class:`Reconstructor`.
 
@@ -131,6 +152,7 @@ class NetworkReconstructor:
         precision: ``auto`` (bfloat16 + channels-last where the hardware runs it natively, see
             :func:`fast_precision`; about 3x faster on such CPUs), ``fp32`` (bit-exact float32)
             or ``bf16``. Resolved for the device of each raw image.
+        domain: The light domain the network was trained in (``srgb`` or ``linear``).
     """
 
     def __init__(
@@ -141,8 +163,10 @@ class NetworkReconstructor:
         *,
         tile: int | None = 512,
         precision: str = "auto",
+        domain: str = "srgb",
     ) -> None:
         fast_precision(precision, "cpu")  # an unknown precision fails here, not at first use
+        self.domain = check_domain(domain)
         self.network = network
         self.pattern = pattern
         self.name = name

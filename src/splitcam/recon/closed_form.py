@@ -18,6 +18,12 @@ Compared with :func:`splitcam.recon.lmmse.fit_lmmse` (simulate the sensor on tra
 gather the moments of its raw neighbourhoods) this needs no simulation, works for kernels that
 change at every step of an optimisation, and is differentiable in the kernels, so gradients reach
 a learned pattern through it (:func:`closed_form_filters`).
+
+Statistics are shipped for both light domains (SPEC section 13): of the training images' sRGB
+display values (``srgb``, the paper's protocol) and of their linear radiance (``linear``: each
+image decoded with the sRGB transfer function before the moments are taken);
+:func:`shipped_image_statistics` takes the domain, and an LMMSE built from statistics works in
+theirs (:attr:`ImageStatistics.domain`).
 """
 
 from __future__ import annotations
@@ -33,15 +39,16 @@ import torch
 
 from ..data.patches import ImageCache
 from ..data.tensorfiles import load_pair, save_pair
-from ..io.weights import IMAGE_STATISTICS
+from ..io.weights import IMAGE_STATISTICS, IMAGE_STATISTICS_LINEAR
 from ..patterns import Pattern, get
-from ..physics.noise import Exposure
+from ..physics.light import check_domain, srgb_to_linear
+from ..physics.noise import Exposure, check_sigma
 from ..physics.sensor import pattern_pixel_kernels
-from .base import check_sigma
 from .lmmse import DEFAULT_RADIUS, LMMSE, LMMSEFileError, apply_filters
 
 __all__ = [
     "DEFAULT_MAX_OFFSET",
+    "SHIPPED_PATHS",
     "ClosedFormFilters",
     "ImageStatistics",
     "closed_form_filters",
@@ -63,6 +70,8 @@ _RIDGE = 1e-8
 _FORMAT = "splitcam-image-statistics"
 _VERSION = 1
 SHIPPED_PATH = IMAGE_STATISTICS
+#: The shipped statistics of each light domain.
+SHIPPED_PATHS = {"srgb": IMAGE_STATISTICS, "linear": IMAGE_STATISTICS_LINEAR}
 
 
 @dataclass(eq=False)
@@ -75,7 +84,8 @@ class ImageStatistics:
             ``[c, c', dy + L, dx + L]``, float64, shape ``(3, 3, 2L + 1, 2L + 1)``; symmetric
             (``second[c, c', d] == second[c', c, -d]``).
         count: Number of pixel positions the moments were averaged over.
-        info: Free-form description of the estimate (source, images), saved with the file.
+        info: Free-form description of the estimate (source, images, ``domain``), saved with
+            the file.
     """
 
     mean: torch.Tensor
@@ -93,6 +103,12 @@ class ImageStatistics:
             raise ValueError("expected finite image statistics")
         self.mean = self.mean.to(torch.float64)
         self.second = s.to(torch.float64)
+
+    @property
+    def domain(self) -> str:
+        """The light domain of the images the moments were taken of (``info["domain"]``;
+        statistics that do not record one are of sRGB values)."""
+        return check_domain(self.info.get("domain", "srgb"))
 
     @property
     def max_offset(self) -> int:
@@ -131,11 +147,26 @@ class ImageStatistics:
             raise LMMSEFileError(f"damaged image statistics '{meta_path}': {exc}") from None
 
 
-@functools.lru_cache(maxsize=1)
-def shipped_image_statistics() -> ImageStatistics:
-    """The statistics shipped with splitcam (``scripts/estimate_image_statistics.py``)."""
+def shipped_image_statistics(domain: str = "srgb") -> ImageStatistics:
+    """The statistics shipped with splitcam for a light domain (``srgb`` or ``linear``),
+    estimated by ``scripts/estimate_image_statistics.py [--domain linear]``.
+
+    Raises:
+        ValueError: An unknown domain.
+    """
+    return _shipped(check_domain(domain))
+
+
+@functools.lru_cache(maxsize=2)
+def _shipped(domain: str) -> ImageStatistics:
     with torch.inference_mode(False):  # cached: must not become inference tensors
-        return ImageStatistics.load(SHIPPED_PATH)
+        stats = ImageStatistics.load(SHIPPED_PATHS[domain])
+    if stats.domain != domain:
+        raise LMMSEFileError(
+            f"{SHIPPED_PATHS[domain]} holds statistics of the {stats.domain} domain, "
+            f"expected {domain}"
+        )
+    return stats
 
 
 def estimate_image_statistics(
@@ -144,6 +175,7 @@ def estimate_image_statistics(
     max_offset: int = DEFAULT_MAX_OFFSET,
     max_images: int | None = None,
     progress: bool = False,
+    domain: str = "srgb",
 ) -> ImageStatistics:
     """Estimate :class:`ImageStatistics` from whole training images.
 
@@ -159,10 +191,14 @@ def estimate_image_statistics(
         max_offset: ``L``, the largest offset per axis.
         max_images: Use at most this many images (from the start of the sorted list).
         progress: Show a progress bar over the images.
+        domain: ``srgb``: the moments of the display values themselves; ``linear``: of the
+            linear radiance each image decodes to (SPEC section 13), taken in float64.
 
     Raises:
-        ValueError: No image larger than ``2L + 1`` pixels in each direction.
+        ValueError: No image larger than ``2L + 1`` pixels in each direction, or an unknown
+            domain.
     """
+    domain = check_domain(domain)
     if isinstance(max_offset, bool) or not isinstance(max_offset, int) or max_offset < 0:
         raise ValueError(f"expected max_offset as an integer >= 0, got {max_offset!r}")
     lo = max_offset
@@ -189,6 +225,8 @@ def estimate_image_statistics(
     count = 0
     for img in images:
         f = img.to(torch.float64)
+        if domain == "linear":
+            f = srgb_to_linear(f)
         _, h, w = f.shape
         if h <= 2 * lo or w <= 2 * lo:
             continue
@@ -209,6 +247,7 @@ def estimate_image_statistics(
     second /= count
     second = 0.5 * (second + second.transpose(0, 1).flip(-1, -2))
     info["max_offset"] = lo
+    info["domain"] = domain
     return ImageStatistics(total / count, second, count, info)
 
 
@@ -394,7 +433,8 @@ def closed_form_mse(
 class ClosedFormFilters:
     """The LMMSE filters of one pattern from :class:`ImageStatistics` (cached per sigma).
 
-    Provides what :class:`splitcam.recon.lmmse.LMMSE` needs of its statistics (``pattern``,
+    Filters are of the statistics' light domain (:attr:`ImageStatistics.domain`). Provides what
+    :class:`splitcam.recon.lmmse.LMMSE` needs of its statistics (``pattern``,
     ``radius``, ``filters(sigma)``, ``expected_mse(sigma)``), so ``LMMSE(ClosedFormFilters(...))``
     reconstructs with the closed-form filters through the same tiled code path.
     """
@@ -432,9 +472,33 @@ def closed_form_lmmse(
     *,
     radius: int = DEFAULT_RADIUS,
     name: str = "lmmse",
+    domain: str | None = None,
 ) -> LMMSE:
-    """An :class:`LMMSE` reconstructor of any pattern, from image statistics (default shipped)."""
-    return LMMSE(ClosedFormFilters(pattern, statistics, radius), name=name)  # type: ignore[arg-type]
+    """An :class:`LMMSE` reconstructor of any pattern, from image statistics.
+
+    Args:
+        pattern: The pattern (name, file or :class:`Pattern`).
+        statistics: Image statistics (default: the shipped ones of ``domain``).
+        radius: Filter radius.
+        name: Label in tables.
+        domain: The light domain it reconstructs in (its ``domain`` attribute); default: that
+            of ``statistics``, or ``srgb``.
+
+    Raises:
+        ValueError: ``domain`` differs from the domain of ``statistics``, or is unknown.
+    """
+    if statistics is None:
+        statistics = shipped_image_statistics(domain or "srgb")
+    elif domain is not None and check_domain(domain) != statistics.domain:
+        raise ValueError(
+            f"image statistics of the {statistics.domain} domain cannot make an LMMSE of the "
+            f"{check_domain(domain)} domain"
+        )
+    lmmse = LMMSE(ClosedFormFilters(pattern, statistics, radius), name=name)  # type: ignore[arg-type]
+    lmmse.domain = statistics.domain
+    if statistics.domain != "srgb":  # what tells its results apart from the sRGB LMMSE's
+        lmmse.fingerprint = f":statistics:{statistics.domain}:{statistics.count}"
+    return lmmse
 
 
 def lmmse_estimate(
