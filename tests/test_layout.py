@@ -12,6 +12,7 @@ from pathlib import Path
 import splitcam
 
 LAYERS = [
+    "checks",
     "io",
     "patterns",
     "physics",

@@ -12,8 +12,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="the pattern a metasurface makes (scalar wave optics), or design one",
         description="Computes the splitter kernels that a metasurface height map makes above "
         "the sensor (angular spectrum propagation, spectral integration; "
-        "splitcam.physics.optics) and writes the pattern file, its figure and the height map (.npy). With --design, "
-        "optimises the height map from --profile for the closed-form LMMSE first.",
+        "splitcam.physics.optics) and writes the pattern file, its figure and the height map "
+        "(.npy). With --design, optimises the height map from --profile for the closed-form "
+        "LMMSE first.",
     )
     p.add_argument(
         "--profile", default="lens", help="flat, lens, random, or a height map .npy (µm)"

@@ -15,28 +15,13 @@ across the sensor, the reconstruction networks and the LMMSE filters:
 from __future__ import annotations
 
 from collections.abc import Sequence
-from numbers import Integral
-from typing import Any
 
 import torch
 import torch.nn.functional as F
 
-__all__ = ["as_period", "period_shuffle", "period_unshuffle", "phase_conv", "phase_map"]
+from ..checks import check_period
 
-
-def as_period(period: Any) -> tuple[int, int]:
-    """Validate a period: two positive integers ``(Ph, Pw)``.
-
-    Raises:
-        ValueError: Anything else.
-    """
-    if (
-        not isinstance(period, (tuple, list, torch.Size))
-        or len(period) != 2
-        or not all(isinstance(p, Integral) and not isinstance(p, bool) and p >= 1 for p in period)
-    ):
-        raise ValueError(f"period must be two positive integers (Ph, Pw), got {period!r}")
-    return int(period[0]), int(period[1])
+__all__ = ["period_shuffle", "period_unshuffle", "phase_conv", "phase_map"]
 
 
 def phase_map(
@@ -50,7 +35,7 @@ def phase_map(
     Shape:
         - output: ``(H, W)``, int64.
     """
-    ph, pw = as_period(period)
+    ph, pw = check_period(period)
     rows = torch.arange(height, device=device) % ph
     cols = torch.arange(width, device=device) % pw
     return rows[:, None] * pw + cols[None, :]
@@ -67,7 +52,7 @@ def period_unshuffle(x: torch.Tensor, period: Sequence[int]) -> torch.Tensor:
         - x: ``(N, C, H, W)``.
         - output: ``(N, C * Ph * Pw, ceil(H / Ph), ceil(W / Pw))``.
     """
-    ph, pw = as_period(period)
+    ph, pw = check_period(period)
     if x.ndim != 4:
         raise ValueError(f"expected (N, C, H, W), got {tuple(x.shape)}")
     n, c, h, w = x.shape
@@ -89,7 +74,7 @@ def period_shuffle(
         - x: ``(N, C * Ph * Pw, h, w)``.
         - output: ``(N, C, h * Ph, w * Pw)``, or ``(N, C, H, W)`` with ``size``.
     """
-    ph, pw = as_period(period)
+    ph, pw = check_period(period)
     if x.ndim != 4 or x.shape[1] % (ph * pw):
         raise ValueError(
             f"expected (N, C * {ph * pw}, h, w) for the period {(ph, pw)}, got {tuple(x.shape)}"
@@ -118,7 +103,7 @@ def phase_conv(x: torch.Tensor, weight: torch.Tensor, period: Sequence[int]) -> 
         - weight: ``(Ph * Pw, O, C, kh, kw)``, odd ``kh``, ``kw``.
         - output: ``(N, O, H, W)``.
     """
-    ph, pw = as_period(period)
+    ph, pw = check_period(period)
     p, o, c, kh, kw = weight.shape
     if p != ph * pw:
         raise ValueError(f"expected {ph * pw} phase kernels for period {(ph, pw)}, got {p}")

@@ -27,6 +27,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from ..checks import check_image
 from ..patterns import Pattern, PatternError, get
 from .periodic import period_shuffle, period_unshuffle, phase_conv
 
@@ -40,18 +41,6 @@ __all__ = [
     "splitter_adjoint",
     "splitter_forward",
 ]
-
-
-def _check(x: torch.Tensor, channels: int, what: str) -> None:
-    """Validate a public input; messages read "expected ..., got ..."."""
-    if not isinstance(x, torch.Tensor):
-        raise TypeError(f"expected {what} as a torch.Tensor, got {type(x).__name__}")
-    if x.ndim != 4 or x.shape[1] != channels:
-        raise ValueError(f"expected {what} of shape (N, {channels}, H, W), got {tuple(x.shape)}")
-    if not x.is_floating_point():
-        raise TypeError(f"expected {what} with a floating dtype (float32/float64), got {x.dtype}")
-    if x.shape[0] == 0 or x.shape[2] == 0 or x.shape[3] == 0:
-        raise ValueError(f"expected {what} with N, H, W >= 1, got {tuple(x.shape)}")
 
 
 Layout = torch.Tensor | np.ndarray | tuple[tuple[int, ...], ...]
@@ -143,7 +132,7 @@ def splitter_forward(rgb: torch.Tensor, weights: torch.Tensor, layout: Layout) -
         - layout: ``(Ph, Pw)``.
         - output: ``(N, 1, H, W)``.
     """
-    _check(rgb, 3, "an RGB image")
+    check_image(rgb, 3, "an RGB image")
     ph, pw = _period(layout)
     kh, kw = weights.shape[-2:]
     h, w = rgb.shape[-2:]
@@ -170,7 +159,7 @@ def splitter_adjoint(raw: torch.Tensor, weights: torch.Tensor, layout: Layout) -
         - raw: ``(N, 1, H, W)``.
         - output: ``(N, 3, H, W)``.
     """
-    _check(raw, 1, "a raw image")
+    check_image(raw, 1, "a raw image")
     ph, pw = _period(layout)
     kh, kw = weights.shape[-2:]
     kernel = _strided_kernel(weights.to(raw.dtype), layout)
@@ -239,7 +228,7 @@ def pixel_gather(rgb: torch.Tensor, weights: torch.Tensor, layout: Layout) -> to
     Shape:
         - rgb: ``(N, 3, H, W)``; output ``(N, 1, H, W)``.
     """
-    _check(rgb, 3, "an RGB image")
+    check_image(rgb, 3, "an RGB image")
     k = pixel_kernels(weights.to(rgb.dtype), layout)
     ph, pw, c, kh, kw = k.shape
     return phase_conv(rgb, k.reshape(ph * pw, 1, c, kh, kw), (ph, pw))

@@ -2,7 +2,8 @@
 ``reconstruct(raw, sigma)``), the networks, the LMMSE filters, classical demosaicking and tiled
 inference."""
 
-from .base import NetworkReconstructor, Reconstructor, check_raw
+from ..checks import check_raw
+from .base import NetworkReconstructor, Reconstructor
 from .demosaic import ClassicalDemosaic
 from .lmmse import LMMSE, LMMSEStatistics, fit_lmmse, shipped_lmmse
 from .networks import PackedReconNet, ReconNet, build_network

@@ -13,8 +13,9 @@ from collections.abc import Callable
 import numpy as np
 import torch
 
+from ..checks import check_raw
 from ..patterns import get
-from .base import check_level, check_raw
+from ..physics.noise import check_level
 from .tiling import DEFAULT_TILE, tiled
 
 __all__ = ["ClassicalDemosaic"]

@@ -20,14 +20,14 @@ from typing import Any
 import torch
 import torch.nn.functional as F
 
+from ..checks import check_raw
 from ..data.patches import ImageCache, PatchSampler
 from ..data.tensorfiles import load_pair, save_pair
 from ..io.weights import LMMSE_DIR
 from ..patterns import Pattern, PatternError, get
-from ..physics.noise import Exposure
+from ..physics.noise import Exposure, check_level
 from ..physics.periodic import phase_conv, phase_map
 from ..physics.sensor import SplitterSensor
-from .base import check_level, check_raw
 from .tiling import DEFAULT_TILE, tiled
 
 __all__ = [

@@ -24,17 +24,15 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from numbers import Integral
 from typing import Any
 
 import torch
 import torch.nn.functional as F
 from torch import nn
 
+from ..checks import check_count, check_period, check_raw
 from ..physics.noise import Exposure
-from ..physics.periodic import as_period as _as_period
 from ..physics.periodic import period_shuffle, period_unshuffle, phase_conv, phase_map
-from .base import check_raw
 from .closed_form import ImageStatistics, lmmse_estimate, shipped_image_statistics
 from .lmmse import DEFAULT_RADIUS
 
@@ -48,16 +46,6 @@ __all__ = [
     "build_network",
     "serves_any_pattern",
 ]
-
-
-def _is_int(value: Any) -> bool:
-    return isinstance(value, Integral) and not isinstance(value, bool)
-
-
-def _as_count(value: Any, name: str, minimum: int) -> int:
-    if not _is_int(value) or value < minimum:
-        raise ValueError(f"{name} must be an integer >= {minimum}, got {value!r}")
-    return int(value)
 
 
 class PeriodicSampling(nn.Module):
@@ -77,7 +65,7 @@ class PeriodicSampling(nn.Module):
 
     def __init__(self, period: tuple[int, int]) -> None:
         super().__init__()
-        self.period = _as_period(period)
+        self.period = check_period(period)
 
     def forward(self, raw: torch.Tensor) -> torch.Tensor:
         ph, pw = self.period
@@ -166,9 +154,9 @@ class _Reconstructor(nn.Module):
 
     def __init__(self, period: tuple[int, int], features: int = 64, blocks: int = 10) -> None:
         super().__init__()
-        self.period = _as_period(period)
-        self.features = _as_count(features, "features", 1)
-        self.num_blocks = _as_count(blocks, "blocks", 0)
+        self.period = check_period(period)
+        self.features = check_count(features, "features", 1)
+        self.num_blocks = check_count(blocks, "blocks", 0)
 
     def config(self) -> dict[str, Any]:
         """JSON-serialisable description that :func:`build_network` turns back into this net."""
@@ -293,7 +281,7 @@ class PhysicsReconNet(_Reconstructor, _WithStatistics):
     ) -> None:
         super().__init__(period, features, blocks)
         ph, pw = self.period
-        self.radius = _as_count(radius, "radius", 0)
+        self.radius = check_count(radius, "radius", 0)
         p = ph * pw
         self.trunk = _Trunk(p + 3 * p + 1, 3 * p, self.features, self.num_blocks)
         nn.init.zeros_(self.trunk.tail.weight)
@@ -381,13 +369,13 @@ class UniversalReconNet(_WithStatistics):
         statistics: ImageStatistics | None = None,
     ) -> None:
         super().__init__()
-        self.features = _as_count(features, "features", 1)
-        self.num_blocks = _as_count(blocks, "blocks", 0)
-        self.radius = _as_count(radius, "radius", 0)
-        self.kernel_size = _as_count(kernel_size, "kernel_size", 1)
+        self.features = check_count(features, "features", 1)
+        self.num_blocks = check_count(blocks, "blocks", 0)
+        self.radius = check_count(radius, "radius", 0)
+        self.kernel_size = check_count(kernel_size, "kernel_size", 1)
         if self.kernel_size % 2 == 0:
             raise ValueError(f"kernel_size must be odd, got {kernel_size}")
-        self.embed = _as_count(embed, "embed", 1)
+        self.embed = check_count(embed, "embed", 1)
         taps = 3 * self.kernel_size**2
         self.encoder = nn.Sequential(nn.Linear(taps, 64), nn.ReLU(), nn.Linear(64, self.embed))
         c = self.CELL[0] * self.CELL[1]

@@ -23,7 +23,7 @@ from typing import Any, NamedTuple
 import torch
 from torch import nn
 
-from .base import check_raw
+from ..checks import check_period, check_raw, is_int
 
 __all__ = ["DEFAULT_TILE", "Span", "reconstruct", "tile_spans", "tiled"]
 
@@ -42,10 +42,6 @@ class Span(NamedTuple):
     stop: int
     keep_start: int
     keep_stop: int
-
-
-def _is_int(value: Any) -> bool:
-    return isinstance(value, Integral) and not isinstance(value, bool)
 
 
 def _ceil_to(value: int, multiple: int) -> int:
@@ -155,14 +151,14 @@ def tiled(
         - Output: ``(N, C, H, W)``.
     """
     check_raw(raw)
-    ph, pw = _check_period(period)
-    if not _is_int(radius) or radius < 0:
+    ph, pw = check_period(period)
+    if not is_int(radius) or radius < 0:
         raise ValueError(f"radius must be an integer >= 0, got {radius!r}")
-    if tile is not None and (not _is_int(tile) or tile < 1):
+    if tile is not None and (not is_int(tile) or tile < 1):
         raise ValueError(f"tile must be a positive integer or None, got {tile!r}")
     if overlap is None:
         overlap_h, overlap_w = _ceil_to(radius, ph), _ceil_to(radius, pw)
-    elif not _is_int(overlap) or overlap < radius:
+    elif not is_int(overlap) or overlap < radius:
         raise ValueError(
             f"overlap must be an integer >= the receptive radius {radius}, got {overlap!r}"
         )
@@ -188,16 +184,6 @@ def tiled(
         ]
     assert out is not None  # there is always at least one tile
     return out
-
-
-def _check_period(period: Any) -> tuple[int, int]:
-    if (
-        not isinstance(period, (tuple, list, torch.Size))
-        or len(period) != 2
-        or not all(_is_int(p) and p >= 1 for p in period)
-    ):
-        raise ValueError(f"period must be two positive integers (Ph, Pw), got {period!r}")
-    return int(period[0]), int(period[1])
 
 
 def reconstruct(
