@@ -14,7 +14,7 @@ attribute is of ``srgb`` (:func:`method_domain`).
 
 from __future__ import annotations
 
-from typing import Any, Protocol, runtime_checkable
+from typing import Protocol, runtime_checkable
 
 import torch
 from torch import nn
@@ -29,7 +29,6 @@ __all__ = [
     "NetworkReconstructor",
     "Reconstructor",
     "check_level",
-    "check_raw",
     "check_sigma",
     "fast_precision",
     "method_domain",
@@ -72,27 +71,6 @@ def fast_precision(precision: str, device: torch.device | str) -> bool:
     if device.type == "cuda":
         return bool(torch.cuda.is_available() and torch.cuda.is_bf16_supported())
     return device.type == "cpu" and _cpu_has_native_bf16()
-
-
-def check_raw(raw: Any) -> None:
-    """Raise if ``raw`` is not a floating-point raw image batch.
-
-    Raises:
-        TypeError: ``raw`` is not a tensor, or its dtype is not floating point.
-        ValueError: ``raw`` is not of shape ``(N, 1, H, W)`` with ``H, W >= 1``.
-
-    Shape:
-        - raw: ``(N, 1, H, W)``.
-    """
-    if not isinstance(raw, torch.Tensor):
-        raise TypeError(f"expected a torch.Tensor of shape (N, 1, H, W), got {type(raw).__name__}")
-    shape = tuple(raw.shape)
-    if raw.ndim != 4 or shape[1] != 1:
-        raise ValueError(f"expected (N, 1, H, W), got {shape}")
-    if shape[2] < 1 or shape[3] < 1:
-        raise ValueError(f"expected (N, 1, H, W) with H, W >= 1, got {shape}")
-    if not raw.is_floating_point():
-        raise TypeError(f"expected a floating-point raw image, got dtype {raw.dtype}")
 
 
 @runtime_checkable
