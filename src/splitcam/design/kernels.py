@@ -314,4 +314,3 @@ def training_patches(folder: str, *, seed: int = 0, size: int = 64, held: int = 
     held_files = files[len(files) - hold :] if hold else files
     held_cache = ImageCache(held_files, min_size=size, progress=False)
     return sampler, PatchSampler(held_cache, patch_size=size, seed=12345).sample(held)
-

@@ -320,4 +320,3 @@ def level_heading(label: str) -> str:
     """A table heading or legend entry: ``σ=15`` or ``N=1000 e⁻``."""
     kind, value = parse_level_label(label)
     return f"N={value:g} e⁻" if kind == "photons" else f"σ={value:g}"
-

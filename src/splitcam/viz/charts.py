@@ -79,9 +79,7 @@ def sigma_chart(
     measured: set[float] = set()
     for label, per_sigma in curves:
         style = {"color": colour_of[group[label]], "ms": 4, **KIND_STYLES[method_kind(label)]}
-        sig = sorted(
-            (s for s in per_sigma if parse_level_label(s)[0] == "sigma"), key=level_key
-        )
+        sig = sorted((s for s in per_sigma if parse_level_label(s)[0] == "sigma"), key=level_key)
         xs = [parse_level_label(s)[1] for s in sig]
         measured.update(xs)
         ax1.plot(xs, [per_sigma[s]["psnr"] for s in sig], label=label, **style)

@@ -218,4 +218,3 @@ def draw_design(
     with atomic_path(path) as tmp:
         fig.savefig(tmp, dpi=dpi)
     return Path(path)
-
