@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import logging
 import os
 import re
 import signal
@@ -450,7 +451,8 @@ def test_the_run_lock_is_an_os_lock_and_a_refusal_is_one_line(image_folder, tmp_
     assert train(tiny(image_folder, out, **{"optim.steps": 1}), progress=False).step == 1
 
 
-def test_settings_changed_on_resume_apply_and_are_recorded(image_folder, tmp_path, capsys):
+def test_settings_changed_on_resume_apply_and_are_recorded(image_folder, tmp_path, capsys, caplog):
+    caplog.set_level(logging.INFO, logger="splitcam")
     out = tmp_path / "changed"
     constant = {"optim.schedule": "constant", "optim.warmup_steps": 0}
     train(tiny(image_folder, out, **{**constant, "optim.steps": 2}), progress=False)
@@ -459,7 +461,8 @@ def test_settings_changed_on_resume_apply_and_are_recorded(image_folder, tmp_pat
         resume=True,
         progress=False,
     )
-    assert "resume at step 2: optim.lr 0.001 -> 0.0003" in capsys.readouterr().out
+    said = [r.getMessage() for r in caplog.records if r.name.startswith("splitcam.training")]
+    assert "resume at step 2: optim.lr 0.001 -> 0.0003" in said
     assert json.loads((out / "config.json").read_text())["optim"]["lr"] == 3e-4
     rows = [json.loads(x) for x in (out / "metrics.jsonl").read_text().splitlines()]
     lr = {r["step"]: r["lr"] for r in rows if "lr" in r}
@@ -486,13 +489,14 @@ def test_settings_changed_on_resume_apply_and_are_recorded(image_folder, tmp_pat
     assert ckpt_io.load(out).meta["step"] == 4  # the refusals changed nothing
 
 
-def test_resume_of_a_run_killed_before_its_first_checkpoint(image_folder, tmp_path, capsys):
+def test_resume_of_a_run_killed_before_its_first_checkpoint(image_folder, tmp_path, capsys, caplog):
+    caplog.set_level(logging.INFO, logger="splitcam")
     out = tmp_path / "early"
     out.mkdir()
     tiny(image_folder, out).write(out / "config.json")
     (out / "metrics.jsonl").write_text('{"step": 0, "val_psnr": 10.0}\n')
     assert main(["train", "--out", str(out), "--resume", "--quiet"]) == 0
-    assert "no checkpoint yet: starting it again from step 0" in capsys.readouterr().out
+    assert "no checkpoint yet: starting it again from step 0" in caplog.text
     steps = [json.loads(x)["step"] for x in (out / "metrics.jsonl").read_text().splitlines()]
     assert steps.count(0) == 1 and steps[-1] == 6
     with pytest.raises(ConfigError, match="no run to resume in .*drop --resume"):
@@ -627,7 +631,7 @@ def test_joint_run_with_design_steps_starts_from_the_designed_kernels(
     instead of designing again."""
     from splitcam.recon.closed_form import closed_form_mse
     from splitcam.recon.design import design_pattern
-    from splitcam.training import trainer
+    from splitcam.training import setup
     from splitcam.training.trainer import build_system
 
     learn = {"pattern.learn": True, "pattern.design_steps": 30, "optim.steps": 3}
@@ -648,7 +652,7 @@ def test_joint_run_with_design_steps_starts_from_the_designed_kernels(
     def no_design(*args, **kwargs):
         raise AssertionError("a resumed run must not design its kernels again")
 
-    monkeypatch.setattr(trainer, "design_pattern", no_design)
+    monkeypatch.setattr(setup, "design_pattern", no_design)
     train(
         tiny(image_folder, tmp_path / "j", **{**learn, "optim.steps": 4}),
         resume=True,
@@ -681,12 +685,29 @@ def test_a_run_past_its_time_limit_does_no_more_steps_on_resume(image_folder, tm
     assert again.step == first.step
 
 
+def test_a_validation_before_the_first_logged_step_shows_in_the_progress_bar(
+    image_folder, tmp_path
+):
+    """Validation every 3 steps, logging every 4: the row of step 3 holds validation only (the
+    training window is logged at step 4), in the file and beside the progress bar."""
+    changes = {"run.log_every": 4, "run.val_every": 3, "optim.steps": 5}
+    result = train(tiny(image_folder, tmp_path / "b", **changes), progress=True)
+    assert result.step == 5 and "loss" in result.last_metrics
+    rows = [json.loads(x) for x in (tmp_path / "b/metrics.jsonl").read_text().splitlines()]
+    assert [(r["step"], "loss" in r, "val_psnr" in r) for r in rows] == [
+        (0, False, True),
+        (3, False, True),
+        (4, True, False),
+        (5, True, True),
+    ]
+
+
 def _weights(run) -> dict:
     tensors = ckpt_io.load(run).tensors
     return {k: v for k, v in tensors.items() if k.startswith("model/network.")}
 
 
-def test_divergence_rolls_back_and_halves_the_learning_rate(image_folder, tmp_path):
+def test_divergence_rolls_back_and_halves_the_learning_rate(image_folder, tmp_path, caplog):
     """A divergence factor below 1 makes step 21 (the first with 20 losses of history) a
     divergence: its update is not applied, the weights go back to the step-0 snapshot, and the
     learning rate is halved from there on; the checkpoint records the scale and a resumed run
@@ -708,6 +729,9 @@ def test_divergence_rolls_back_and_halves_the_learning_rate(image_folder, tmp_pa
     assert [s for s, r in by_step.items() if r["rollbacks"]] == [21]
     assert by_step[20]["lr"] == pytest.approx(1e-3) and by_step[22]["lr"] == pytest.approx(5e-4)
     assert ckpt_io.load(tmp_path / "g").meta["lr_scale"] == 0.5
+    said = [r for r in caplog.records if "diverged; rolled back" in r.getMessage()]
+    assert [(r.levelno, r.name.split(".")[0]) for r in said] == [(logging.WARNING, "splitcam")]
+    assert said[0].getMessage().startswith("step 21: loss ")
     train(
         tiny(
             image_folder,

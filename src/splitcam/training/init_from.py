@@ -1,0 +1,149 @@
+"""``run.init_from``: a new run that starts from the weights of a model or of another run, and
+``run.continue_schedule``: one that continues that run's schedule where it stopped."""
+
+from __future__ import annotations
+
+import json
+import logging
+from pathlib import Path
+from typing import Any
+
+import torch
+
+from ..physics.sensor import LearnableSplitterSensor
+from ..physics.system import ImagingSystem
+from ..recon.networks import UniversalReconNet
+from . import checkpoint as ckpt_io
+from .config import ConfigError, TrainConfig
+
+logger = logging.getLogger(__name__)
+
+
+def start_from(system: ImagingSystem, spec: str) -> dict[str, Any]:
+    """Load the weights of a model or run into a new run's system (``run.init_from``).
+
+    The network must have the same architecture (and period); a learned pattern starts from the
+    source's kernels (logits ``log k``); a fixed one may be another pattern of that period (a
+    head start: most of what the network learnt is not specific to the pattern). Returns what the
+    checkpoints record: the source's name, its pattern if another, and accumulated provenance.
+    """
+    source, record = _load_source(spec)
+    own_device = next(system.network.parameters()).device
+    if isinstance(system.network, UniversalReconNet):
+        return _start_universal(system.network, source.network, spec, record, own_device)
+    if source.network.config() != system.network.config():
+        raise ConfigError(
+            f"--init-from {spec}: its network {source.network.config()} differs from this "
+            f"run's {system.network.config()}"
+        )
+    _start_pattern(system, source, spec, record)
+    system.network.load_state_dict(source.network.to(own_device).state_dict())
+    return record
+
+
+def _load_source(spec: str) -> tuple[ImagingSystem, dict[str, Any]]:
+    """The system ``spec`` names (a run folder, a checkpoint, a shipped model or a model file)
+    and the record of it a run keeps: its name and provenance."""
+    from .models import ModelError, check_unambiguous, load_model, provenance_of
+
+    try:
+        check_unambiguous(spec, "--init-from")
+    except ModelError as exc:
+        raise ConfigError(str(exc)) from None
+    path = Path(spec)
+    if path.is_dir() or path.name == ckpt_io.CHECKPOINT_NAME:
+        checkpoint = ckpt_io.resolve(path)
+        if not checkpoint.is_file():
+            raise ConfigError(f"--init-from {spec}: no checkpoint there")
+        source = ckpt_io.load_system(checkpoint)
+        return source, {
+            "name": str(spec),
+            "provenance": provenance_of(ckpt_io.load(checkpoint), checkpoint.parent),
+        }
+    try:
+        source, meta = load_model(spec)
+    except ModelError as exc:
+        raise ConfigError(f"--init-from: {exc}; or a run folder") from None
+    return source, {"name": meta.get("name", str(spec)), "provenance": meta.get("provenance")}
+
+
+def _start_pattern(
+    system: ImagingSystem, source: ImagingSystem, spec: str, record: dict[str, Any]
+) -> None:
+    """A learned pattern starts from the source's kernels; a fixed one that differs from the
+    source's is recorded (``record["pattern"]``) and said."""
+    kernels = source.sensor.pixel_kernels().detach()
+    own = system.sensor
+    if isinstance(own, LearnableSplitterSensor):
+        if tuple(own.logits.shape) != tuple(source.sensor.kernels.shape):
+            raise ConfigError(f"--init-from {spec}: its pattern has another layout or kernel size")
+        exact = LearnableSplitterSensor(source.sensor.to_pattern(), init="exact")
+        with torch.no_grad():
+            own.logits.copy_(exact.logits)
+    elif not torch.allclose(own.pixel_kernels().detach().double(), kernels.double(), atol=1e-6):
+        # Another pattern of the same period: what the network learnt (denoising, detail,
+        # colour) is mostly not specific to the pattern, so it is a head start (the network
+        # config, period included, matched by the caller).
+        record["pattern"] = source.sensor.to_pattern().name
+        logger.info(
+            f"--init-from {spec}: its network was trained for pattern {record['pattern']}; "
+            f"training it on for {own.to_pattern().name}"
+        )
+
+
+def _start_universal(
+    own: UniversalReconNet, source: torch.nn.Module, spec: str, record: dict, device: Any
+) -> dict[str, Any]:
+    """``run.init_from`` for a universal network: another universal network of the same shape
+    (for any pattern: fine-tuning), or a 2x2-period physics network whose trunk it starts from
+    (:meth:`~splitcam.recon.networks.UniversalReconNet.load_physics_trunk`)."""
+    state = source.to(device).state_dict()
+    if isinstance(source, UniversalReconNet):
+        if source.config() != own.config():
+            raise ConfigError(
+                f"--init-from {spec}: its network {source.config()} differs from this run's "
+                f"{own.config()}"
+            )
+        own.load_state_dict(state)
+    elif getattr(source, "arch", "") == "physics" and tuple(source.period) == (2, 2):
+        try:
+            own.load_physics_trunk(state)
+        except ValueError as exc:
+            raise ConfigError(f"--init-from {spec}: {exc}") from None
+    else:
+        raise ConfigError(
+            f"--init-from {spec}: a universal network starts from a universal network or from a "
+            f"2x2-period physics network, not from {source.config()}"
+        )
+    return record
+
+
+def source_network(spec: str) -> dict[str, Any] | None:
+    """The network config of what ``run.init_from`` names (a shipped model, a model file, a run
+    folder or a checkpoint), read from its JSON header; None where there is none to read."""
+    from .models import ModelError, resolve_model
+
+    path = Path(spec)
+    if path.is_dir() or path.name == ckpt_io.CHECKPOINT_NAME:
+        try:
+            return ckpt_io.read_meta(ckpt_io.resolve(path)).get("network")
+        except (OSError, ValueError):
+            return None
+    try:
+        return json.loads(resolve_model(spec).read_text(encoding="utf-8")).get("network")
+    except (ModelError, OSError, ValueError):
+        return None
+
+
+def continue_point(init_from: dict[str, Any], config: TrainConfig) -> tuple[int, float]:
+    """Where a ``run.continue_schedule`` run begins: the source's total steps and the divergence
+    guard's learning-rate scale at its end (from its provenance)."""
+    provenance = init_from.get("provenance") or {}
+    done = int(provenance.get("total_steps", 0))
+    if not 0 < done < config.optim.steps:
+        raise ConfigError(
+            f"run.continue_schedule: {init_from['name']} has {done} steps of training; it must be "
+            f"between 0 and optim.steps ({config.optim.steps}), the budget of the whole"
+        )
+    segments = provenance.get("segments") or [{}]
+    return done, float(segments[-1].get("lr_scale", 1.0))

@@ -1,0 +1,294 @@
+"""Setting a training run up from its configuration: the device and processes, the imaging
+system (sensor + network), the optimiser, where the weights start, the training patches, the
+noise, and the validation images; :func:`prepare` does it all in order, for a new run or for
+one that resumes a checkpoint."""
+
+from __future__ import annotations
+
+import contextlib
+import os
+from pathlib import Path
+from typing import Any
+
+import torch
+
+from .. import patterns
+from ..data.patches import ImageCache, PatchSampler
+from ..design.kernels import design_pattern
+from ..patterns.random import PatternMix
+from ..physics.noise import GaussianNoise, PhotonNoise
+from ..physics.sensor import LearnableSplitterSensor, SplitterSensor, SwitchingSensor
+from ..physics.system import ImagingSystem
+from ..recon.base import fast_precision
+from ..recon.networks import build_network
+from . import checkpoint as ckpt_io
+from . import seeds
+from .config import ConfigError, TrainConfig
+from .distributed import DistInfo, init_distributed
+from .guard import DivergenceGuard
+from .init_from import continue_point, start_from
+from .state import Run, TrainState, restore
+from .validation import say_held_out, train_source, val_images, val_levels
+
+
+def prepare(
+    config: TrainConfig, run_dir: Path, loaded: ckpt_io.Checkpoint | None, progress: bool
+) -> tuple[Run, TrainState]:
+    """Everything a run trains with, at its first step or at the checkpoint ``loaded``.
+
+    The order matters: errors in the data settings come before the process group exists, and
+    torch's global generator is seeded before the network is built.
+    """
+    source = train_source(config)
+    device, dist = _processes(config)
+    torch.manual_seed(seeds.global_seed(config))
+    start = patterns.Pattern.from_dict(loaded.meta["start_pattern"]) if loaded else None
+    system = build_system(config, start, design=loaded is None).to(device)
+    run = Run(
+        config,
+        run_dir,
+        device,
+        dist,
+        fast=config.run.bf16 or fast_precision(config.run.precision, device),
+        device_label=device_name(device),
+        start_pattern=system.sensor._meta.to_dict(),
+        mix=pattern_mix(config),
+    )
+    if run.mix is not None:
+        run.val_patterns = [patterns.get(p) for p in config.pattern.val_patterns]
+    _speed_up(system, run)
+    optimizer = build_optimizer(config, system)
+    run.init_from, start_step, lr_scale = _origin(config, system, loaded)
+    sampler = _patch_sampler(run, source, start_step, system, progress)
+    run.train_images = len(sampler.cache)
+    state = TrainState(
+        system,
+        optimizer,
+        DivergenceGuard(config.optim.divergence_factor, lr_scale=lr_scale),
+        sampler,
+        build_noise(config, start_step, dist.rank),
+        step=start_step,
+        start_step=start_step,
+    )
+    _validation(run, progress)
+    if loaded is not None:
+        restore(state, loaded, run)
+    return run, state
+
+
+def _processes(config: TrainConfig) -> tuple[torch.device, DistInfo]:
+    """The device, and under ``torchrun`` the process group joined."""
+    if config.run.threads:
+        torch.set_num_threads(config.run.threads)
+    # torchrun sets LOCAL_RANK: the device comes first, it decides the backend (nccl or gloo).
+    device = resolve_device(config.run.device, int(os.environ.get("LOCAL_RANK", "0")))
+    return device, init_distributed(device.type)
+
+
+def _validation(run: Run, progress: bool) -> None:
+    """The validation images (on the main process: the others do not validate) and levels."""
+    if run.dist.is_main:
+        run.val_images = val_images(run.config)
+        if progress:
+            say_held_out(run.config, run.val_images)
+    run.val_levels = val_levels(run.config)
+
+
+def _speed_up(system: ImagingSystem, run: Run) -> None:
+    """Channels-last memory (with bfloat16, or asked for) and ``torch.compile`` (if asked for)."""
+    if run.config.run.channels_last or run.fast:
+        system.channels_last = True
+        system.network.to(memory_format=torch.channels_last)
+    if run.config.run.compile:
+        system.compile_network()
+
+
+def _origin(
+    config: TrainConfig, system: ImagingSystem, loaded: ckpt_io.Checkpoint | None
+) -> tuple[dict[str, Any] | None, int, float]:
+    """``(init_from record, start step, learning-rate scale)``: a resumed run's own; a new run
+    loads ``run.init_from`` (if any) into ``system`` and, continuing that run's schedule
+    (``run.continue_schedule``), starts where it stopped: step numbers, the schedule and the
+    budget are those of the whole."""
+    if loaded is not None:
+        meta = loaded.meta
+        start_step = int(meta.get("start_step", 0))
+        return meta.get("init_from"), start_step, float(meta.get("lr_scale", 1.0))
+    init_from = start_from(system, config.run.init_from) if config.run.init_from else None
+    if config.run.continue_schedule:
+        return (init_from, *continue_point(init_from, config))
+    return init_from, 0, 1.0
+
+
+def resolve_device(name: str, local_rank: int = 0) -> torch.device:
+    """The device ``run.device`` names (``auto``: CUDA, else MPS, else the CPU).
+
+    Raises:
+        ConfigError: An unknown or unavailable device.
+    """
+    if name == "auto":
+        if torch.cuda.is_available():
+            return torch.device("cuda", local_rank)
+        mps = getattr(torch.backends, "mps", None)
+        if mps is not None and mps.is_available():
+            return torch.device("mps")
+        return torch.device("cpu")
+    try:
+        device = torch.device(name)
+    except RuntimeError:
+        raise ConfigError(f"unknown device {name!r}; use auto, cpu, cuda, cuda:N or mps") from None
+    if device.type == "cuda" and not torch.cuda.is_available():
+        raise ConfigError("device 'cuda' requested but no CUDA device is available")
+    if device.type == "cuda" and device.index is None:
+        device = torch.device("cuda", local_rank)
+    return device
+
+
+def device_name(device: torch.device) -> str:
+    """What the run trained on, for provenance: ``cuda (NVIDIA H100 ...)`` or ``cpu (<model>,
+    <instruction set>, N threads)``."""
+    if device.type == "cuda":
+        return f"cuda ({torch.cuda.get_device_name(device)})"
+    import platform
+
+    cpu = platform.processor() or platform.machine()
+    with contextlib.suppress(OSError):
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    # The instruction set matters as much as the name: one "AMD EPYC" did 7.0 steps/s with
+    # AVX512 (native bfloat16), another 2.4 with AVX2 only.
+    capability = torch.backends.cpu.get_cpu_capability()
+    threads = torch.get_num_threads()
+    return f"{device.type} ({cpu}, {capability}, {threads} thread{'s' if threads != 1 else ''})"
+
+
+def build_system(
+    config: TrainConfig, pattern: patterns.Pattern | None = None, *, design: bool = True
+) -> ImagingSystem:
+    """Sensor + network from a configuration (network weights freshly initialised).
+
+    A learned pattern with ``pattern.design_steps`` starts from the kernels that
+    :func:`~splitcam.design.design_pattern` finds from its initialisation (unless
+    ``design`` is false: a resumed run loads its own kernels).
+    """
+    mix = pattern_mix(config)
+    pattern = pattern or (mix.pattern(0) if mix else patterns.get(config.pattern.name))
+    sensor = _sensor(config, pattern, mix, design)
+    net = build_network(
+        {
+            "arch": config.network.arch,
+            "period": list(pattern.period),
+            "features": config.network.features,
+            "blocks": config.network.blocks,
+        }
+    )
+    return ImagingSystem(sensor, net)
+
+
+def _sensor(
+    config: TrainConfig, pattern: patterns.Pattern, mix: PatternMix | None, design: bool
+) -> SplitterSensor:
+    """The sensor: switching between patterns, learned (from designed kernels), a metasurface,
+    or fixed."""
+    if mix is not None:
+        return SwitchingSensor(pattern)
+    if config.pattern.learn:
+        gen = torch.Generator().manual_seed(seeds.pattern_seed(config))
+        sensor = LearnableSplitterSensor(pattern, init=config.pattern.init, generator=gen)
+        if design and config.pattern.design_steps:
+            designed = design_pattern(
+                pattern,
+                init=config.pattern.init,
+                steps=config.pattern.design_steps,
+                seed=seeds.pattern_seed(config),
+            )
+            with torch.no_grad():
+                sensor.logits.copy_(designed.logits)
+        return sensor
+    if config.pattern.metasurface:
+        return _metasurface_sensor(config.pattern.metasurface, pattern.period, config)
+    return SplitterSensor(pattern)
+
+
+def pattern_mix(config: TrainConfig) -> PatternMix | None:
+    """The patterns of a ``--pattern random`` run (one per step), or None for one pattern."""
+    if config.pattern.name.strip().lower() != "random":
+        return None
+    named = [patterns.get(name) for name in config.pattern.mix]
+    return PatternMix(named, config.pattern.mix_fraction, seed=seeds.mix_seed(config))
+
+
+def _metasurface_sensor(spec: str, period: tuple[int, int], config: TrainConfig) -> SplitterSensor:
+    """A :class:`~splitcam.physics.optics.MetasurfaceSensor` of the default geometry starting
+    from :func:`~splitcam.physics.optics.profile` ``spec`` (``random``, ``lens``, ``flat`` or a
+    .npy file)."""
+    from ..physics.optics import MetasurfaceSensor, Optics, profile
+
+    optics = Optics()
+    try:
+        return MetasurfaceSensor(
+            profile(spec, period, optics, seeds.pattern_seed(config)), period, optics
+        )
+    except ValueError as exc:
+        raise ConfigError(f"pattern.metasurface: {exc}") from None
+
+
+def build_optimizer(config: TrainConfig, system: ImagingSystem) -> torch.optim.Optimizer:
+    """Adam over the network (and a learned pattern, at ``pattern.lr``). Each parameter group
+    keeps its ``peak_lr``: what the schedule scales."""
+    groups = [
+        {
+            "params": list(system.network.parameters()),
+            "lr": config.optim.lr,
+            "peak_lr": config.optim.lr,
+        }
+    ]
+    sensor_params = list(system.sensor.parameters())
+    if sensor_params:
+        pattern_lr = config.pattern.lr or config.optim.lr
+        groups.append({"params": sensor_params, "lr": pattern_lr, "peak_lr": pattern_lr})
+    return torch.optim.Adam(groups, lr=config.optim.lr, betas=tuple(config.optim.betas))
+
+
+def _patch_sampler(
+    run: Run, source: Any, start_step: int, system: ImagingSystem, progress: bool
+) -> PatchSampler:
+    """This rank's training patches of the images ``source``, cut at whole periods of the
+    pattern."""
+    config = run.config
+    cache = ImageCache(
+        source,
+        min_size=config.data.patch_size,
+        max_images=config.data.max_images,
+        progress=progress and run.dist.is_main,
+    )
+    return PatchSampler(
+        cache,
+        patch_size=config.data.patch_size,
+        seed=seeds.sampler_seed(config, start_step),
+        rank=run.dist.rank,
+        world_size=run.dist.world_size,
+        partial=config.data.partial_periods,
+        # A new pattern every step: cut into periods of up to 4 (the largest drawn) instead.
+        period=(4, 4) if run.mix is not None else system.sensor.period,
+    )
+
+
+def build_noise(config: TrainConfig, start_step: int, rank: int) -> GaussianNoise | PhotonNoise:
+    """This rank's simulated sensor noise: Gaussian over ``optim.sigma_min..sigma_max``, or the
+    photon model at ``noise.photons``."""
+    seed = seeds.noise_seed(config, start_step, rank)
+    if config.noise.model == "photon":
+        return PhotonNoise(
+            tuple(config.noise.photons),
+            per_sample=config.optim.per_sample_sigma,
+            seed=seed,
+            **config.noise.sensor(),
+        )
+    return GaussianNoise(
+        (config.optim.sigma_min, config.optim.sigma_max),
+        per_sample=config.optim.per_sample_sigma,
+        seed=seed,
+    )

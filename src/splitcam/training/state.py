@@ -1,0 +1,227 @@
+"""A training run's state and what its checkpoint holds.
+
+:class:`Run` is what stays fixed while a run trains (its settings, device, processes, data for
+validation); :class:`TrainState` is what the steps change (the model, the optimiser, the
+divergence guard, the random generators, the step and the time spent). A checkpoint saves the
+latter with the record of the former that provenance needs, and a resume restores it exactly:
+the same weights, optimiser moments, generator states (of every rank) and guard scale.
+"""
+
+from __future__ import annotations
+
+import time
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import torch
+
+from .. import patterns
+from ..data.patches import PatchSampler
+from ..io import atomic_path
+from ..patterns.random import PatternMix
+from ..physics.noise import Exposure, GaussianNoise, PhotonNoise
+from ..physics.system import ImagingSystem
+from . import checkpoint as ckpt_io
+from . import seeds
+from .config import TrainConfig
+from .distributed import DistInfo, gather
+from .guard import DivergenceGuard
+
+
+@dataclass
+class Run:
+    """What stays fixed while a run trains."""
+
+    config: TrainConfig
+    run_dir: Path
+    device: torch.device
+    dist: DistInfo
+    #: bfloat16 autocast (else float32 throughout).
+    fast: bool
+    #: What the checkpoints record as the device (:func:`~splitcam.training.setup.device_name`).
+    device_label: str
+    #: The pattern the run started from (``Pattern.to_dict``).
+    start_pattern: dict[str, Any]
+    #: The patterns of a run over many (one per step), or None.
+    mix: PatternMix | None = None
+    #: What ``run.init_from`` started the run from (name, provenance), or None.
+    init_from: dict[str, Any] | None = None
+    train_images: int = 0
+    val_images: list[tuple[str, torch.Tensor]] = field(default_factory=list)
+    val_levels: list[float] | list[Exposure] = field(default_factory=list)
+    val_patterns: list[patterns.Pattern] | None = None
+
+    @property
+    def checkpoint_path(self) -> Path:
+        return self.run_dir / ckpt_io.CHECKPOINT_NAME
+
+    @property
+    def time_limit_s(self) -> float | None:
+        limit = self.config.run.time_limit
+        return 60 * limit if limit else None
+
+
+@dataclass
+class TrainState:
+    """What the training steps change."""
+
+    system: ImagingSystem
+    optimizer: torch.optim.Optimizer
+    guard: DivergenceGuard
+    sampler: PatchSampler
+    noise: GaussianNoise | PhotonNoise
+    #: Steps done (of the whole schedule, for a run continued from another's weights).
+    step: int
+    #: The step this run's optimiser began at (its moments warm up from there).
+    start_step: int = 0
+    #: Training time of the run so far, all processes (validation not included).
+    train_seconds: float = 0.0
+    #: The latest batch drawn (its fingerprint goes into the checkpoint).
+    last_batch: torch.Tensor | None = None
+    #: The latest logged values (the training window's and the latest validation's).
+    last_metrics: dict[str, float] = field(default_factory=dict)
+    timed_out: bool = False
+
+
+def restore(state: TrainState, loaded: ckpt_io.Checkpoint, run: Run) -> None:
+    """Continue from a checkpoint: weights, optimiser, step, time spent and generators.
+
+    The peak learning rates and Adam's betas are settings, not state: those of this run's
+    configuration apply (a changed ``--lr`` too).
+    """
+    peaks = [group["peak_lr"] for group in state.optimizer.param_groups]
+    ckpt_io.load_module(state.system, loaded)
+    ckpt_io.load_optimizer(state.optimizer, loaded)
+    state.step = int(loaded.meta["step"])
+    state.train_seconds = float(loaded.meta.get("train_seconds", 0.0))
+    restore_rng(loaded, state.sampler, state.noise, run.dist)
+    for group, peak in zip(state.optimizer.param_groups, peaks, strict=True):
+        group["peak_lr"] = peak
+        group["betas"] = tuple(run.config.optim.betas)
+
+
+def save_checkpoint(state: TrainState, run: Run) -> None:
+    """Write the checkpoint (on the main process; every rank takes part in the gathers), and for
+    a learned pattern its ``pattern.toml`` (and a metasurface's height map)."""
+    rng = gather_rng(state.sampler, state.noise, run.dist)
+    replicas = replica_report(state.system, state.last_batch, run.dist)
+    if not run.dist.is_main:
+        return
+    opt_tensors, opt_meta = ckpt_io.optimizer_tensors(state.optimizer)
+    tensors = {f"model/{k}": v for k, v in state.system.state_dict().items()}
+    tensors.update(opt_tensors)
+    tensors.update(rng)
+    ckpt_io.save(run.checkpoint_path, _meta(state, run, opt_meta, replicas), tensors)
+    _export_pattern(state.system, run)
+
+
+def _meta(
+    state: TrainState, run: Run, opt_meta: dict[str, Any], replicas: dict[str, Any]
+) -> dict[str, Any]:
+    """The checkpoint's JSON header."""
+    system = state.system
+    return {
+        "config": run.config.to_dict(),
+        "step": state.step,
+        "start_step": state.start_step,
+        "network": system.network.config(),
+        "pattern": system.sensor.to_pattern().to_dict(),
+        "start_pattern": run.start_pattern,
+        "optimizer": opt_meta,
+        "world_size": run.dist.world_size,
+        "train_seconds": state.train_seconds,
+        "lr_scale": state.guard.lr_scale,
+        "device": run.device_label,
+        "precision": "bf16" if run.fast else "fp32",
+        "train_images": run.train_images,
+        "init_from": run.init_from,
+        "replicas": replicas,
+        "time": time.strftime("%Y-%m-%dT%H:%M:%S"),
+    }
+
+
+def _export_pattern(system: ImagingSystem, run: Run) -> None:
+    """A learned pattern as ``pattern.toml``; a metasurface's height map too."""
+    settings = run.config.pattern
+    if settings.learn or settings.metasurface:
+        patterns.save(
+            system.sensor.to_pattern(f"{run.start_pattern['name']}-learned"),
+            run.run_dir / "pattern.toml",
+        )
+    if settings.metasurface:
+        export_profile(system.sensor, run.run_dir)
+
+
+def export_profile(sensor: Any, run_dir: Path) -> None:
+    """A metasurface run's learned height map: ``height.npy`` (µm) and ``height.png``."""
+    import numpy as np
+
+    from ..viz.patterns import draw_height_maps
+
+    height = sensor.height().detach().cpu().to(torch.float64).numpy()
+    with atomic_path(run_dir / "height.npy") as tmp:
+        np.save(tmp, height)
+    draw_height_maps(
+        [("learned height map", height)],
+        run_dir / "height.png",
+        period=tuple(sensor.period),
+        pitch=sensor.optics.pitch,
+        max_height=sensor.optics.max_height,
+    )
+
+
+def replica_report(
+    system: ImagingSystem, batch: torch.Tensor | None, info: DistInfo
+) -> dict[str, Any]:
+    """Per rank: a fingerprint of the model (network + sensor) and of the last batch drawn.
+
+    Under DistributedDataParallel the models must be identical on every rank and the batches
+    different; recording both in the checkpoint makes that checkable after the fact.
+    """
+    with torch.no_grad():
+        params = [p.detach().double().flatten() for p in system.parameters()]
+        weights = system.sensor.weights().detach().double().flatten()
+        vec = torch.cat([*params, weights])
+        ramp = torch.arange(1, vec.numel() + 1, dtype=torch.float64, device=vec.device)
+        drawn = batch.double().sum() if batch is not None else vec.new_zeros(())
+        fingerprint = torch.stack([vec.sum(), (vec * ramp).sum(), drawn.to(vec.device)]).cpu()
+    rows = gather(fingerprint, info)
+    return {
+        "model_fingerprints": [[float(r[0]), float(r[1])] for r in rows],
+        "batch_sums": [float(r[2]) for r in rows],
+    }
+
+
+def gather_rng(
+    sampler: PatchSampler, noise: GaussianNoise | PhotonNoise, info: DistInfo
+) -> dict[str, torch.Tensor]:
+    """RNG states of every rank (collected on rank 0) so a resume draws the same batches."""
+    mine = torch.cat([sampler.generator.get_state(), noise.generator.get_state()])
+    n_sampler = sampler.generator.get_state().numel()
+    out = {"rng/torch": torch.get_rng_state()}
+    for rank, state in enumerate(gather(mine, info)):
+        out[f"rng/sampler/{rank}"] = state[:n_sampler].clone()
+        out[f"rng/noise/{rank}"] = state[n_sampler:].clone()
+    return out
+
+
+def restore_rng(
+    loaded: ckpt_io.Checkpoint,
+    sampler: PatchSampler,
+    noise: GaussianNoise | PhotonNoise,
+    info: DistInfo,
+) -> None:
+    """Set this rank's generators (and torch's) to the checkpoint's; a rank it holds none for
+    (a run resumed with more processes than it had) is reseeded from the step."""
+    key = f"rng/sampler/{info.rank}"
+    if key in loaded.tensors:
+        sampler.generator.set_state(loaded.tensors[key])
+        noise.generator.set_state(loaded.tensors[f"rng/noise/{info.rank}"])
+    else:
+        warnings.warn(f"checkpoint has no RNG state for rank {info.rank}; reseeding", stacklevel=2)
+        patches, sensor_noise = seeds.reseeded(sampler.seed, info.rank, int(loaded.meta["step"]))
+        sampler.generator.manual_seed(patches)
+        noise.generator.manual_seed(sensor_noise)
+    torch.set_rng_state(loaded.tensors["rng/torch"])

@@ -1,0 +1,157 @@
+"""What a run trains and validates on: the training images, the held-out validation split, the
+noise levels and patterns validated, and the validation score itself."""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+from typing import Any
+
+import torch
+
+from .. import patterns
+from ..data.patches import ImageCache, list_images
+from ..data.testsets import centre_crop
+from ..evaluation.protocol import mean_psnr
+from ..physics.noise import Exposure
+from ..physics.system import ImagingSystem
+from ..recon.base import NetworkReconstructor
+from .config import ConfigError, TrainConfig
+
+logger = logging.getLogger(__name__)
+
+
+def val_split(config: TrainConfig) -> int:
+    """How many images (the last, sorted by name) the training folder holds out: the set
+    ``data.val_split``, none with a ``data.val`` folder, else ``min(32, max(1, n // 10))`` of
+    ``n >= 2`` images (so validation curves come by default)."""
+    data = config.data
+    if data.val or not data.train:
+        return 0
+    if data.val_split is not None:
+        return data.val_split
+    n = len(list_images(data.train))
+    return min(32, max(1, n // 10)) if n >= 2 else 0
+
+
+def _short_side(path: Path) -> int:
+    """An image file's smaller side, from its header (an unreadable file counts as large:
+    decoding reports it later, naming it)."""
+    from PIL import Image
+
+    try:
+        with Image.open(path) as im:
+            return min(im.size)
+    except OSError:
+        return 1 << 30
+
+
+def held_out(config: TrainConfig) -> list[Path]:
+    """The training folder's validation images: the last ``val_split`` (sorted by name) of those
+    that fit the validation crop (or, in a folder of smaller images, that are as large as its
+    largest), so a tiny image sorting last is never the whole validation set.
+
+    Raises:
+        ConfigError: The split would leave no training image.
+    """
+    data = config.data
+    split = val_split(config)
+    if not split:
+        return []
+    files = list_images(data.train)
+    sides = {f: _short_side(f) for f in files}
+    need = min(data.val_crop or 1, max(sides.values()))
+    chosen = [f for f in files if sides[f] >= need][-split:]
+    if len(chosen) >= len(files):
+        raise ConfigError(
+            f"data.val_split {split} leaves no training images (the folder has {len(files)})"
+        )
+    return chosen
+
+
+def train_source(config: TrainConfig) -> Any:
+    """The training images: the ``data.train`` folder, or its files but the held-out ones.
+
+    Raises:
+        ConfigError: No training folder, or the split would leave no training image.
+    """
+    if not config.data.train:
+        raise ConfigError("no training data: give --data DIR (or data.train in the config)")
+    held = set(held_out(config))
+    if held:
+        return [f for f in list_images(config.data.train) if f not in held]
+    return config.data.train
+
+
+def val_images(config: TrainConfig) -> list[tuple[str, torch.Tensor]]:
+    """Validation images: the held-out split or the --val folder, centre-cropped."""
+    data = config.data
+    if data.val:
+        source: Any = data.val
+    elif val_split(config) and data.train:
+        source = held_out(config)
+    else:
+        return []
+    cache = ImageCache(source, min_size=1, max_images=data.val_max_images, progress=False)
+    images = []
+    for i, name in enumerate(cache.names):
+        img = cache.image(i)
+        if data.val_crop:
+            img = centre_crop(img, data.val_crop, multiple=1)
+        images.append((name, img.contiguous()))
+    return images
+
+
+def say_held_out(config: TrainConfig, images: list[tuple[str, torch.Tensor]]) -> None:
+    """Log which training images a run holds out for validation (nothing with a --val folder)."""
+    if not images or config.data.val:
+        return
+    names = [name for name, _ in images]
+    shown = ", ".join(names[:4]) + (", ..." if len(names) > 4 else "")
+    crop = f" (of those at least {config.data.val_crop} px)" if config.data.val_crop else ""
+    logger.info(
+        f"validation: {len(names)} of the last {val_split(config)} images of "
+        f"{config.data.train}{crop}, held out of training: {shown}"
+    )
+
+
+def val_levels(config: TrainConfig) -> list[float] | list[Exposure]:
+    """The noise levels validated: ``data.val_sigmas``, or the photon model's exposures."""
+    if config.noise.model == "photon":
+        return [Exposure(n, **config.noise.sensor()) for n in config.noise.val_photons]
+    return list(config.data.val_sigmas)
+
+
+def validate(
+    system: ImagingSystem,
+    images: list[tuple[str, torch.Tensor]],
+    sigmas: list[float] | list[Exposure],
+    val_patterns: list[patterns.Pattern] | None = None,
+) -> dict[str, float]:
+    """Mean PSNR per noise level (a sigma, or a photon-model exposure: ``val_psnr_N<photons>``)
+    on the validation images, by the evaluation protocol itself
+    (:func:`splitcam.evaluation.protocol.mean_psnr`): the pattern as a run's checkpoint records
+    it, the same simulation, noise, reconstruction, rounding and averaging as ``splitcam
+    evaluate``, so the logged value is what ``evaluate`` reports for this step.
+
+    With ``val_patterns`` (a run over many patterns) each of them is scored
+    (``val_psnr_<pattern>_<level>``) and the plain keys hold the means over the patterns."""
+    was_training = system.training
+    system.eval()
+    targets = val_patterns or [system.sensor.to_pattern()]
+    per_pattern = {}
+    for pattern in targets:
+        method = NetworkReconstructor(system.network, pattern, "validation")
+        per_pattern[pattern.name] = mean_psnr(method, images, sigmas)
+    system.train(was_training)
+
+    def key(s: float | Exposure) -> str:
+        return f"N{s.photons:g}" if isinstance(s, Exposure) else f"{s:g}"
+
+    means = {s: sum(m[s] for m in per_pattern.values()) / len(per_pattern) for s in sigmas}
+    out = {f"val_psnr_{key(s)}": value for s, value in means.items()}
+    if val_patterns:
+        for name, scores in per_pattern.items():
+            out.update({f"val_psnr_{name}_{key(s)}": v for s, v in scores.items()})
+    out["val_psnr"] = sum(means.values()) / len(means)
+    return out
