@@ -12,10 +12,10 @@ import torch
 
 from splitcam import patterns
 from splitcam.cli import main
-from splitcam.data.tensorfiles import meta_checksum
 from splitcam.evaluation import evaluate, markdown_tables, summarise
 from splitcam.evaluation.protocol import mean_psnr, score_images
 from splitcam.evaluation.tables import read_rows
+from splitcam.io.tensorfiles import meta_checksum
 from splitcam.io.weights import MODELS_DIR
 from splitcam.methods import build_method, build_model, model_domain, trained_domain
 from splitcam.physics import DOMAINS, check_domain, linear_to_srgb, srgb_to_linear

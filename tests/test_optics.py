@@ -1,4 +1,4 @@
-"""Scalar wave optics from a metasurface height map to splitter kernels (splitcam.physics.optics)."""
+"""Scalar wave optics from a metasurface height map to splitter kernels (physics.optics)."""
 
 from __future__ import annotations
 

@@ -629,8 +629,8 @@ def test_joint_run_with_design_steps_starts_from_the_designed_kernels(
     """pattern.design_steps: the learned kernels start where `design` takes the initialisation
     (lower closed-form error than the support start), and a resume keeps the trained kernels
     instead of designing again."""
+    from splitcam.design import design_pattern
     from splitcam.recon.closed_form import closed_form_mse
-    from splitcam.recon.design import design_pattern
     from splitcam.training import setup
     from splitcam.training.trainer import build_system
 

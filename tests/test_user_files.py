@@ -86,8 +86,10 @@ def test_init_from_an_ambiguous_name_is_refused(tmp_path, monkeypatch):
         train(config, progress=False)
 
 
-def test_validation_never_uses_an_image_smaller_than_its_crop(tmp_path, capsys):
+def test_validation_never_uses_an_image_smaller_than_its_crop(tmp_path, caplog):
     """A 16x16 image sorting last would have been the whole validation set."""
+    import logging
+
     from splitcam.training import train
     from splitcam.training.trainer import held_out
 
@@ -96,9 +98,9 @@ def test_validation_never_uses_an_image_smaller_than_its_crop(tmp_path, capsys):
     config = tiny_config(data, tmp_path / "run", **{"data.val_crop": 32, "data.val_split": 1})
     chosen = held_out(config)
     assert [p.name for p in chosen] == ["im4.png"]
+    caplog.set_level(logging.INFO, logger="splitcam")
     train(config, progress=True)
-    out = capsys.readouterr().out
-    assert "validation: 1 of the last 1 images" in out and "training: im4\n" in out
+    assert "validation: 1 of the last 1 images" in caplog.text and "training: im4" in caplog.text
     # The tiny image is trained on, not lost: the training set is the rest.
     from splitcam.training.trainer import _train_source
 
@@ -110,21 +112,23 @@ def test_validation_never_uses_an_image_smaller_than_its_crop(tmp_path, capsys):
     assert [p.name for p in held_out(big)] == ["im3.png", "im4.png"]
 
 
-def test_resuming_a_finished_run_with_other_settings_records_nothing(tmp_path, capsys):
+def test_resuming_a_finished_run_with_other_settings_records_nothing(tmp_path, caplog):
     """No step runs, so the run's config, changes and checkpoint stay as they were (an exported
     model would otherwise report a batch size and learning rate it was never trained with)."""
     import json
+    import logging
 
     from splitcam.training import checkpoint as ckpt_io
     from splitcam.training import train
 
+    caplog.set_level(logging.INFO, logger="splitcam")
     data = blocky_images(tmp_path / "img", 5)
     run = tmp_path / "run"
     train(tiny_config(data, run, **{"optim.steps": 3}), progress=False)
     before = {n: (run / n).read_bytes() for n in ("config.json", "checkpoint.safetensors")}
     changed = tiny_config(data, run, **{"optim.steps": 3, "optim.lr": 0.5, "data.batch_size": 2})
     result = train(changed, resume=True, progress=False)
-    assert result.step == 3 and "nothing to train" in capsys.readouterr().out
+    assert result.step == 3 and "nothing to train" in caplog.text
     assert all((run / n).read_bytes() == b for n, b in before.items())
     assert not (run / "changes.jsonl").exists()
     assert ckpt_io.read_meta(run / "checkpoint.safetensors")["config"]["optim"]["lr"] == 1e-3
@@ -196,7 +200,7 @@ def test_an_edited_model_file_is_refused_and_old_files_are_fingerprinted_by_thei
     """An edited `radius` cost 5.2 dB without an error; now the fields carry a checksum."""
     import json
 
-    from splitcam.data.tensorfiles import meta_checksum
+    from splitcam.io.tensorfiles import meta_checksum
     from splitcam.methods import build_model
     from splitcam.training import train
     from splitcam.training.models import ModelError, export_model, load_model

@@ -33,7 +33,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from . import patterns
-from .data.tensorfiles import meta_checksum
+from .io.tensorfiles import meta_checksum
 from .physics.light import check_domain
 from .recon.base import NetworkReconstructor, Reconstructor
 from .recon.closed_form import closed_form_lmmse

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import logging
 import sys
 from collections.abc import Sequence
 
@@ -63,10 +64,27 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+class _Console(logging.Handler):
+    """The library's messages (``logging.getLogger("splitcam...")``) on the console: INFO to
+    stdout, WARNING and above to stderr. The stream is looked up per message, so whatever
+    ``sys.stdout`` is at the time (a test's capture included) receives it."""
+
+    def emit(self, record: logging.LogRecord) -> None:
+        try:
+            stream = sys.stderr if record.levelno >= logging.WARNING else sys.stdout
+            print(self.format(record), file=stream, flush=True)
+        except Exception:
+            self.handleError(record)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the ``splitcam`` command; returns the exit status."""
     parser = build_parser()
     args = parser.parse_args(argv)
+    logger = logging.getLogger("splitcam")
+    console, level = _Console(), logger.level
+    logger.addHandler(console)
+    logger.setLevel(logging.INFO)
     try:
         return args.handler(args)
     except KeyboardInterrupt:
@@ -78,3 +96,6 @@ def main(argv: Sequence[str] | None = None) -> int:
         message = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         print(f"splitcam {args.command}: error: {message}", file=sys.stderr)
         return 1
+    finally:
+        logger.removeHandler(console)
+        logger.setLevel(level)

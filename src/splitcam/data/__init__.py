@@ -40,7 +40,6 @@ _SUBMODULES = (
     "patches",
     "raw",
     "registry",
-    "tensorfiles",
     "testsets",
 )
 

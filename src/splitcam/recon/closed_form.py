@@ -38,7 +38,7 @@ import numpy as np
 import torch
 
 from ..data.patches import ImageCache
-from ..data.tensorfiles import load_pair, save_pair
+from ..io.tensorfiles import load_pair, save_pair
 from ..io.weights import IMAGE_STATISTICS, IMAGE_STATISTICS_LINEAR
 from ..patterns import Pattern, get
 from ..physics.light import check_domain, srgb_to_linear

@@ -22,7 +22,7 @@ import torch.nn.functional as F
 
 from ..checks import check_raw
 from ..data.patches import ImageCache, PatchSampler
-from ..data.tensorfiles import load_pair, save_pair
+from ..io.tensorfiles import load_pair, save_pair
 from ..io.weights import LMMSE_DIR
 from ..patterns import Pattern, PatternError, get
 from ..physics.noise import Exposure, check_level

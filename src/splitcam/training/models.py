@@ -27,7 +27,7 @@ from typing import Any
 
 import torch
 
-from ..data.tensorfiles import load_pair, paired_paths, save_pair
+from ..io.tensorfiles import load_pair, paired_paths, save_pair
 from ..io.weights import MODELS_DIR
 from ..patterns import Pattern
 from ..physics.sensor import SplitterSensor

@@ -17,7 +17,7 @@ from typing import Any
 
 import torch
 
-from ..io import write_bytes, write_text
+from . import write_bytes, write_text
 
 
 class TensorFileError(ValueError):
