@@ -10,8 +10,8 @@ import torch
 
 from splitcam import patterns
 from splitcam.cli import main
-from splitcam.recon.closed_form import closed_form_mse
 from splitcam.design import closed_form_psnr, design_pattern
+from splitcam.recon.closed_form import closed_form_mse
 
 SIGMAS = [0.0, 15.0]
 
