@@ -528,3 +528,95 @@ def test_table1_checks_rank_b_and_c_among_the_patterns_evaluated():
     assert verdicts({**four, "E": [35, 32.5]})["B and C last at every σ"] is True
     assert verdicts({**four, "E": [33.5, 31]})["B and C last at every σ"] is False
     assert not any("B and C" in s for s in verdicts({"A": [40, 33], "D": [41, 34]}))
+
+
+def test_paper_tables_writes_every_section_beside_the_paper(tmp_path):
+    """reproduce.md from a summary with every row, LMMSE baselines, Malvar, learned patterns and
+    zooms: the cells, gains and ranks are the hand-computed ones, the sections in order."""
+    from splitcam.evaluation.report import paper_tables
+    from splitcam.physics.sensor import LearnableSplitterSensor
+
+    # PSNR, SSIM and CIEDE2000 at sigma 0 and 20.
+    ours = {
+        "A": [(39.0, 0.97, 1.0), (33.0, 0.90, 2.0)],
+        "B": [(32.0, 0.91, 1.0), (31.0, 0.88, 2.0)],
+        "C": [(31.0, 0.90, 1.0), (30.5, 0.87, 2.0)],
+        "D": [(40.0, 0.975, 1.0), (33.5, 0.91, 2.0)],
+        "E": [(35.0, 0.96, 1.0), (32.0, 0.90, 2.0)],
+        "bayer": [(38.0, 0.96, 1.5), (32.5, 0.89, 3.0)],
+        "A optimised": [(39.5, 0.972, 1.0), (33.6, 0.905, 2.0)],
+        "D optimised": [(40.5, 0.978, 0.9), (34.0, 0.915, 1.8)],
+        "D optimised (random init.)": [(40.4, 0.977, 0.95), (34.1, 0.916, 1.85)],
+        "lmmse-A": [(36.0, 0.95, 2.0), (31.0, 0.85, 4.0)],
+        "lmmse-D": [(37.0, 0.955, 2.0), (31.5, 0.86, 4.0)],
+        "bayer+malvar2004": [(35.0, 0.94, 2.5), (30.0, 0.80, 5.0)],
+    }
+    summary = {
+        name: {
+            "pattern": "D",
+            "domain": "srgb",
+            "all": {
+                s: {"psnr": p, "ssim": q, "ciede2000": c, "n_images": 42, "n_infinite": 0}
+                for s, (p, q, c) in zip(["0", "20"], values, strict=True)
+            },
+        }
+        for name, values in ours.items()
+    }
+    rows = {r: r for r in ours if not r.startswith(("lmmse", "bayer+"))}
+    learned = {"A optimised": LearnableSplitterSensor("A").to_pattern("A-opt")}
+    report = paper_tables(
+        summary,
+        rows,
+        tmp_path,
+        budgets={r: f"{r} budget" for r in rows if r != "E"},
+        learned=learned,
+        zooms=["zoom/x.png"],
+        baselines={"A": "lmmse-A", "D": "lmmse-D", "B": "not evaluated"},
+    ).read_text()
+    headings = [line for line in report.splitlines() if line.startswith("## ")]
+    assert headings == [
+        "## Budget of each model",
+        "## Table 1: every pattern, fixed",
+        "## Table 2: A against A optimised",
+        "## Table 3: D against D optimised",
+        "## Fig. 9: bayer, D, D optimised and D optimised from random",
+        "## The paper's conclusions at our budget",
+        "## Without training: the LMMSE of every pattern",
+        "## Learned patterns (Fig. 6)",
+        "## Zoomed crops (Figs. 4, 5, 7, 8)",
+    ]
+    lines = report.splitlines()
+    expected = [
+        "Ours: mean over 42 images; cells are",
+        "- **A** (`A`): A budget",
+        "- **E** (`E`): unknown",
+        "| pattern | σ=0 | σ=20 |",
+        "| A | 39.00 / 0.9700 (40.02, -1.02) | 33.00 / 0.9000 (33.47, -0.47) |",
+        "| bayer | 38.00 / 0.9600 | 32.50 / 0.8900 |",
+        "| A | 2 (2) | 2 (2) |",
+        "| C | 5 (5) | 5 (5) |",
+        "| A optimised | 39.50 / 0.9720 (40.33, -0.83) | 33.60 / 0.9050 (34.25, -0.65) |",
+        "| gain (paper) | +0.50 (+0.31) | +0.60 (+0.78) |",  # Table 2
+        "| gain (paper) | +0.50 (+0.68) | +0.50 (+0.32) |",  # Table 3
+        "| pattern | CIEDE2000 σ=0 | CIEDE2000 σ=20 |",
+        "| bayer | 1.500 | 3.000 |",
+        "![Fig. 9](fig9_sigma_curves.png)",
+        "- holds: D ahead of A at every σ (D − A: +1.00, +0.50 dB)",
+        "- holds: A optimised ahead of A at every σ (+0.50, +0.60 dB)",
+        "| A | 36.00 / 0.9500 (net +3.00) | 31.00 / 0.8500 (net +2.00) |",
+        "| D | 37.00 / 0.9550 (net +3.00) | 31.50 / 0.8600 (net +2.00) |",
+        "| bayer, Malvar 2004 | 35.00 / 0.9400 | 30.00 / 0.8000 |",
+        "Ranks by LMMSE PSNR among A–E: σ=0: D A; σ=20: D A",
+        "- LMMSE, holds: D ahead of A at every σ (D − A: +1.00, +0.50 dB)",
+        "![A optimised](patterns/A_optimised.png)",
+        "![zoom](zoom/x.png)",
+    ]
+    positions = []
+    for want in expected:
+        found = [i for i, line in enumerate(lines) if line.startswith(want)]
+        assert found, want
+        positions.append(found[0] if "gain" not in want else found[-1 if "0.68" in want else 0])
+    assert positions == sorted(positions)
+    assert not any(line.startswith("| B | ") and "net" in line for line in lines)
+    assert (tmp_path / "patterns/A_optimised.png").is_file()
+    assert (tmp_path / "fig9_sigma_curves.png").is_file()

@@ -26,8 +26,9 @@ import hashlib
 import json
 import os
 from collections.abc import Iterator, Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
+from typing import Any
 
 import torch
 
@@ -276,22 +277,92 @@ def evaluate(
             sigma, crop or domain, exposures with different sensor settings, or a zoom that
             names an unknown image or a region outside it; all checked before any work.
     """
+    domain, sigmas, sensor_settings = _check_settings(methods, sigmas, crop, domain)
+    zoom = _zoom_plan(zoom_images, datasets)
+    _check_image_sizes(datasets, crop)
+    fingerprints = {result_label(m.name, domain): _fingerprint(m, crop, domain) for m in methods}
+    out_dir = Path(out) if out is not None else None
+    done: dict[tuple, EvalRow] = {}
+    others: list[EvalRow] = []
+    if out_dir is not None:
+        done, others = _start_folder(
+            out_dir, methods, fingerprints, sensor_settings, crop, resume=resume
+        )
+    run = _Run(
+        methods=methods,
+        sensors={m.name: SplitterSensor(m.pattern) for m in methods},
+        domain=domain,
+        crop=crop,
+        out_dir=out_dir,
+        done=done,
+        zooms=zoom,
+        save_images=save_images,
+        zoom_only=zoom_only,
+        zoom_sigmas=zoom_sigmas,
+    )
+    jobs = [
+        (dataset, name, rgb, sigma)
+        for dataset, images in datasets
+        for name, rgb in images
+        for sigma in sigmas
+    ]
+    run.bar = _progress_bar(len(jobs) * len(methods), len(done)) if progress else None
+    try:
+        for dataset, image_name, rgb, sigma in jobs:
+            _evaluate_job(run, dataset, image_name, rgb, sigma)
+    finally:
+        if run.bar is not None:
+            run.bar.close()
+    if out_dir is not None:
+        write_summary([*others, *run.rows], out_dir)
+    return run.rows
+
+
+def _check_settings(
+    methods: Sequence[Reconstructor],
+    sigmas: Sequence[float | Exposure],
+    crop: int,
+    domain: str,
+) -> tuple[str, list[float | Exposure], dict | None]:
+    """The domain, noise levels and photon sensor settings of an evaluation, checked with its
+    methods and crop.
+
+    Raises:
+        ValueError: No method, duplicate method names, a method of another light domain, a bad
+            or no sigma, exposures with different sensor settings or a bad crop.
+    """
     if not methods:
         raise ValueError("expected at least one method to evaluate")
     names = [m.name for m in methods]
     if len(set(names)) != len(names):
         raise ValueError(f"expected distinct method names, got {names}")
     domain = check_method_domains(methods, domain)
-    sigmas = [check_level(s) for s in sigmas]
-    if not sigmas:
+    levels = [check_level(s) for s in sigmas]
+    if not levels:
         raise ValueError("expected at least one sigma")
-    sensor_settings = _sensor_settings(sigmas)
+    sensor_settings = _sensor_settings(levels)
     if isinstance(crop, bool) or not isinstance(crop, int) or crop < 0:
         raise ValueError(f"expected crop as an integer >= 0, got {crop!r}")
+    return domain, levels, sensor_settings
+
+
+def _zoom_plan(
+    zoom_images: Sequence[str | Zoom] | None, datasets: Sequence[tuple[str, Images]]
+) -> dict[str, list[Zoom]]:
+    """The zooms of each image (:func:`_check_zooms`): those given (specs parsed), by default
+    the first image of each dataset."""
     zooms = [z if isinstance(z, Zoom) else parse_zoom(z) for z in zoom_images or ()]
     if zoom_images is None:
         zooms = [Zoom(images[0][0]) for _, images in datasets if images]
-    zoom = _check_zooms(zooms, datasets)
+    return _check_zooms(zooms, datasets)
+
+
+def _check_image_sizes(datasets: Sequence[tuple[str, Images]], crop: int) -> None:
+    """Every image is large enough for SSIM's window after the border crop.
+
+    Raises:
+        ValueError: Images too small (the first five named).
+    """
     need = SSIM_WINDOW + 2 * crop  # what SSIM's window needs after the border crop
     small = [
         f"{dataset}/{name} ({rgb.shape[-1]}x{rgb.shape[-2]})"
@@ -305,112 +376,140 @@ def evaluate(
             f"a {crop}-pixel border crop: {', '.join(small[:5])}{' ...' if len(small) > 5 else ''}"
             f"; remove them from the folder"
         )
-    fingerprints = {result_label(m.name, domain): _fingerprint(m, crop, domain) for m in methods}
 
-    out_dir = Path(out) if out is not None else None
-    done: dict[tuple, EvalRow] = {}
-    others: list[EvalRow] = []
-    if out_dir is not None:
-        out_dir.mkdir(parents=True, exist_ok=True)
-        done, others, other_prints = (
-            _previous_rows(out_dir, fingerprints, sensor_settings, crop) if resume else ({}, [], {})
-        )
-        # Rewrite the CSV with the rows kept (this evaluation's so far, and those of other
-        # methods, which stay), then append: the file holds every result that still applies.
-        write_summary([*others, *done.values()], out_dir)
-        write_text(
-            out_dir / SETTINGS_NAME,
-            json.dumps(
-                {
-                    "crop": crop,
-                    "fingerprints": {**other_prints, **fingerprints},
-                    "photon_sensor": sensor_settings,
-                },
-                indent=2,
-            )
-            + "\n",
-        )
-        (out_dir / "patterns").mkdir(exist_ok=True)
-        for method in methods:
-            save(method.pattern, out_dir / "patterns" / f"{method.name}.json")
 
-    sensors = {m.name: SplitterSensor(m.pattern) for m in methods}
-    jobs = [
-        (dataset, name, rgb, sigma)
-        for dataset, images in datasets
-        for name, rgb in images
-        for sigma in sigmas
-    ]
-    total = len(jobs) * len(methods)
-    bar = None
-    if progress:
-        from tqdm import tqdm
-
-        bar = tqdm(
-            total=total, initial=len(done), unit="recon", desc="evaluate", dynamic_ncols=True
+def _start_folder(
+    out_dir: Path,
+    methods: Sequence[Reconstructor],
+    fingerprints: dict[str, str],
+    sensor_settings: dict | None,
+    crop: int,
+    *,
+    resume: bool,
+) -> tuple[dict[tuple, EvalRow], list[EvalRow]]:
+    """Prepare ``out_dir`` for an evaluation: the results kept from an earlier one (with
+    ``resume``, :func:`_previous_rows`) rewritten as the CSV and summary, ``evaluation.json``
+    and the methods' patterns written. Returns the rows reused and those of other methods."""
+    out_dir.mkdir(parents=True, exist_ok=True)
+    done, others, other_prints = (
+        _previous_rows(out_dir, fingerprints, sensor_settings, crop) if resume else ({}, [], {})
+    )
+    # Rewrite the CSV with the rows kept (this evaluation's so far, and those of other
+    # methods, which stay), then append: the file holds every result that still applies.
+    write_summary([*others, *done.values()], out_dir)
+    write_text(
+        out_dir / SETTINGS_NAME,
+        json.dumps(
+            {
+                "crop": crop,
+                "fingerprints": {**other_prints, **fingerprints},
+                "photon_sensor": sensor_settings,
+            },
+            indent=2,
         )
-    rows: list[EvalRow] = []
-    try:
-        for dataset, image_name, rgb, sigma in jobs:
-            this_zoom = _zoom_at(zoom.get(image_name, []), sigma)
-            zoomed = (
-                (save_images or zoom_only)
-                and this_zoom is not None
-                and (zoom_sigmas is None or sigma in zoom_sigmas)
-            )
-            outputs = {}
-            photons = sigma.photons if isinstance(sigma, Exposure) else 0.0
-            level = level_label(sigma)
-            for method in methods:
-                key = (method.name, dataset, image_name, level, domain)
-                if key in done and not zoomed:
-                    rows.append(done[key])
-                    continue
-                pred = simulate_and_reconstruct(
-                    method, sensors[method.name], image_name, rgb, sigma, domain=domain
-                )
-                scores = score(pred, rgb, crop=crop)
-                row = EvalRow(
-                    method.name,
-                    method.pattern.name,
-                    dataset,
-                    image_name,
-                    0.0 if photons else sigma,
-                    **scores,
-                    photons=photons,
-                    domain=domain,
-                )
-                rows.append(row)
-                outputs[method.name] = (pred, scores)
-                if out_dir is not None and key not in done:
-                    append_rows(out_dir / CSV_NAME, [row])
-                if bar is not None:
-                    if key not in done:
-                        bar.update(1)
-                    bar.set_postfix_str(
-                        f"{dataset}/{image_name} {'' if photons else 's'}{level} "
-                        f"{result_label(method.name, domain)} "
-                        f"{scores['psnr']:.2f} dB",
-                        refresh=False,
-                    )
-            if out_dir is not None and outputs and (save_images or zoomed):
-                _save_images(
-                    out_dir,
-                    dataset,
-                    image_name,
-                    sigma,
-                    rgb,
-                    outputs if save_images else {},
-                    this_zoom if zoomed else None,
-                    zoom_outputs=outputs,
-                    domain=domain,
-                )
-    finally:
-        if bar is not None:
-            bar.close()
-    if out_dir is not None:
-        write_summary([*others, *rows], out_dir)
-    return rows
+        + "\n",
+    )
+    (out_dir / "patterns").mkdir(exist_ok=True)
+    for method in methods:
+        save(method.pattern, out_dir / "patterns" / f"{method.name}.json")
+    return done, others
+
+
+def _progress_bar(total: int, initial: int):
+    """A progress bar over every reconstruction, ``initial`` of them already done."""
+    from tqdm import tqdm
+
+    return tqdm(total=total, initial=initial, unit="recon", desc="evaluate", dynamic_ncols=True)
+
+
+@dataclass
+class _Run:
+    """One evaluation under way: its methods and their sensors, settings, output folder (or
+    ``None``), the rows reused from an earlier run (by key), the zooms of each image, the
+    progress bar (or ``None``) and the rows so far, in order."""
+
+    methods: Sequence[Reconstructor]
+    sensors: dict[str, SplitterSensor]
+    domain: str
+    crop: int
+    out_dir: Path | None
+    done: dict[tuple, EvalRow]
+    zooms: dict[str, list[Zoom]]
+    save_images: bool
+    zoom_only: bool
+    zoom_sigmas: Sequence[float] | None
+    bar: Any = None
+    rows: list[EvalRow] = field(default_factory=list)
+
+
+def _evaluate_job(
+    run: _Run, dataset: str, image_name: str, rgb: torch.Tensor, sigma: float | Exposure
+) -> None:
+    """Every method on one image at one noise level: rows reused where the run has them (and
+    no zoom needs the reconstruction), else computed; then the images and zoom written."""
+    this_zoom = _zoom_at(run.zooms.get(image_name, []), sigma)
+    zoomed = (
+        (run.save_images or run.zoom_only)
+        and this_zoom is not None
+        and (run.zoom_sigmas is None or sigma in run.zoom_sigmas)
+    )
+    outputs = {}
+    for method in run.methods:
+        key = (method.name, dataset, image_name, level_label(sigma), run.domain)
+        if key in run.done and not zoomed:
+            run.rows.append(run.done[key])
+            continue
+        outputs[method.name] = _evaluate_method(run, method, key, rgb, sigma)
+    if run.out_dir is not None and outputs and (run.save_images or zoomed):
+        _save_images(
+            run.out_dir,
+            dataset,
+            image_name,
+            sigma,
+            rgb,
+            outputs if run.save_images else {},
+            this_zoom if zoomed else None,
+            zoom_outputs=outputs,
+            domain=run.domain,
+        )
+
+
+def _evaluate_method(
+    run: _Run, method: Reconstructor, key: tuple, rgb: torch.Tensor, sigma: float | Exposure
+) -> tuple[torch.Tensor, dict[str, float]]:
+    """One method's reconstruction and scores of the job ``key`` (method, dataset, image,
+    level, domain): its row added to the run and, if new, to ``per_image.csv`` and the
+    progress bar's count."""
+    _, dataset, image_name, level, domain = key
+    pred = simulate_and_reconstruct(
+        method, run.sensors[method.name], image_name, rgb, sigma, domain=domain
+    )
+    scores = score(pred, rgb, crop=run.crop)
+    photons = sigma.photons if isinstance(sigma, Exposure) else 0.0
+    row = EvalRow(
+        method.name,
+        method.pattern.name,
+        dataset,
+        image_name,
+        0.0 if photons else sigma,
+        **scores,
+        photons=photons,
+        domain=domain,
+    )
+    run.rows.append(row)
+    new = key not in run.done
+    if run.out_dir is not None and new:
+        append_rows(run.out_dir / CSV_NAME, [row])
+    if run.bar is not None:
+        if new:
+            run.bar.update(1)
+        run.bar.set_postfix_str(
+            f"{dataset}/{image_name} {'' if photons else 's'}{level} "
+            f"{result_label(method.name, domain)} "
+            f"{scores['psnr']:.2f} dB",
+            refresh=False,
+        )
+    return pred, scores
 
 
 def _sensor_settings(levels: Sequence[float | Exposure]) -> dict | None:

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import os
+from dataclasses import dataclass
 from pathlib import Path
 
 from .. import patterns
@@ -332,6 +333,243 @@ def checks(summary: dict, rows: dict[str, str], sigmas: list[str]) -> list[tuple
     return out
 
 
+@dataclass(frozen=True)
+class _Tables:
+    """What every section of ``reproduce.md`` reads: the summary, the paper row → method map,
+    the noise levels of the rows present (in the summary's order) and the folder written to."""
+
+    summary: dict
+    rows: dict[str, str]
+    sigmas: list[str]
+    out: Path
+
+    @classmethod
+    def of(cls, summary: dict, rows: dict[str, str], out: Path) -> _Tables:
+        sigmas = list(
+            dict.fromkeys(s for m in rows.values() if m in summary for s in summary[m]["all"])
+        )
+        return cls(summary, rows, sigmas, out)
+
+    def has(self, row: str) -> bool:
+        """Whether the paper row's method is in the summary."""
+        return self.rows.get(row) in self.summary
+
+    def ours(self, row: str, s: str) -> dict | None:
+        """Our means of a paper row at one level (``None`` where it was not evaluated)."""
+        m = self.rows.get(row)
+        return self.summary[m]["all"].get(s) if m in self.summary else None
+
+    @staticmethod
+    def paper(row: str, s: str) -> tuple[float, float] | None:
+        """The paper's PSNR and SSIM of a row at one level, where the paper has them."""
+        if row in PAPER and s in PAPER_SIGMAS:
+            return PAPER[row][PAPER_SIGMAS.index(s)]
+        return None
+
+    @property
+    def head(self) -> str:
+        return _line("pattern", [f"σ={s}" for s in self.sigmas])
+
+    @property
+    def rule(self) -> str:
+        return "|---|" + "---|" * len(self.sigmas)
+
+    def cells_row(self, row: str) -> str:
+        """A table line of ours beside the paper's (:func:`_cell`) at every level."""
+        return _line(row, [_cell(self.ours(row, s), self.paper(row, s)) for s in self.sigmas])
+
+
+def _line(first: str, cells: list[str]) -> str:
+    """A markdown table line."""
+    return f"| {first} | " + " | ".join(cells) + " |"
+
+
+def _intro(t: _Tables) -> list[str]:
+    n = max(
+        (
+            t.summary[m]["all"][s]["n_images"]
+            for m in t.rows.values()
+            if m in t.summary
+            for s in t.summary[m]["all"]
+        ),
+        default=0,
+    )
+    domains = (t.summary[m].get("domain", "srgb") for m in t.rows.values() if m in t.summary)
+    return [
+        "# The paper's tables, reproduced with splitcam's shipped models",
+        "",
+        f"Ours: mean over {n} images; cells are our PSNR dB / SSIM, then (the paper's PSNR, "
+        "ours − paper). The paper trained 10^6 GPU steps of batch 80 on DIV2K; our budgets are "
+        "below. B, C and E are modelled patterns (SPEC section 2).",
+        "",
+        domain_line(domains),
+        "",
+    ]
+
+
+def _budget_section(t: _Tables, budgets: dict[str, str] | None) -> list[str]:
+    lines = ["## Budget of each model", ""]
+    for row, method in t.rows.items():
+        lines.append(f"- **{row}** (`{method}`): {(budgets or {}).get(row, 'unknown')}")
+    return lines
+
+
+def _table1_section(t: _Tables) -> list[str]:
+    """Table 1 (A-E and bayer) and, for A-E, the ranks by PSNR at every level."""
+    lines = ["", "## Table 1: every pattern, fixed", "", t.head, t.rule]
+    present = [r for r in (*TABLE1, "bayer") if t.has(r)]
+    lines += [t.cells_row(row) for row in present]
+    ranked = [r for r in TABLE1 if r in present]
+    if not ranked:
+        return lines
+    lines += [
+        "",
+        "Ranks by PSNR among A–E (ours; the paper's in brackets: D 1, A 2, E 3, B 4, C 5):",
+        "",
+        t.head.replace("pattern", "rank"),
+        t.rule,
+    ]
+    paper_rank = {"D": 1, "A": 2, "E": 3, "B": 4, "C": 5}
+    per_sigma = {s: _ranks({r: t.ours(r, s)["psnr"] for r in ranked}) for s in t.sigmas}
+    for row in ranked:
+        lines.append(_line(row, [f"{per_sigma[s][row]} ({paper_rank[row]})" for s in t.sigmas]))
+    return lines
+
+
+def _tables23_section(t: _Tables) -> list[str]:
+    """Tables 2 and 3 (A, D against the pattern learned from it) with the gain of learning."""
+    lines: list[str] = []
+    for number, start in ((2, "A"), (3, "D")):
+        opt = f"{start} optimised"
+        if not (t.has(start) and t.has(opt)):
+            continue
+        lines += ["", f"## Table {number}: {start} against {start} optimised", "", t.head, t.rule]
+        lines += [t.cells_row(start), t.cells_row(opt)]
+        diff = []
+        for s in t.sigmas:
+            d = t.ours(opt, s)["psnr"] - t.ours(start, s)["psnr"]
+            p0, p1 = t.paper(start, s), t.paper(opt, s)
+            diff.append(f"{d:+.2f}" + (f" ({p1[0] - p0[0]:+.2f})" if p0 and p1 else ""))
+        lines.append(_line("gain (paper)", diff))
+    return lines
+
+
+def _fig9_section(t: _Tables) -> list[str]:
+    """Fig. 9: the PSNR/CIEDE2000 chart (drawn into the folder) and the CIEDE2000 table."""
+    fig9 = [r for r in FIG9 if t.has(r)]
+    if not fig9:
+        return []
+    chart = sigma_chart(
+        [(r, t.summary[t.rows[r]]["all"]) for r in fig9],
+        t.out / "fig9_sigma_curves.png",
+        {
+            r: [(float(s), p) for s, (p, _) in zip(PAPER_SIGMAS, PAPER[r], strict=True)]
+            for r in fig9
+            if r in PAPER
+        },
+    )
+    lines = [
+        "",
+        "## Fig. 9: bayer, D, D optimised and D optimised from random",
+        "",
+        _line("pattern", [f"CIEDE2000 σ={s}" for s in t.sigmas]),
+        t.rule,
+    ]
+    for row in fig9:
+        lines.append(_line(row, [f"{t.ours(row, s)['ciede2000']:.3f}" for s in t.sigmas]))
+    return [*lines, "", f"![Fig. 9]({chart.name})"]
+
+
+def _verdicts(summary: dict, rows: dict[str, str], sigmas: list[str], prefix: str) -> list[str]:
+    """:func:`checks` as list items, each starting with ``prefix``."""
+    return [
+        f"- {prefix}{'holds' if holds else '**does not hold**'}: {statement} ({numbers})"
+        for statement, holds, numbers in checks(summary, rows, sigmas)
+    ]
+
+
+def _conclusions_section(t: _Tables) -> list[str]:
+    return [
+        "",
+        "## The paper's conclusions at our budget",
+        "",
+        *_verdicts(t.summary, t.rows, t.sigmas, ""),
+    ]
+
+
+def _lmmse_section(t: _Tables, baselines: dict[str, str] | None) -> list[str]:
+    """The training-free baselines: a table with the networks' gains over them, Malvar 2004,
+    their ranks among A-E and the Table-1 conclusions checked on them."""
+    base = {r: m for r, m in (baselines or {}).items() if m in t.summary}
+    if not base:
+        return []
+    lines = [
+        "",
+        "## Without training: the LMMSE of every pattern",
+        "",
+        "The closed-form LMMSE (`--method lmmse`) of each pattern on the same images and "
+        "noise: no network, so every pattern is compared even where its network is not "
+        "shipped. Cells are PSNR dB / SSIM, then the shipped network's gain over it.",
+        "",
+        t.head,
+        t.rule,
+    ]
+    lines += [_lmmse_row(t, row, base[row]) for row in (*TABLE1, "bayer") if row in base]
+    if "bayer+malvar2004" in t.summary:
+        malvar = t.summary["bayer+malvar2004"]["all"]
+        lines.append(_line("bayer, Malvar 2004", [_cell(malvar.get(s), None) for s in t.sigmas]))
+    lines += _lmmse_ranks(t, base)
+    return lines + _verdicts(t.summary, base, t.sigmas, "LMMSE, ")
+
+
+def _lmmse_row(t: _Tables, row: str, method: str) -> str:
+    """A baseline's line: its PSNR / SSIM and the row's network's gain over it."""
+    cells = []
+    for s in t.sigmas:
+        lm, net = t.summary[method]["all"].get(s), t.ours(row, s)
+        cell = _cell(lm, None)
+        if lm is not None and net is not None:
+            cell += f" (net {net['psnr'] - lm['psnr']:+.2f})"
+        cells.append(cell)
+    return _line(row, cells)
+
+
+def _lmmse_ranks(t: _Tables, base: dict[str, str]) -> list[str]:
+    """The baselines of A-E ordered by PSNR at every level (none with fewer than two)."""
+    ranked = [r for r in TABLE1 if r in base]
+    if len(ranked) <= 1:
+        return []
+    order = {
+        s: sorted(ranked, key=lambda r, s=s: -t.summary[base[r]]["all"][s]["psnr"])
+        for s in t.sigmas
+    }
+    return [
+        "",
+        "Ranks by LMMSE PSNR among A–E: "
+        + "; ".join(f"σ={s}: " + " ".join(order[s]) for s in t.sigmas),
+        "",
+    ]
+
+
+def _learned_section(t: _Tables, learned: dict[str, patterns.Pattern] | None) -> list[str]:
+    """The learned patterns, drawn under ``patterns/`` (Fig. 6)."""
+    if not learned:
+        return []
+    lines = ["", "## Learned patterns (Fig. 6)", ""]
+    (t.out / "patterns").mkdir(exist_ok=True)
+    for row, pattern in learned.items():
+        path = t.out / "patterns" / f"{row.replace(' ', '_').replace('.', '')}.png"
+        draw_pattern(pattern, path)
+        lines.append(f"![{row}](patterns/{path.name})")
+    return lines
+
+
+def _zoom_section(zooms: list[str] | None) -> list[str]:
+    if not zooms:
+        return []
+    return ["", "## Zoomed crops (Figs. 4, 5, 7, 8)", "", *(f"![zoom]({z})" for z in zooms)]
+
+
 def paper_tables(
     summary: dict,
     rows: dict[str, str],
@@ -360,170 +598,18 @@ def paper_tables(
     """
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    sigmas = list(
-        dict.fromkeys(s for m in rows.values() if m in summary for s in summary[m]["all"])
-    )
-
-    def ours(row: str, s: str) -> dict | None:
-        m = rows.get(row)
-        return summary[m]["all"].get(s) if m in summary else None
-
-    def paper(row: str, s: str) -> tuple[float, float] | None:
-        key = "A optimised" if row == "A optimised" else row
-        if key in PAPER and s in PAPER_SIGMAS:
-            return PAPER[key][PAPER_SIGMAS.index(s)]
-        return None
-
-    n = max(
-        (
-            summary[m]["all"][s]["n_images"]
-            for m in rows.values()
-            if m in summary
-            for s in summary[m]["all"]
-        ),
-        default=0,
-    )
-    head = "| pattern | " + " | ".join(f"σ={s}" for s in sigmas) + " |"
-    rule = "|---|" + "---|" * len(sigmas)
+    t = _Tables.of(summary, rows, out)
     lines = [
-        "# The paper's tables, reproduced with splitcam's shipped models",
-        "",
-        f"Ours: mean over {n} images; cells are our PSNR dB / SSIM, then (the paper's PSNR, "
-        "ours − paper). The paper trained 10^6 GPU steps of batch 80 on DIV2K; our budgets are "
-        "below. B, C and E are modelled patterns (SPEC section 2).",
-        "",
-        domain_line(summary[m].get("domain", "srgb") for m in rows.values() if m in summary),
-        "",
-        "## Budget of each model",
-        "",
+        *_intro(t),
+        *_budget_section(t, budgets),
+        *_table1_section(t),
+        *_tables23_section(t),
+        *_fig9_section(t),
+        *_conclusions_section(t),
+        *_lmmse_section(t, baselines),
+        *_learned_section(t, learned),
+        *_zoom_section(zooms),
     ]
-    for row, method in rows.items():
-        lines.append(f"- **{row}** (`{method}`): {(budgets or {}).get(row, 'unknown')}")
-    lines += ["", "## Table 1: every pattern, fixed", "", head, rule]
-    present = [r for r in (*TABLE1, "bayer") if rows.get(r) in summary]
-    for row in present:
-        lines.append(
-            f"| {row} | " + " | ".join(_cell(ours(row, s), paper(row, s)) for s in sigmas) + " |"
-        )
-    ranked = [r for r in TABLE1 if r in present]
-    if ranked:
-        lines += [
-            "",
-            "Ranks by PSNR among A–E (ours; the paper's in brackets: D 1, A 2, E 3, B 4, C 5):",
-            "",
-            head.replace("pattern", "rank"),
-            rule,
-        ]
-        paper_rank = {"D": 1, "A": 2, "E": 3, "B": 4, "C": 5}
-        per_sigma = {s: _ranks({r: ours(r, s)["psnr"] for r in ranked}) for s in sigmas}
-        for row in ranked:
-            lines.append(
-                f"| {row} | "
-                + " | ".join(f"{per_sigma[s][row]} ({paper_rank[row]})" for s in sigmas)
-                + " |"
-            )
-    for number, start in ((2, "A"), (3, "D")):
-        opt = f"{start} optimised"
-        if rows.get(start) not in summary or rows.get(opt) not in summary:
-            continue
-        lines += ["", f"## Table {number}: {start} against {start} optimised", "", head, rule]
-        for row in (start, opt):
-            lines.append(
-                f"| {row} | "
-                + " | ".join(_cell(ours(row, s), paper(row, s)) for s in sigmas)
-                + " |"
-            )
-        diff = []
-        for s in sigmas:
-            d = ours(opt, s)["psnr"] - ours(start, s)["psnr"]
-            p0, p1 = paper(start, s), paper(opt, s)
-            diff.append(f"{d:+.2f}" + (f" ({p1[0] - p0[0]:+.2f})" if p0 and p1 else ""))
-        lines.append("| gain (paper) | " + " | ".join(diff) + " |")
-    fig9 = [r for r in FIG9 if rows.get(r) in summary]
-    if fig9:
-        chart = sigma_chart(
-            [(r, summary[rows[r]]["all"]) for r in fig9],
-            out / "fig9_sigma_curves.png",
-            {
-                r: [(float(s), p) for s, (p, _) in zip(PAPER_SIGMAS, PAPER[r], strict=True)]
-                for r in fig9
-                if r in PAPER
-            },
-        )
-        lines += [
-            "",
-            "## Fig. 9: bayer, D, D optimised and D optimised from random",
-            "",
-            "| pattern | " + " | ".join(f"CIEDE2000 σ={s}" for s in sigmas) + " |",
-            rule,
-        ]
-        for row in fig9:
-            lines.append(
-                f"| {row} | "
-                + " | ".join(f"{ours(row, s)['ciede2000']:.3f}" for s in sigmas)
-                + " |"
-            )
-        lines += ["", f"![Fig. 9]({chart.name})"]
-    lines += ["", "## The paper's conclusions at our budget", ""]
-    for statement, holds, numbers in checks(summary, rows, sigmas):
-        lines.append(f"- {'holds' if holds else '**does not hold**'}: {statement} ({numbers})")
-    base = {r: m for r, m in (baselines or {}).items() if m in summary}
-    if base:
-        lines += [
-            "",
-            "## Without training: the LMMSE of every pattern",
-            "",
-            "The closed-form LMMSE (`--method lmmse`) of each pattern on the same images and "
-            "noise: no network, so every pattern is compared even where its network is not "
-            "shipped. Cells are PSNR dB / SSIM, then the shipped network's gain over it.",
-            "",
-            head,
-            rule,
-        ]
-        for row in (*TABLE1, "bayer"):
-            if row not in base:
-                continue
-            cells = []
-            for s in sigmas:
-                lm, net = summary[base[row]]["all"].get(s), ours(row, s)
-                cell = _cell(lm, None)
-                if lm is not None and net is not None:
-                    cell += f" (net {net['psnr'] - lm['psnr']:+.2f})"
-                cells.append(cell)
-            lines.append(f"| {row} | " + " | ".join(cells) + " |")
-        if "bayer+malvar2004" in summary:
-            malvar = summary["bayer+malvar2004"]["all"]
-            lines.append(
-                "| bayer, Malvar 2004 | "
-                + " | ".join(_cell(malvar.get(s), None) for s in sigmas)
-                + " |"
-            )
-        ranked = [r for r in TABLE1 if r in base]
-        if len(ranked) > 1:
-            order = {
-                s: sorted(ranked, key=lambda r, s=s: -summary[base[r]]["all"][s]["psnr"])
-                for s in sigmas
-            }
-            lines += [
-                "",
-                "Ranks by LMMSE PSNR among A–E: "
-                + "; ".join(f"σ={s}: " + " ".join(order[s]) for s in sigmas),
-                "",
-            ]
-        for statement, holds, numbers in checks(summary, base, sigmas):
-            lines.append(
-                f"- LMMSE, {'holds' if holds else '**does not hold**'}: {statement} ({numbers})"
-            )
-    if learned:
-        lines += ["", "## Learned patterns (Fig. 6)", ""]
-        (out / "patterns").mkdir(exist_ok=True)
-        for row, pattern in learned.items():
-            path = out / "patterns" / f"{row.replace(' ', '_').replace('.', '')}.png"
-            draw_pattern(pattern, path)
-            lines.append(f"![{row}](patterns/{path.name})")
-    if zooms:
-        lines += ["", "## Zoomed crops (Figs. 4, 5, 7, 8)", ""]
-        lines += [f"![zoom]({z})" for z in zooms]
     report = out / "reproduce.md"
     write_text(report, "\n".join(lines) + "\n")
     return report
