@@ -199,8 +199,8 @@ def main() -> None:
     parser.add_argument("--score-only", action="store_true", help="score existing runs")
     args = parser.parse_args()
 
-    from splitcam.methods import build_method
     from splitcam.patterns import get as get_pattern
+    from splitcam.recon.registry import build_method
     from splitcam.viz.curves import compare_runs
 
     torch.set_num_threads(args.threads)

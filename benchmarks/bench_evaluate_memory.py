@@ -39,10 +39,10 @@ def _image(h: int, w: int) -> torch.Tensor:
 def run_variant(variant: str, h: int, w: int, pattern: str, sigma: float) -> dict:
     from splitcam.evaluation.metrics import SSIM_K1, SSIM_K2, SSIM_SIGMA, SSIM_WINDOW
     from splitcam.evaluation.protocol import score, simulate_and_reconstruct
-    from splitcam.methods import build_method
     from splitcam.physics.sensor import SplitterSensor
     from splitcam.physics.system import simulate
     from splitcam.recon.lmmse import apply_filters
+    from splitcam.recon.registry import build_method
 
     rgb = _image(h, w)
     method = build_method("lmmse", pattern=pattern)

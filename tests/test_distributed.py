@@ -13,7 +13,7 @@ import pytest
 from PIL import Image
 
 from splitcam import patterns
-from splitcam.training import checkpoint as ckpt_io
+from splitcam.io import checkpoints as ckpt_io
 
 
 @pytest.fixture

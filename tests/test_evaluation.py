@@ -14,8 +14,8 @@ from splitcam import patterns
 from splitcam.cli import main
 from splitcam.evaluation import evaluate, summarise
 from splitcam.evaluation.metrics import psnr
-from splitcam.methods import build_method
 from splitcam.physics.sensor import SplitterSensor
+from splitcam.recon.registry import build_method
 from splitcam.training import TrainConfig, train
 from splitcam.viz.zoom import detail_region, zoom_figure
 

@@ -9,6 +9,8 @@ from __future__ import annotations
 import ast
 from pathlib import Path
 
+import pytest
+
 import splitcam
 
 LAYERS = [
@@ -22,12 +24,11 @@ LAYERS = [
     "viz",
     "evaluation",
     "training",
-    "methods",
     "cli",
 ]
 PACKAGE = Path(splitcam.__file__).parent
 #: Packages that only say where their content moved (importing them raises ImportError).
-MOVED = {"optics"}
+MOVED = {"optics", "methods"}
 
 
 def _part(module: str) -> str | None:
@@ -78,10 +79,19 @@ def test_every_module_belongs_to_a_layer():
     assert tops - {"__init__", "__main__", "weights"} - MOVED == set(LAYERS)
 
 
-def test_moved_packages_hold_no_code():
+def test_moved_modules_hold_no_code():
+    """A moved package or module only raises ImportError naming where its content went."""
+    import importlib
+
     for name in MOVED:
-        assert [p.name for p in (PACKAGE / name).glob("*.py")] == ["__init__.py"]
-        assert not _imports(PACKAGE / name / "__init__.py")
+        path = (
+            PACKAGE / name / "__init__.py" if (PACKAGE / name).is_dir() else PACKAGE / f"{name}.py"
+        )
+        if path.name == "__init__.py":
+            assert [p.name for p in path.parent.glob("*.py")] == ["__init__.py"]
+        assert not _imports(path)
+        with pytest.raises(ImportError, match="moved to splitcam"):
+            importlib.import_module(f"splitcam.{name}")
 
 
 def test_the_checker_sees_a_wrong_way_import(tmp_path):

@@ -17,7 +17,6 @@ from splitcam.evaluation.protocol import mean_psnr, score_images
 from splitcam.evaluation.tables import read_rows
 from splitcam.io.tensorfiles import meta_checksum
 from splitcam.io.weights import MODELS_DIR
-from splitcam.methods import build_method, build_model, model_domain, trained_domain
 from splitcam.physics import DOMAINS, check_domain, linear_to_srgb, srgb_to_linear
 from splitcam.physics.noise import Exposure
 from splitcam.recon.base import method_domain
@@ -27,6 +26,7 @@ from splitcam.recon.closed_form import (
     estimate_image_statistics,
     shipped_image_statistics,
 )
+from splitcam.recon.registry import build_method, build_model, model_domain, trained_domain
 
 
 def _decode_np(u: np.ndarray) -> np.ndarray:

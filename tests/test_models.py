@@ -21,11 +21,12 @@ from conftest import TINY_SETTINGS, blocky_images, tiny_config
 
 from splitcam.cli import main
 from splitcam.evaluation.protocol import mean_psnr
-from splitcam.methods import build_method, build_model
+from splitcam.io import checkpoints as ckpt_io
+from splitcam.io import weights as io_weights
+from splitcam.recon.loading import ModelError, load_model, model_names, model_serves_any_pattern
+from splitcam.recon.registry import build_method, build_model
 from splitcam.training import ConfigError, TrainConfig, load_system, train
-from splitcam.training import checkpoint as ckpt_io
-from splitcam.training import models as models_module
-from splitcam.training.models import ModelError, export_model, load_model, model_names
+from splitcam.training.models import export_model
 from splitcam.training.sweep import load_experiments, run_sweep, status
 
 
@@ -75,7 +76,7 @@ def test_export_round_trip_matches_the_run(trained_run, tmp_path, storage):
     assert meta["provenance"]["total_steps"] == 4
     assert meta["provenance"]["segments"][0]["batch_size"] == 4
     assert [row["step"] for row in meta["provenance"]["validation"]] == [0, 2, 4]
-    system, loaded_meta = load_model(path)
+    system = load_model(path)
     run_system = load_system(trained_run)
     for key, value in run_system.network.state_dict().items():
         mine = system.network.state_dict()[key]
@@ -108,13 +109,13 @@ def test_export_is_byte_for_byte_repeatable(trained_run, tmp_path):
         blobs.add(blob)
     assert len(blobs) == 1
     loaded = load_file(str(tmp_path / "m0.safetensors"))  # still plain safetensors
-    system, _ = load_model(tmp_path / "m0")
+    system = load_model(tmp_path / "m0")
     for key, value in system.network.state_dict().items():
         torch.testing.assert_close(loaded[key].to(value.dtype), value, rtol=0, atol=0)
 
 
 def test_shipped_names_resolve_and_unknown_names_list_them(trained_run, tmp_path, monkeypatch):
-    monkeypatch.setattr(models_module, "MODELS_DIR", tmp_path)
+    monkeypatch.setattr(io_weights, "MODELS_DIR", tmp_path)
     export_model(trained_run, tmp_path / "D", name="D")
     export_model(trained_run, tmp_path / "D-opt", name="D-opt")
     assert model_names() == ["D", "D-opt"]
@@ -143,7 +144,7 @@ def test_damaged_model_files_are_refused(trained_run, tmp_path):
 
 
 def test_cli_models_export_list_and_evaluate(trained_run, tmp_path, monkeypatch, capsys):
-    monkeypatch.setattr(models_module, "MODELS_DIR", tmp_path / "shipped")
+    monkeypatch.setattr(io_weights, "MODELS_DIR", tmp_path / "shipped")
     (tmp_path / "shipped").mkdir()
     assert main(["models", "export", str(trained_run), "--name", "D", "--ship"]) == 0
     assert main(["models"]) == 0
@@ -176,7 +177,7 @@ def test_training_from_a_model_continues_its_weights_and_provenance(
     image_folder, trained_run, tmp_path
 ):
     model = export_model(trained_run, tmp_path / "m", storage="float32")
-    system, _ = load_model(model)
+    system = load_model(model)
     out = tmp_path / "more"
     config = _config(
         image_folder,
@@ -455,7 +456,7 @@ def test_sweep_skips_an_experiment_whose_model_ships_with_its_budget(
     """A shipped model of the experiment's name with the whole budget, and no run folder or
     snapshot: the sweep skips it instead of training it again from scratch; a bigger budget,
     or --retrain-shipped, trains it."""
-    monkeypatch.setattr(models_module, "MODELS_DIR", tmp_path / "shipped")
+    monkeypatch.setattr(io_weights, "MODELS_DIR", tmp_path / "shipped")
     export_model(trained_run, tmp_path / "shipped" / "d", name="d")  # 4 steps
     exps = tmp_path / "experiments"
     exps.mkdir()
@@ -542,7 +543,7 @@ def test_reproduce_writes_the_paper_tables_from_shipped_models(
     """The mechanics of `splitcam reproduce` (tables, ranks, checks, Fig. 9, learned patterns),
     on models exported from one tiny run under the paper's names."""
     shipped = tmp_path / "shipped"
-    monkeypatch.setattr(models_module, "MODELS_DIR", shipped)
+    monkeypatch.setattr(io_weights, "MODELS_DIR", shipped)
     for name in ("A", "B", "C", "D", "E", "bayer", "D-opt"):
         export_model(trained_run, shipped / name, name=name)
     out = tmp_path / "rep"
@@ -583,7 +584,7 @@ def test_reproduce_tables_the_lmmse_of_every_pattern_beside_the_networks(
     without a shipped network are still compared) and each shipped network's gain over it; the
     gain printed equals the difference of the two methods' means in summary.json."""
     shipped = tmp_path / "shipped"
-    monkeypatch.setattr(models_module, "MODELS_DIR", shipped)
+    monkeypatch.setattr(io_weights, "MODELS_DIR", shipped)
     export_model(trained_run, shipped / "D", name="D")
     out = tmp_path / "rep"
     args = ["reproduce", "--datasets", str(image_folder), "--max-images", "2"]
@@ -630,7 +631,7 @@ def test_provenance_records_each_thread_count_of_a_resumed_run(image_folder, tmp
 
 def _one_pattern_models() -> list[str]:
     """Shipped models of one pattern (a model for any pattern has a test of its own)."""
-    return [name for name in model_names() if not models_module.model_serves_any_pattern(name)]
+    return [name for name in model_names() if not model_serves_any_pattern(name)]
 
 
 @pytest.mark.parametrize("name", _one_pattern_models())
@@ -653,13 +654,14 @@ def test_every_shipped_model_loads_matches_its_json_and_beats_its_lmmse(name, sh
     from splitcam.patterns import Pattern
     from splitcam.recon.closed_form import closed_form_lmmse
 
-    weights = models_module.MODELS_DIR / f"{name}.safetensors"
-    stored = json.loads((models_module.MODELS_DIR / f"{name}.json").read_text())
+    weights = io_weights.MODELS_DIR / f"{name}.safetensors"
+    stored = json.loads((io_weights.MODELS_DIR / f"{name}.json").read_text())
     assert weights.stat().st_size <= 2 * 1024**2
-    system, meta = load_model(name)
+    system = load_model(name)
+    meta = system.meta
     assert meta["name"] == name and meta["network"] == stored["network"]
     pattern = Pattern.from_dict(stored["pattern"])
-    np.testing.assert_allclose(system.sensor.weights().double().numpy(), pattern.kernels, atol=1e-6)
+    np.testing.assert_allclose(system.pattern.kernels, pattern.kernels, atol=1e-6)
     assert meta["provenance"]["total_steps"] == stored["config"]["optim"]["steps"]
 
     # The last 32 training images by name are held out of every shipped run's training set.
@@ -683,7 +685,7 @@ def test_the_main_job_scores_every_shipped_model_on_crops(trained_run, tmp_path,
 
     from splitcam.cli.evaluate import MAIN_JOB_MAX_SIZE
 
-    monkeypatch.setattr(models_module, "MODELS_DIR", tmp_path / "shipped")
+    monkeypatch.setattr(io_weights, "MODELS_DIR", tmp_path / "shipped")
     export_model(trained_run, tmp_path / "shipped" / "D", name="D")
     common = ["--max-images", "1", "--sigmas", "0", "--quiet"]
     assert main(["evaluate", *common, "--out", str(tmp_path / "crops")]) == 0
@@ -713,7 +715,7 @@ def test_the_shipped_universal_model_beats_the_lmmse_of_every_library_pattern(sh
     from splitcam.data.testsets import centre_crop
     from splitcam.recon.closed_form import closed_form_lmmse
 
-    weights = models_module.MODELS_DIR / "universal.safetensors"
+    weights = io_weights.MODELS_DIR / "universal.safetensors"
     assert weights.stat().st_size <= 4 * 1024**2
     crops = [
         (
@@ -722,7 +724,7 @@ def test_the_shipped_universal_model_beats_the_lmmse_of_every_library_pattern(sh
         )
         for path in list_images(shared_data / "train")[-4:]
     ]
-    _, meta = load_model("universal")
+    meta = load_model("universal").meta
     for name in meta["config"]["pattern"]["mix"]:
         method = build_method("universal", pattern=name, precision="fp32")
         assert method.name == f"net-universal-{name}"

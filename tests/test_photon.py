@@ -222,9 +222,9 @@ def test_training_under_the_photon_model(tmp_path) -> None:
     under signal-dependent noise."""
 
     from splitcam.evaluation.protocol import mean_psnr
+    from splitcam.io import checkpoints as ckpt_io
     from splitcam.recon.closed_form import closed_form_lmmse
     from splitcam.training import TrainConfig, train
-    from splitcam.training import checkpoint as ckpt_io
     from splitcam.training.trainer import _val_images
 
     folder = blocky_images(tmp_path / "img", 5)
@@ -254,7 +254,7 @@ def test_training_under_the_photon_model(tmp_path) -> None:
     assert ckpt_io.load(tmp_path / "run").meta["config"]["noise"]["model"] == "photon"
     # The exposure study takes the trained network beside the LMMSE of its pattern.
     from splitcam.evaluation.exposure import exposure_study
-    from splitcam.methods import build_method
+    from splitcam.recon.registry import build_method
 
     study = exposure_study(
         _val_images(config),

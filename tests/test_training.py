@@ -20,9 +20,9 @@ from PIL import Image
 from splitcam import patterns
 from splitcam.cli import main
 from splitcam.evaluation.protocol import mean_psnr
+from splitcam.io import checkpoints as ckpt_io
 from splitcam.recon.closed_form import closed_form_lmmse
 from splitcam.training import CheckpointError, ConfigError, TrainConfig, load_system, train
-from splitcam.training import checkpoint as ckpt_io
 from splitcam.training.trainer import _val_images
 
 

@@ -247,7 +247,7 @@ def tiny_universal(tmp_path_factory):
 
 
 def test_model_for_any_pattern_needs_a_pattern_and_names_a_bad_file(tiny_universal, tmp_path):
-    from splitcam.methods import build_method, build_model
+    from splitcam.recon.registry import build_method, build_model
 
     model, _ = tiny_universal
     with pytest.raises(ValueError, match="reconstructs any pattern"):
@@ -296,14 +296,14 @@ def test_main_job_uses_the_universal_network_for_patterns_without_one(
     import shutil
 
     from splitcam.cli import main
-    from splitcam.training import models
+    from splitcam.io import weights
 
     model, data = tiny_universal
     shipped = tmp_path / "shipped"
     shipped.mkdir()
     for suffix in (".json", ".safetensors"):
         shutil.copy(model.with_suffix(suffix), shipped / f"universal{suffix}")
-    monkeypatch.setattr(models, "MODELS_DIR", shipped)
+    monkeypatch.setattr(weights, "MODELS_DIR", shipped)
     mine = tmp_path / "mine.toml"
     patterns.save(random_pattern(np.random.default_rng(5)), mine)
     ev = ["evaluate", "--patterns", str(mine), "--datasets", str(data), "--sigmas", "0"]
@@ -317,8 +317,8 @@ def test_fine_tuning_from_a_universal_model(tiny_universal, tmp_path, capsys):
     """`train --pattern FILE --init-from MODEL`: the architecture follows the model, the weights
     start from it, and the run is a model like any other."""
     from splitcam.cli import main
-    from splitcam.methods import build_method
-    from splitcam.training.models import load_model
+    from splitcam.recon.loading import load_model
+    from splitcam.recon.registry import build_method
 
     model, data = tiny_universal
     mine = tmp_path / "mine.toml"
@@ -333,7 +333,7 @@ def test_fine_tuning_from_a_universal_model(tiny_universal, tmp_path, capsys):
     assert config["optim"]["lr"] == 3e-4  # the fine-tuning rate
     method = build_method(str(run), precision="fp32")  # a run of one pattern: its own
     assert method.pattern.equals(patterns.load(mine))
-    source, _ = load_model(model)
+    source = load_model(model)
     from splitcam.training.checkpoint import load_system
 
     tuned = load_system(run)
@@ -360,10 +360,10 @@ def test_design_against_a_frozen_network(tiny_universal):
     reach the logits through the frozen network."""
     from splitcam.data.patches import ImageCache, PatchSampler, list_images
     from splitcam.design import design_pattern, network_psnr
-    from splitcam.training.models import load_model
+    from splitcam.recon.loading import load_model
 
     model, data = tiny_universal
-    system, _ = load_model(model)
+    system = load_model(model)
     files = list_images(data)
     sampler = PatchSampler(ImageCache(files, min_size=16, progress=False), patch_size=16)
     before = [p.detach().clone() for p in system.network.parameters()]

@@ -59,8 +59,8 @@ def test_a_name_that_is_both_a_shipped_model_and_a_folder_is_refused(
 ):
     """`--checkpoint D` with ./D a run folder (sweep names them so): an error showing both, and
     each still reachable by its unambiguous name."""
-    from splitcam.methods import build_method
-    from splitcam.training.models import ModelError, model_names
+    from splitcam.recon.loading import ModelError, model_names
+    from splitcam.recon.registry import build_method
 
     assert "D" in model_names()
     monkeypatch.chdir(tmp_path)
@@ -118,7 +118,7 @@ def test_resuming_a_finished_run_with_other_settings_records_nothing(tmp_path, c
     import json
     import logging
 
-    from splitcam.training import checkpoint as ckpt_io
+    from splitcam.io import checkpoints as ckpt_io
     from splitcam.training import train
 
     caplog.set_level(logging.INFO, logger="splitcam")
@@ -173,7 +173,8 @@ def test_the_guard_gives_up_after_halving_the_rate_ten_times(tmp_path):
 
 def test_models_export_never_replaces_a_model_unasked(tmp_path, monkeypatch, capsys):
     """As the README showed it, `models export RUN --name D` replaced the shipped model D."""
-    from splitcam.training import models, train
+    from splitcam.io import weights
+    from splitcam.training import train
 
     data = blocky_images(tmp_path / "img", 5)
     run = tmp_path / "run"
@@ -181,7 +182,7 @@ def test_models_export_never_replaces_a_model_unasked(tmp_path, monkeypatch, cap
     shipped = tmp_path / "shipped"
     shipped.mkdir()
     (shipped / "D.json").write_text("{}")
-    monkeypatch.setattr(models, "MODELS_DIR", shipped)
+    monkeypatch.setattr(weights, "MODELS_DIR", shipped)
     monkeypatch.chdir(tmp_path)
     assert main(["models", "export", str(run), "--name", "D"]) == 0
     assert (tmp_path / "models" / "D.json").is_file()  # a user folder by default
@@ -191,7 +192,9 @@ def test_models_export_never_replaces_a_model_unasked(tmp_path, monkeypatch, cap
     assert main(["models", "export", str(run), "--name", "D", "--ship"]) == 1
     assert (shipped / "D.json").read_text() == "{}"
     assert main(["models", "export", str(run), "--name", "D", "--ship", "--force"]) == 0
-    assert models.load_model("D")[1]["name"] == "D"
+    from splitcam.recon.loading import load_model
+
+    assert load_model("D").meta["name"] == "D"
 
 
 def test_an_edited_model_file_is_refused_and_old_files_are_fingerprinted_by_their_fields(
@@ -201,9 +204,10 @@ def test_an_edited_model_file_is_refused_and_old_files_are_fingerprinted_by_thei
     import json
 
     from splitcam.io.tensorfiles import meta_checksum
-    from splitcam.methods import build_model
+    from splitcam.recon.loading import ModelError, load_model
+    from splitcam.recon.registry import build_model
     from splitcam.training import train
-    from splitcam.training.models import ModelError, export_model, load_model
+    from splitcam.training.models import export_model
 
     data = blocky_images(tmp_path / "img", 5)
     train(tiny_config(data, tmp_path / "run", **{"optim.steps": 2}), progress=False)
@@ -220,7 +224,7 @@ def test_an_edited_model_file_is_refused_and_old_files_are_fingerprinted_by_thei
     path.write_text(json.dumps(edited))
     assert build_model(path).fingerprint != first
     # The shipped files all carry it.
-    from splitcam.training.models import MODELS_DIR
+    from splitcam.io.weights import MODELS_DIR
 
     for shipped in MODELS_DIR.glob("*.json"):
         stored = json.loads(shipped.read_text())
@@ -421,13 +425,13 @@ def test_reconstruct_writes_16_bit_and_float_outputs(photo, tmp_path):
 
 def test_patterns_show_a_shipped_models_learned_pattern(tmp_path):
     from splitcam import patterns
-    from splitcam.training.models import load_model
+    from splitcam.recon.loading import load_model
 
     out = tmp_path / "a.png"
     assert main(["patterns", "show", "A-opt", "--out", str(out)]) == 0
     assert out.stat().st_size > 1000
     assert main(["patterns", "export", "A-opt", "--out", str(tmp_path / "a.toml")]) == 0
-    learned = load_model("A-opt")[0].sensor.to_pattern()
+    learned = load_model("A-opt").pattern
     assert np.allclose(patterns.load(tmp_path / "a.toml").kernels, learned.kernels)
 
 

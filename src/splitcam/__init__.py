@@ -17,7 +17,7 @@ The package is layered; each part imports only the parts above it in this list (
    validation), result tables, LMMSE screening, reports beside the paper's numbers.
 7. :mod:`splitcam.training` — typed configuration, safetensors checkpoints (and loading a trained
    system), the training loop.
-8. :mod:`splitcam.methods` — the registry that turns a name (``lmmse``, ``malvar2004``, a run
+8. :mod:`splitcam.recon.registry` — the registry that turns a name (``lmmse``, ``malvar2004``, a run
    folder, ...) into a reconstruction method, for the CLI and Python alike.
 9. :mod:`splitcam.cli` — the ``splitcam`` command: parses arguments, calls the library.
 

@@ -13,10 +13,10 @@ from splitcam.data.images import read_image
 from splitcam.data.patches import list_images
 from splitcam.data.testsets import centre_crop
 from splitcam.evaluation.protocol import mean_psnr
-from splitcam.methods import build_method
+from splitcam.io.weights import MODELS_DIR
 from splitcam.patterns import Pattern
 from splitcam.recon.closed_form import closed_form_lmmse
-from splitcam.training.models import MODELS_DIR
+from splitcam.recon.registry import build_method
 
 SIGMAS = [0.0, 15.0]
 torch.set_num_threads(2)

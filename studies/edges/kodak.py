@@ -11,7 +11,7 @@ import torch
 
 from splitcam.data.testsets import load_images
 from splitcam.evaluation.protocol import mean_psnr
-from splitcam.methods import build_method
+from splitcam.recon.registry import build_method
 
 torch.set_num_threads(1)
 images = load_images("kodak24")

@@ -24,9 +24,9 @@ from splitcam.data.imageio import read_image
 from splitcam.data.patches import list_images
 from splitcam.evaluation.metrics import mean_over_images
 from splitcam.evaluation.protocol import score_images
-from splitcam.methods import build_method
+from splitcam.recon.loading import model_names
 from splitcam.recon.networks import serves_any_pattern
-from splitcam.training.models import model_names
+from splitcam.recon.registry import build_method
 
 SIGMAS = [0.0, 15.0]
 DATA = Path(__file__).resolve().parents[4] / "shared" / "data" / "train"
@@ -37,13 +37,11 @@ def border_loss(method, images, sigmas=SIGMAS) -> dict[float, tuple[float, float
     """``{sigma: (whole-image PSNR, PSNR with BORDER pixels left out)}``, means over images."""
     whole: dict[float, list[float]] = {s: [] for s in sigmas}
     inner: dict[float, list[float]] = {s: [] for s in sigmas}
-    for _, sigma, pred, values in score_images(method, images, sigmas):
+    for _, sigma, _, values in score_images(method, images, sigmas):
         whole[sigma].append(values["psnr"])
-    for _, sigma, pred, values in score_images(method, images, sigmas, crop=BORDER):
+    for _, sigma, _, values in score_images(method, images, sigmas, crop=BORDER):
         inner[sigma].append(values["psnr"])
-    return {
-        s: (mean_over_images(whole[s]).mean, mean_over_images(inner[s]).mean) for s in sigmas
-    }
+    return {s: (mean_over_images(whole[s]).mean, mean_over_images(inner[s]).mean) for s in sigmas}
 
 
 def main() -> int:

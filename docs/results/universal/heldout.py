@@ -24,9 +24,9 @@ from splitcam import patterns
 from splitcam.data.imageio import read_image
 from splitcam.data.patches import list_images
 from splitcam.evaluation.protocol import mean_psnr
-from splitcam.methods import build_method
+from splitcam.recon.loading import load_model, model_names
 from splitcam.recon.networks import serves_any_pattern
-from splitcam.training.models import load_model, model_names
+from splitcam.recon.registry import build_method
 
 SIGMAS = [0.0, 15.0]
 DATA = Path(__file__).resolve().parents[4] / "shared" / "data" / "train"
@@ -35,8 +35,8 @@ DATA = Path(__file__).resolve().parents[4] / "shared" / "data" / "train"
 def shipped_for(pattern: patterns.Pattern) -> str | None:
     """The shipped single-pattern model whose pattern is this one, if any."""
     for name in model_names():
-        system, _ = load_model(name)
-        if not serves_any_pattern(system.network) and system.sensor.to_pattern().equals(pattern):
+        system = load_model(name)
+        if not serves_any_pattern(system.network) and system.pattern.equals(pattern):
             return name
     return None
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import os
 from collections.abc import Sequence
 from pathlib import Path
@@ -22,18 +23,18 @@ def pattern_or_model(spec: str):
     """A pattern by name or file, or the pattern of a shipped model of one pattern (``A-opt``:
     its learned kernels)."""
     from .. import patterns
+    from ..recon.loading import load_model, model_names
     from ..recon.networks import serves_any_pattern
-    from ..training.models import load_model, model_names
 
     try:
         return patterns.get(spec)
     except patterns.PatternError:
         if spec not in model_names():
             raise
-        system, _ = load_model(spec)
+        system = load_model(spec)
         if serves_any_pattern(system.network):
             raise ValueError(f"model {spec} serves any pattern; it has none to show") from None
-        return system.sensor.to_pattern(spec)
+        return dataclasses.replace(system.pattern, name=spec)
 
 
 def check_distinct(inputs: dict[str, str | None], outputs: dict[str, str | None]) -> None:
@@ -123,8 +124,8 @@ def model_methods(
     pattern (``universal``) once per pattern of ``--patterns``. In the main job the universal
     model reconstructs only the patterns that no shipped network serves, and says so."""
     from .. import patterns
-    from ..methods import build_model
-    from ..training.models import model_serves_any_pattern
+    from ..recon.loading import model_serves_any_pattern
+    from ..recon.registry import build_model
 
     universal = [spec for spec in models if model_serves_any_pattern(spec)]
     single = [build_model(spec, **options) for spec in models if spec not in universal]

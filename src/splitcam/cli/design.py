@@ -12,12 +12,12 @@ def _network_objective(args: argparse.Namespace) -> dict:
     """What ``design --objective network`` needs: the frozen network of ``--model`` and the
     patches of ``--data`` (:func:`splitcam.design.training_patches`)."""
     from ..design import training_patches
+    from ..recon.loading import load_model
     from ..recon.networks import serves_any_pattern
-    from ..training.models import load_model
 
     if not args.data:
         raise ValueError("--objective network needs training images: --data DIR")
-    system, _ = load_model(args.model)
+    system = load_model(args.model)
     if not serves_any_pattern(system.network):
         raise ValueError(f"--model {args.model} serves one pattern; give a network for any pattern")
     patches, held_out = training_patches(args.data, seed=args.seed)

@@ -130,8 +130,8 @@ def run(args: argparse.Namespace) -> int:
     from ..data.testsets import load_datasets
     from ..evaluation.protocol import evaluate, parse_zoom
     from ..evaluation.tables import markdown_tables, summarise
-    from ..methods import build_methods, model_domain
-    from ..training.models import model_names
+    from ..recon.loading import model_names
+    from ..recon.registry import build_methods, model_domain
 
     zooms = [parse_zoom(z) for z in args.zoom or ()]  # bad syntax fails before any work
     chosen = args.checkpoint or args.method or args.model

@@ -32,20 +32,16 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..training.models import (
-        MODELS_DIR,
-        export_model,
-        load_model,
-        model_names,
-        model_summary,
-    )
+    from ..io import weights
+    from ..recon.loading import load_model, model_names
+    from ..training.models import export_model, model_summary
 
     if args.action == "export":
         if not args.run or not args.name:
             raise ValueError("models export needs a run folder and --name")
         if args.ship and args.out:
             raise ValueError("give --ship (into the package's shipped models) or --out, not both")
-        out = (MODELS_DIR if args.ship else Path(args.out or "models")) / args.name
+        out = (weights.MODELS_DIR if args.ship else Path(args.out or "models")) / args.name
         existing = [
             p for p in (out.with_suffix(".json"), out.with_suffix(".safetensors")) if p.exists()
         ]
@@ -58,9 +54,9 @@ def run(args: argparse.Namespace) -> int:
         size = path.with_suffix(".safetensors").stat().st_size
         print(f"wrote {path} and {path.with_suffix('.safetensors').name} ({size / 2**20:.2f} MiB)")
         return 0
-    rows = [model_summary(name, load_model(name)[1]) for name in model_names()]
+    rows = [model_summary(name, load_model(name).meta) for name in model_names()]
     if not rows:
-        print(f"no models shipped in {MODELS_DIR}")
+        print(f"no models shipped in {weights.MODELS_DIR}")
         return 0
     print(table(rows))
     return 0

@@ -61,11 +61,11 @@ def run(args: argparse.Namespace) -> int:
 
     from .. import patterns
     from ..data.imageio import read_image, read_raw, read_raw_meta, write_image
-    from ..methods import build_method, build_model
     from ..physics.light import decode_scene, encode_estimate
     from ..physics.sensor import SplitterSensor
     from ..physics.system import simulate
     from ..recon.base import method_domain
+    from ..recon.registry import build_method, build_model
 
     if (args.image is None) == (args.raw is None):
         raise ValueError("give exactly one of --image (simulate, then reconstruct) or --raw")

@@ -35,8 +35,9 @@ def run(args: argparse.Namespace) -> int:
     from ..evaluation.protocol import evaluate
     from ..evaluation.report import PAPER_MODELS, TABLE1, paper_tables
     from ..evaluation.tables import summarise
-    from ..methods import build_method, build_model
-    from ..training.models import load_model, model_names, training_budget
+    from ..recon.loading import load_model, model_names
+    from ..recon.registry import build_method, build_model
+    from ..training.models import training_budget
 
     rows = dict(PAPER_MODELS)
     shipped = set(model_names())
@@ -68,7 +69,7 @@ def run(args: argparse.Namespace) -> int:
     inference = "bfloat16" if fast_precision(args.precision, "cpu") else "float32"
     budgets, learned = {}, {}
     for row, name in rows.items():
-        _, meta = load_model(name)
+        meta = load_model(name).meta
         budgets[row] = f"{training_budget(meta)}; evaluated in {inference}"
         if meta["pattern"].get("provenance") == "learned":
             from ..patterns import Pattern

@@ -67,7 +67,7 @@ def run(args: argparse.Namespace) -> int:
     datasets = load_datasets(args.datasets, args.max_images)
     images = [img for _, imgs in datasets for img in imgs]
     names = ", ".join(f"{d} ({len(i)})" for d, i in datasets)
-    from ..methods import build_method
+    from ..recon.registry import build_method
 
     options = {"domain": args.domain}
     methods = model_methods(args.model, args.patterns, main_job=False, options=options)

@@ -4,7 +4,8 @@ A *reconstruction method* is anything with a ``name``, the ``pattern`` whose raw
 reconstructs, and ``reconstruct(raw, sigma) -> rgb`` (:class:`Reconstructor`): classical
 demosaicking (:mod:`splitcam.recon.demosaic`), the LMMSE filters (:mod:`splitcam.recon.lmmse`)
 and trained networks (:class:`NetworkReconstructor`) alike. The evaluation protocol, the CLI and
-the Python API only ever talk to this interface; :mod:`splitcam.methods` builds one from a name.
+the Python API only ever talk to this interface; :mod:`splitcam.recon.registry` builds one from a
+name.
 
 A method also works in a light domain (SPEC section 13), its ``domain`` attribute: ``srgb`` (the
 raw image is of display values and the estimate is of display values, the paper's protocol) or

@@ -10,10 +10,11 @@ from typing import Any
 
 import torch
 
-from ..physics.sensor import LearnableSplitterSensor
+from ..io import checkpoints as ckpt_io
+from ..physics.sensor import LearnableSplitterSensor, SplitterSensor
 from ..physics.system import ImagingSystem
+from ..recon.loading import LoadedNetwork, ModelError, check_unambiguous, load_model, load_network
 from ..recon.networks import UniversalReconNet
-from . import checkpoint as ckpt_io
 from .config import ConfigError, TrainConfig
 
 logger = logging.getLogger(__name__)
@@ -41,10 +42,10 @@ def start_from(system: ImagingSystem, spec: str) -> dict[str, Any]:
     return record
 
 
-def _load_source(spec: str) -> tuple[ImagingSystem, dict[str, Any]]:
-    """The system ``spec`` names (a run folder, a checkpoint, a shipped model or a model file)
+def _load_source(spec: str) -> tuple[LoadedNetwork, dict[str, Any]]:
+    """The network ``spec`` names (a run folder, a checkpoint, a shipped model or a model file)
     and the record of it a run keeps: its name and provenance."""
-    from .models import ModelError, check_unambiguous, load_model, provenance_of
+    from .models import provenance_of
 
     try:
         check_unambiguous(spec, "--init-from")
@@ -55,36 +56,38 @@ def _load_source(spec: str) -> tuple[ImagingSystem, dict[str, Any]]:
         checkpoint = ckpt_io.resolve(path)
         if not checkpoint.is_file():
             raise ConfigError(f"--init-from {spec}: no checkpoint there")
-        source = ckpt_io.load_system(checkpoint)
+        source = load_network(checkpoint)
         return source, {
             "name": str(spec),
             "provenance": provenance_of(ckpt_io.load(checkpoint), checkpoint.parent),
         }
     try:
-        source, meta = load_model(spec)
+        source = load_model(spec)
     except ModelError as exc:
         raise ConfigError(f"--init-from: {exc}; or a run folder") from None
+    meta = source.meta
     return source, {"name": meta.get("name", str(spec)), "provenance": meta.get("provenance")}
 
 
 def _start_pattern(
-    system: ImagingSystem, source: ImagingSystem, spec: str, record: dict[str, Any]
+    system: ImagingSystem, source: LoadedNetwork, spec: str, record: dict[str, Any]
 ) -> None:
     """A learned pattern starts from the source's kernels; a fixed one that differs from the
     source's is recorded (``record["pattern"]``) and said."""
-    kernels = source.sensor.pixel_kernels().detach()
+    theirs = SplitterSensor(source.pattern)
+    kernels = theirs.pixel_kernels().detach()
     own = system.sensor
     if isinstance(own, LearnableSplitterSensor):
-        if tuple(own.logits.shape) != tuple(source.sensor.kernels.shape):
+        if tuple(own.logits.shape) != tuple(theirs.kernels.shape):
             raise ConfigError(f"--init-from {spec}: its pattern has another layout or kernel size")
-        exact = LearnableSplitterSensor(source.sensor.to_pattern(), init="exact")
+        exact = LearnableSplitterSensor(source.pattern, init="exact")
         with torch.no_grad():
             own.logits.copy_(exact.logits)
     elif not torch.allclose(own.pixel_kernels().detach().double(), kernels.double(), atol=1e-6):
         # Another pattern of the same period: what the network learnt (denoising, detail,
         # colour) is mostly not specific to the pattern, so it is a head start (the network
         # config, period included, matched by the caller).
-        record["pattern"] = source.sensor.to_pattern().name
+        record["pattern"] = source.pattern.name
         logger.info(
             f"--init-from {spec}: its network was trained for pattern {record['pattern']}; "
             f"training it on for {own.to_pattern().name}"
@@ -121,7 +124,7 @@ def _start_universal(
 def source_network(spec: str) -> dict[str, Any] | None:
     """The network config of what ``run.init_from`` names (a shipped model, a model file, a run
     folder or a checkpoint), read from its JSON header; None where there is none to read."""
-    from .models import ModelError, resolve_model
+    from ..recon.loading import resolve_model
 
     path = Path(spec)
     if path.is_dir() or path.name == ckpt_io.CHECKPOINT_NAME:

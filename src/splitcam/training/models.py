@@ -18,7 +18,6 @@ statistics of the physics network) keep their dtype. Nothing is unpickled.
 
 from __future__ import annotations
 
-import json
 import os
 import re
 import time
@@ -27,99 +26,20 @@ from typing import Any
 
 import torch
 
-from ..io.tensorfiles import load_pair, paired_paths, save_pair
-from ..io.weights import MODELS_DIR
-from ..patterns import Pattern
-from ..physics.sensor import SplitterSensor
-from ..physics.system import ImagingSystem
-from ..recon.networks import UniversalReconNet, build_network
-from . import checkpoint as ckpt_io
+from ..io import checkpoints as ckpt_io
+from ..io.tensorfiles import paired_paths, save_pair
+from ..recon.loading import MODEL_FORMAT, MODEL_VERSION, ModelError, load_network
+from .rundir import changes_rows, metrics_rows
 
-__all__ = [
-    "MODELS_DIR",
-    "ModelError",
-    "check_unambiguous",
-    "export_model",
-    "load_model",
-    "model_names",
-    "model_serves_any_pattern",
-    "provenance_of",
-    "resolve_model",
-]
+__all__ = ["export_model", "model_summary", "provenance_of", "training_budget"]
 
-FORMAT = "splitcam-model"
-VERSION = 1
-#: Where the shipped models live.
 STORAGE = {"float16": torch.float16, "bfloat16": torch.bfloat16, "float32": torch.float32}
-
-
-class ModelError(ValueError):
-    """A model name or file that cannot be used; the message says why (and the valid names)."""
-
-
-def model_names() -> list[str]:
-    """Names of the models shipped with splitcam (sorted)."""
-    if not MODELS_DIR.is_dir():
-        return []
-    return sorted(p.stem for p in MODELS_DIR.glob("*.json"))
-
-
-def check_unambiguous(spec: str | os.PathLike[str], flag: str) -> None:
-    """Refuse a bare name that is both a shipped model and a file or folder here (``D`` when
-    ``./D`` is a run folder, as ``splitcam sweep`` names them): either reading would silently
-    use something the user did not mean. The message shows both and how to name each."""
-    text = str(spec)
-    if isinstance(spec, str) and text in model_names() and Path(text).exists():
-        kind = "run folder" if Path(text).is_dir() else "file"
-        raise ModelError(
-            f"{flag} {text} is ambiguous: the shipped model {text} and the {kind} ./{text}; "
-            f"write ./{text} for the {kind}, or --model {text} for the shipped model"
-        )
-
-
-def model_serves_any_pattern(spec: str | os.PathLike[str]) -> bool:
-    """Whether a shipped model or model file is a network for any pattern (``universal``), read
-    from its JSON header (the weights are not loaded).
-
-    Raises:
-        ModelError: As :func:`resolve_model`, or a header that cannot be read.
-    """
-    path = resolve_model(spec)
-    try:
-        arch = json.loads(path.read_text(encoding="utf-8"))["network"]["arch"]
-    except (OSError, ValueError, KeyError, TypeError) as exc:
-        raise ModelError(f"model {str(path)!r} is damaged: {exc}") from None
-    return arch == UniversalReconNet.arch
-
-
-def resolve_model(spec: str | os.PathLike[str]) -> Path:
-    """A shipped model's name, or a model file (either file of the pair) → its JSON path.
-
-    Raises:
-        ModelError: Neither a shipped name nor an existing model file; the message lists the
-            shipped names.
-    """
-    text = str(spec)
-    if text in model_names():
-        return MODELS_DIR / f"{text}.json"
-    _, meta_path = paired_paths(text)
-    if meta_path.is_file():
-        return meta_path
-    shipped = ", ".join(model_names()) or "none shipped"
-    raise ModelError(f"unknown model {text!r}; shipped models: {shipped} (or a model .json file)")
 
 
 def _validation_curve(run_dir: Path, offset: int) -> list[dict[str, float]]:
     """``[{"step": s, "val_psnr_0": ..., ...}]`` of a run's log, steps shifted by ``offset``."""
-    path = run_dir / "metrics.jsonl"
-    if not path.is_file():
-        return []
     curve = []
-    for line in path.read_text(encoding="utf-8").splitlines():
-        try:
-            row = json.loads(line)
-        except json.JSONDecodeError:
-            continue
+    for row in metrics_rows(run_dir):
         vals = {k: round(v, 4) for k, v in row.items() if k.startswith("val_psnr_")}
         if vals:
             curve.append({"step": int(row.get("step", 0)) + offset, **vals})
@@ -131,15 +51,12 @@ def _thread_history(folder: Path, final: Any, steps: int) -> list[list[int]]:
     its ``changes.jsonl`` (one entry when it never changed). The checkpoint itself only knows the
     last count, so without this a run trained mostly on 1 thread would claim 2."""
     changes = []
-    path = folder / "changes.jsonl"
-    if path.is_file():
-        for line in path.read_text(encoding="utf-8").splitlines():
-            try:
-                entry = json.loads(line)
-                old, new = entry["changes"]["run.threads"]
-                changes.append((int(entry["step"]), old, new))
-            except (json.JSONDecodeError, KeyError, TypeError, ValueError):
-                continue
+    for entry in changes_rows(folder):
+        try:
+            old, new = entry["changes"]["run.threads"]
+            changes.append((int(entry["step"]), old, new))
+        except (KeyError, TypeError, ValueError):
+            continue
     changes = [c for c in changes if c[0] < steps]
     if not changes:
         return [[0, final]]
@@ -245,11 +162,10 @@ def export_model(
     path = ckpt_io.resolve(run)
     loaded = ckpt_io.load(path)
     ckpt_io.require(loaded, "pattern", "network", "config", purpose="it cannot be exported")
-    system = ckpt_io.load_system(path)  # validates the pattern and the network's tensors
-    params = {n for n, _ in system.network.named_parameters()}
+    network = load_network(path).network  # validates the pattern and the network's tensors
+    params = {n for n, _ in network.named_parameters()}
     tensors = {
-        k: (v.to(STORAGE[storage]) if k in params else v)
-        for k, v in system.network.state_dict().items()
+        k: (v.to(STORAGE[storage]) if k in params else v) for k, v in network.state_dict().items()
     }
     _, meta_path = paired_paths(out)
     name = name or meta_path.stem
@@ -265,36 +181,7 @@ def export_model(
         "exported": time.strftime("%Y-%m-%dT%H:%M:%S"),
         "provenance": provenance_of(loaded, run_dir),
     }
-    return save_pair(meta_path, tensors, FORMAT, VERSION, meta)
-
-
-def load_model(
-    spec: str | os.PathLike[str], device: str | torch.device = "cpu"
-) -> tuple[ImagingSystem, dict[str, Any]]:
-    """A shipped model (by name) or a model file → ``(system, meta)``.
-
-    The system's sensor is fixed to the model's pattern (learned kernels included); the network
-    is in float32 and in eval mode.
-
-    Raises:
-        ModelError: Unknown name, damaged or inconsistent files.
-    """
-    meta_path = resolve_model(spec)
-    tensors, meta, _ = load_pair(meta_path, FORMAT, VERSION, "splitcam model", ModelError)
-    try:
-        pattern = Pattern.from_dict(meta["pattern"], source=str(meta_path))
-        network = build_network(meta["network"])
-    except (KeyError, TypeError, ValueError) as exc:
-        raise ModelError(f"model {str(meta_path)!r} is damaged: {exc}") from None
-    own = network.state_dict()
-    if set(own) != set(tensors) or any(own[k].shape != tensors[k].shape for k in own):
-        raise ModelError(f"model {str(meta_path)!r}: its tensors do not fit its architecture")
-    network.load_state_dict({k: v.to(own[k].dtype) for k, v in tensors.items()})
-    for key, value in network.state_dict().items():
-        if value.is_floating_point() and not bool(torch.isfinite(value).all()):
-            raise ModelError(f"model {str(meta_path)!r} holds NaN or infinite values in {key!r}")
-    system = ImagingSystem(SplitterSensor(pattern), network)
-    return system.to(device).eval(), meta
+    return save_pair(meta_path, tensors, MODEL_FORMAT, MODEL_VERSION, meta)
 
 
 def training_budget(meta: dict[str, Any]) -> str:

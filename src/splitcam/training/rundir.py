@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from ..io import appending, stale_temporaries, write_text
-from . import checkpoint as ckpt_io
+from ..io import checkpoints as ckpt_io
 from .config import ConfigError, TrainConfig, read_config_file
 
 logger = logging.getLogger(__name__)

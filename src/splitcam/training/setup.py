@@ -15,13 +15,13 @@ import torch
 from .. import patterns
 from ..data.patches import ImageCache, PatchSampler
 from ..design.kernels import design_pattern
+from ..io import checkpoints as ckpt_io
 from ..patterns.random import PatternMix
 from ..physics.noise import GaussianNoise, PhotonNoise
 from ..physics.sensor import LearnableSplitterSensor, SplitterSensor, SwitchingSensor
 from ..physics.system import ImagingSystem
 from ..recon.base import fast_precision
 from ..recon.networks import build_network
-from . import checkpoint as ckpt_io
 from . import seeds
 from .config import ConfigError, TrainConfig
 from .distributed import DistInfo, init_distributed

@@ -20,11 +20,12 @@ import torch
 from .. import patterns
 from ..data.patches import PatchSampler
 from ..io import atomic_path
+from ..io import checkpoints as ckpt_io
 from ..patterns.random import PatternMix
 from ..physics.noise import Exposure, GaussianNoise, PhotonNoise
 from ..physics.system import ImagingSystem
-from . import checkpoint as ckpt_io
 from . import seeds
+from .checkpoint import load_optimizer, optimizer_tensors
 from .config import TrainConfig
 from .distributed import DistInfo, gather
 from .guard import DivergenceGuard
@@ -93,7 +94,7 @@ def restore(state: TrainState, loaded: ckpt_io.Checkpoint, run: Run) -> None:
     """
     peaks = [group["peak_lr"] for group in state.optimizer.param_groups]
     ckpt_io.load_module(state.system, loaded)
-    ckpt_io.load_optimizer(state.optimizer, loaded)
+    load_optimizer(state.optimizer, loaded)
     state.step = int(loaded.meta["step"])
     state.train_seconds = float(loaded.meta.get("train_seconds", 0.0))
     restore_rng(loaded, state.sampler, state.noise, run.dist)
@@ -109,7 +110,7 @@ def save_checkpoint(state: TrainState, run: Run) -> None:
     replicas = replica_report(state.system, state.last_batch, run.dist)
     if not run.dist.is_main:
         return
-    opt_tensors, opt_meta = ckpt_io.optimizer_tensors(state.optimizer)
+    opt_tensors, opt_meta = optimizer_tensors(state.optimizer)
     tensors = {f"model/{k}": v for k, v in state.system.state_dict().items()}
     tensors.update(opt_tensors)
     tensors.update(rng)

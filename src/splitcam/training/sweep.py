@@ -42,7 +42,7 @@ from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
-from . import checkpoint as ckpt_io
+from ..io import checkpoints as ckpt_io
 from .config import ConfigError, TrainConfig
 
 __all__ = [
@@ -170,13 +170,14 @@ def shipped_already(
     folder, no snapshot, no ``run.init_from``); else None. A sweep skips such an experiment:
     without this, naming a shipped model's file on a machine without its run folder would
     train it again from scratch."""
-    from .models import MODELS_DIR, model_names
+    from ..io import weights
+    from ..recon.loading import model_names
 
     if status(exp) != "new" or exp.config.run.init_from or exp.name not in model_names():
         return None
     if snapshots is not None and snapshot_path(exp, snapshots).is_file():
         return None
-    path = MODELS_DIR / f"{exp.name}.json"
+    path = weights.MODELS_DIR / f"{exp.name}.json"
     try:
         steps = int(json.loads(path.read_text())["provenance"]["total_steps"])
     except (OSError, ValueError, KeyError, TypeError):

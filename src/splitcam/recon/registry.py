@@ -1,0 +1,306 @@
+"""The registry of reconstruction methods: from what a user types to a
+:class:`~splitcam.recon.Reconstructor`.
+
+``splitcam evaluate``, ``splitcam reconstruct`` and Python code all build their methods here, so a
+name means the same thing everywhere:
+
+- ``lmmse``: the LMMSE filters of a pattern (shipped fits for the built-in patterns, closed-form
+  filters from the shipped image statistics for any other kernels, or fitted on a folder of
+  training images with ``lmmse_train``);
+- ``bilinear``, ``malvar2004``, ``menon2007``: classical demosaicking of the ``bayer`` pattern;
+- a run folder or checkpoint file: a trained network with the pattern it was trained for;
+- a shipped model's name (``A`` ... ``E``, ``bayer``, ``A-opt``, ``D-opt``, ``D-opt-random``; see
+  :func:`splitcam.recon.loading.model_names`) or a model file: a trained network shipped with
+  splitcam (``splitcam evaluate --model D``).
+
+Every method works in a light domain (SPEC section 13, the ``domain`` attribute): ``lmmse``
+in the one asked for (``srgb``: the shipped fit of a built-in pattern; ``linear``: the closed form
+from the shipped linear image statistics), classical demosaicking in either (fixed interpolation,
+no image statistics), a network in the one it was trained in (its config's ``data.domain``,
+``srgb`` where the config does not say), and asking a network for another is an error.
+
+>>> build_method("malvar2004").name
+'bayer+malvar2004'
+
+Networks are loaded by :mod:`splitcam.recon.loading`.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from collections.abc import Sequence
+from pathlib import Path
+
+from .. import patterns
+from ..io.checkpoints import CHECKPOINT_NAME, read_meta, resolve
+from ..io.tensorfiles import meta_checksum
+from ..physics.light import check_domain
+from .base import NetworkReconstructor, Reconstructor
+from .closed_form import closed_form_lmmse
+from .demosaic import ClassicalDemosaic
+from .lmmse import LMMSE, shipped_lmmse
+from .loading import (
+    LoadedNetwork,
+    ModelError,
+    check_unambiguous,
+    load_model,
+    load_network,
+    model_names,
+    resolve_model,
+)
+from .networks import serves_any_pattern
+
+__all__ = [
+    "DEMOSAICKING",
+    "build_method",
+    "build_methods",
+    "build_model",
+    "method_names",
+    "model_domain",
+    "trained_domain",
+]
+
+#: Classical demosaicking methods of the bayer pattern, by name.
+DEMOSAICKING = ClassicalDemosaic.METHODS
+
+
+def method_names() -> list[str]:
+    """The method names :func:`build_method` knows (besides run folders and checkpoints)."""
+    return ["lmmse", *DEMOSAICKING]
+
+
+def build_model(
+    spec: str | os.PathLike,
+    *,
+    pattern: str | os.PathLike | patterns.Pattern | None = None,
+    tile: int | None = 512,
+    precision: str = "auto",
+    domain: str | None = None,
+) -> NetworkReconstructor:
+    """A shipped model (by name) or a model file as a reconstruction method, labelled
+    ``net-<name>`` (the same for every command).
+
+    Its ``domain`` is the light domain it was trained in (:func:`trained_domain`); ``domain``,
+    if given, must be that one.
+
+    A model for any pattern (``universal``) needs ``pattern`` (a library name, a pattern file or
+    a :class:`~splitcam.patterns.Pattern`) and is labelled ``net-<name>-<pattern>``; a model of
+    one pattern ignores it (the CLI checks that the two agree).
+
+    Raises:
+        ModelError: Unknown name (the message lists the shipped ones) or a damaged file.
+        ValueError: A model for any pattern without ``pattern``.
+        PatternError: An unknown pattern name or a bad pattern file (the message names it).
+        ValueError: ``domain`` is not the one the model was trained in.
+    """
+    loaded = load_model(spec)
+    meta = loaded.meta
+    name = meta.get("name") or Path(str(spec)).stem
+    own = _trained_on_one_pattern(meta.get("config"))
+    method = _network_method(loaded, f"net-{name}", pattern, tile, precision, own)
+    method.domain = _check_network_domain(f"net-{name}", meta.get("config"), domain)
+    # Files written before their fields had a checksum: the fields themselves identify them.
+    fields = "" if "meta_sha256" in meta else f":{meta_checksum(meta)}"
+    method.fingerprint = f"model:{name}:{meta.get('sha256', '')}{fields}{method.fingerprint}"
+    return method
+
+
+def trained_domain(config: dict | None) -> str:
+    """The light domain a network was trained in, from its run's (or model's) saved config:
+    ``data.domain``, ``srgb`` where the config does not record one."""
+    data = (config or {}).get("data") or {}
+    return check_domain(data.get("domain") or "srgb")
+
+
+def model_domain(spec: str | os.PathLike) -> str:
+    """The light domain a shipped model (by name) or model file was trained in, read from its
+    JSON header (:func:`trained_domain`; the weights are not loaded).
+
+    Raises:
+        ModelError: As :func:`~splitcam.recon.loading.resolve_model`, or a header that cannot
+            be read.
+    """
+    path = resolve_model(spec)
+    try:
+        config = json.loads(path.read_text(encoding="utf-8")).get("config")
+        return trained_domain(config if isinstance(config, dict) else None)
+    except (OSError, ValueError, AttributeError) as exc:
+        raise ModelError(f"model {str(path)!r} is damaged: {exc}") from None
+
+
+def _check_network_domain(label: str, config: dict | None, domain: str | None) -> str:
+    """The domain of a trained network; raises if ``domain`` (when given) is another."""
+    own = trained_domain(config)
+    if domain is not None and check_domain(domain) != own:
+        raise ValueError(
+            f"{label} was trained in the {own} domain and cannot reconstruct raw images of the "
+            f"{check_domain(domain)} domain (SPEC section 13): use --domain {own}, or a network "
+            f"trained with data.domain {check_domain(domain)}"
+        )
+    return own
+
+
+def _trained_on_one_pattern(config: dict | None) -> bool:
+    """Whether a run's (or model's) saved config trained on one pattern, not ``random``."""
+    name = ((config or {}).get("pattern") or {}).get("name", "")
+    return str(name).strip().lower() != "random"
+
+
+def _network_method(
+    loaded: LoadedNetwork, label: str, pattern, tile: int | None, precision: str, own_pattern: bool
+) -> NetworkReconstructor:
+    """A trained network as a method: with its own pattern, or for a network of any pattern
+    (``period`` None) with ``pattern``, labelled ``<label>-<pattern>``; ``fingerprint`` holds
+    what, beyond the weights, identifies its results (the pattern's values). A network of any
+    pattern fine-tuned on one (``own_pattern``) reconstructs that one unless told another."""
+    if not serves_any_pattern(loaded.network) or (own_pattern and pattern is None):
+        method = NetworkReconstructor(
+            loaded.network, loaded.pattern, label, tile=tile, precision=precision
+        )
+        method.fingerprint = ""
+        return method
+    if pattern is None:
+        raise ValueError(
+            f"{label} reconstructs any pattern: name the pattern of the raw images "
+            f"(--pattern, a library name or a pattern file)"
+        )
+    resolved = patterns.get(pattern)
+    name = _pattern_label(pattern, resolved)
+    method = NetworkReconstructor(
+        loaded.network, resolved, f"{label}-{name}", tile=tile, precision=precision
+    )
+    values = ",".join(f"{v:.9g}" for v in resolved.kernels.reshape(-1))
+    layout = ",".join(str(v) for v in resolved.layout.reshape(-1))
+    method.fingerprint = f":{name}:{resolved.kernels.shape}:{layout}:{values}"
+    return method
+
+
+def _is_path(spec: str | os.PathLike) -> bool:
+    """A run folder or checkpoint file, as opposed to a method name."""
+    text = str(spec)
+    return (
+        isinstance(spec, os.PathLike)
+        or "/" in text
+        or os.sep in text
+        or text.endswith(".safetensors")
+        or Path(text).exists()
+    )
+
+
+def _pattern_label(
+    pattern_spec: str | os.PathLike | patterns.Pattern, pattern: patterns.Pattern
+) -> str:
+    """``D`` for a built-in pattern, the file name for a pattern file (even if the file's
+    pattern is named like a built-in, so a table never passes one off as the other)."""
+    if isinstance(pattern_spec, (str, os.PathLike)) and str(pattern_spec).lower() not in (
+        n.lower() for n in patterns.names()
+    ):
+        return Path(pattern_spec).name
+    return pattern.name
+
+
+def build_method(
+    spec: str | os.PathLike,
+    *,
+    pattern: str | os.PathLike | patterns.Pattern | None = None,
+    lmmse_train: str | os.PathLike | None = None,
+    tile: int | None = 512,
+    precision: str = "auto",
+    progress: bool = False,
+    domain: str | None = None,
+) -> Reconstructor:
+    """One reconstruction method from its name or a run folder / checkpoint file.
+
+    Args:
+        spec: ``lmmse``, ``bilinear``, ``malvar2004``, ``menon2007``, a shipped model's name or
+            model file, or the path of a run folder or checkpoint.
+        pattern: The pattern (name, file or :class:`~splitcam.patterns.Pattern`) for ``lmmse``
+            and for a network of any pattern (``universal``).
+        lmmse_train: Fit the LMMSE on this folder of training images instead of using the
+            shipped fit (needed for patterns other than the built-in ones).
+        tile: Tile size of network reconstruction.
+        precision: Network inference precision: ``auto`` (bfloat16 + channels-last where
+            native), ``fp32`` or ``bf16`` (:class:`~splitcam.recon.base.NetworkReconstructor`).
+        progress: Progress bars while fitting.
+        domain: The light domain (``srgb`` or ``linear``) of the raw images: the LMMSE's and
+            a classical demosaicker's (default ``srgb``); a network's must be this one
+            (default: whichever it was trained in).
+
+    Raises:
+        ValueError: Unknown name (the message lists the valid ones), ``lmmse`` without a
+            pattern, a network trained in another domain than ``domain``, or ``lmmse_train``
+            in the linear domain.
+    """
+    key = str(spec).strip().lower()
+    if domain is not None:
+        domain = check_domain(domain)
+    if key in DEMOSAICKING:
+        method = ClassicalDemosaic(key)
+        method.name = f"bayer+{key}"
+        method.domain = domain or "srgb"
+        return method
+    if key == "lmmse":
+        if pattern is None:
+            raise ValueError("method 'lmmse' needs a pattern (a name such as D, or a file)")
+        resolved = patterns.get(pattern)
+        if domain == "linear":
+            if lmmse_train is not None:
+                raise ValueError(
+                    "the LMMSE fitted on training images (--lmmse-train) is of sRGB values; in "
+                    "the linear domain the LMMSE is the closed form from the shipped linear "
+                    "image statistics: leave --lmmse-train out"
+                )
+            lmmse = closed_form_lmmse(resolved, domain="linear")
+        elif lmmse_train is not None:
+            lmmse = LMMSE.fit(resolved, lmmse_train, progress=progress)
+        else:
+            try:
+                lmmse = shipped_lmmse(resolved)
+            except FileNotFoundError:  # not a built-in's kernels: solve its filters in closed form
+                lmmse = closed_form_lmmse(resolved)
+        lmmse.pattern = resolved
+        lmmse.name = f"lmmse-{_pattern_label(pattern, resolved)}"
+        lmmse.domain = domain or "srgb"
+        return lmmse
+    check_unambiguous(spec, "method")
+    options = {"pattern": pattern, "tile": tile, "precision": precision, "domain": domain}
+    if isinstance(spec, str) and spec.strip() in model_names():
+        return build_model(spec.strip(), **options)
+    if _is_path(spec) and str(spec).endswith(".json") and Path(spec).is_file():
+        return build_model(spec, **options)
+    if _is_path(spec):
+        path = resolve(spec)
+        config = read_meta(path).get("config")
+        label = path.parent.name if path.name == CHECKPOINT_NAME else path.stem
+        trained_in = _check_network_domain(label, config, domain)
+        own = _trained_on_one_pattern(config)
+        method = _network_method(load_network(path), label, pattern, tile, precision, own)
+        method.domain = trained_in
+        stat = path.stat()
+        method.fingerprint = (
+            f"{path.resolve()}:{stat.st_size}:{stat.st_mtime_ns}{method.fingerprint}"
+        )
+        return method
+    raise ValueError(
+        f"unknown method {str(spec)!r}; valid: {', '.join(method_names())}, a shipped model "
+        f"({', '.join(model_names()) or 'none shipped'}), or a run folder / checkpoint file"
+    )
+
+
+def build_methods(
+    specs: Sequence[str | os.PathLike],
+    *,
+    patterns_for_lmmse: Sequence[str | os.PathLike | patterns.Pattern] = (),
+    **options,
+) -> list[Reconstructor]:
+    """:func:`build_method` for each spec; ``lmmse`` expands to one method per pattern."""
+    methods: list[Reconstructor] = []
+    for spec in specs:
+        if str(spec).strip().lower() == "lmmse":
+            if not patterns_for_lmmse:
+                raise ValueError("method 'lmmse' needs at least one pattern")
+            methods += [build_method(spec, pattern=p, **options) for p in patterns_for_lmmse]
+        else:
+            methods.append(build_method(spec, **options))
+    return methods
