@@ -225,7 +225,11 @@ class PackedReconNet(_Reconstructor):
 
 class _WithStatistics(nn.Module):
     """The image statistics a network solves its LMMSE filters from, kept as (float64) buffers
-    so a checkpoint carries them, and the check of the physics a network is called with."""
+    so a checkpoint carries them, and the check of the physics a network is called with.
+
+    The statistics belong to a light domain (SPEC section 13): a network for raw images of
+    linear radiance holds statistics of linear images (``shipped_image_statistics("linear")``),
+    one for sRGB values (the default) the sRGB ones."""
 
     def _keep_statistics(self, statistics: ImageStatistics | None) -> None:
         stats = statistics if statistics is not None else shipped_image_statistics()
@@ -234,6 +238,22 @@ class _WithStatistics(nn.Module):
 
     def statistics(self) -> ImageStatistics:
         return ImageStatistics(self.stat_mean.double(), self.stat_second.double(), 0)
+
+    def use_statistics(self, statistics: ImageStatistics) -> None:
+        """Solve the LMMSE from ``statistics`` from now on (the buffers keep their device and
+        dtype): e.g. a network whose weights come from one domain, trained on in another.
+
+        Raises:
+            ValueError: Statistics of another window size than the network's.
+        """
+        if tuple(statistics.second.shape) != tuple(self.stat_second.shape):
+            raise ValueError(
+                f"expected image statistics of shape {tuple(self.stat_second.shape)}, got "
+                f"{tuple(statistics.second.shape)}"
+            )
+        with torch.no_grad():
+            self.stat_mean.copy_(statistics.mean)
+            self.stat_second.copy_(statistics.second)
 
     def _check_physics(self, raw: torch.Tensor, sigma: Any, kernels: Any) -> None:
         check_raw(raw)
@@ -529,12 +549,18 @@ ARCHITECTURES: dict[str, type[nn.Module]] = {
 }
 
 
-def build_network(config: Mapping[str, Any]) -> nn.Module:
+def build_network(
+    config: Mapping[str, Any], *, statistics: ImageStatistics | None = None
+) -> nn.Module:
     """Build an (untrained) network from a ``config()`` dictionary.
 
     Args:
         config: ``{"arch": "paper" | "packed", "period": [Ph, Pw], "features": F,
             "blocks": K}``; ``features`` and ``blocks`` default to 64 and 10.
+        statistics: The image statistics of the LMMSE inside the ``physics`` and ``universal``
+            networks (default: the shipped sRGB ones; ``shipped_image_statistics("linear")``
+            for a network of the linear domain). The blind architectures use none and ignore
+            it.
 
     Returns:
         The network, freshly initialised; load a state dict to restore weights.
@@ -554,14 +580,17 @@ def build_network(config: Mapping[str, Any]) -> nn.Module:
         unknown = sorted(set(config) - fields - {"arch", "period"})
         if unknown:
             raise ValueError(f"unknown network config field(s): {', '.join(map(str, unknown))}")
-        return UniversalReconNet(**{k: config[k] for k in fields if k in config})
+        kwargs = {k: config[k] for k in fields if k in config}
+        return UniversalReconNet(**kwargs, statistics=statistics)
     extra = {"radius"} if arch == PhysicsReconNet.arch else set()
     unknown = sorted(set(config) - {"arch", "period", "features", "blocks"} - extra)
     if unknown:
         raise ValueError(f"unknown network config field(s): {', '.join(map(str, unknown))}")
     if "period" not in config:
         raise ValueError("network config needs a 'period' [Ph, Pw]")
-    kwargs = {k: config[k] for k in extra if k in config}
+    kwargs: dict[str, Any] = {k: config[k] for k in extra if k in config}
+    if arch == PhysicsReconNet.arch:
+        kwargs["statistics"] = statistics
     return ARCHITECTURES[arch](
         period=config["period"],
         features=config.get("features", 64),

@@ -26,19 +26,27 @@ else:  # pragma: no cover
 
 
 from ..io import write_text
+from ..io.domains import DEFAULT_DOMAIN, DOMAINS
 
 
 class ConfigError(ValueError):
     """A configuration file or override is invalid; the message names the key."""
 
 
-def _opt(default: Any, help: str, *, flag: str | None = None) -> Any:
-    """A setting: its default, its help text and (if not the field name) its command-line flag.
+def _opt(
+    default: Any,
+    help: str,
+    *,
+    flag: str | None = None,
+    choices: tuple[str, ...] | None = None,
+) -> Any:
+    """A setting: its default, its help text, (if not the field name) its command-line flag and
+    (for a setting of a few names) the values it takes.
 
     The one place each setting is described: ``splitcam train``'s flags are generated from these
     (:func:`train_flags`), with the default shown in their help.
     """
-    metadata = {"help": help, "flag": flag}
+    metadata = {"help": help, "flag": flag, "choices": choices}
     if isinstance(default, list):
         return field(default_factory=lambda: list(default), metadata=metadata)
     return field(default=default, metadata=metadata)
@@ -128,10 +136,22 @@ class DataConfig:
         "docs/results/convergence/5min_lr.md)",
     )
     max_images: int | None = _opt(None, "use at most this many training images")
+    domain: str = _opt(
+        DEFAULT_DOMAIN,
+        "light domain (SPEC section 13): srgb (the paper's: the 8-bit values / 255 are the "
+        "light) or linear (patches decoded to linear radiance before the sensor and the noise; "
+        "the network estimates radiance, the loss compares it with the patch's radiance, and "
+        "the LMMSE inside the physics and universal networks uses the linear image statistics); "
+        "saved with the run and its exported models, which reconstruct only this domain",
+        choices=DOMAINS,
+    )
 
 
 #: Settings added after runs were saved without them, and the value that reproduces those runs.
-SAVED_BEFORE: dict[tuple[str, str], Any] = {("data", "partial_periods"): 0.0}
+SAVED_BEFORE: dict[tuple[str, str], Any] = {
+    ("data", "partial_periods"): 0.0,
+    ("data", "domain"): "srgb",
+}
 
 
 @dataclass
@@ -319,6 +339,10 @@ class TrainConfig:
                 "network.features must be >= 1 and network.blocks >= 0",
             ),
             (self.data.patch_size >= 1, "data.patch_size must be >= 1"),
+            (
+                self.data.domain in DOMAINS,
+                f"data.domain must be one of {', '.join(DOMAINS)}, got {self.data.domain!r}",
+            ),
             (self.data.batch_size >= 1, "data.batch_size must be >= 1"),
             (
                 0 <= self.data.partial_periods <= 1,
@@ -531,6 +555,8 @@ class Flag:
     ones take several)."""
     many: bool
     help: str
+    choices: tuple[str, ...] | None = None
+    """The values a setting of a few names takes (e.g. ``data.domain``), else None."""
 
 
 def train_flags() -> list[Flag]:
@@ -554,7 +580,14 @@ def train_flags() -> list[Flag]:
                 shown = " ".join(map(str, default)) if many else default
                 text = f"{text} (default: {shown})"
             out.append(
-                Flag(f.metadata.get("flag") or f.name, f"{section.name}.{f.name}", kind, many, text)
+                Flag(
+                    f.metadata.get("flag") or f.name,
+                    f"{section.name}.{f.name}",
+                    kind,
+                    many,
+                    text,
+                    f.metadata.get("choices"),
+                )
             )
     return out
 

@@ -1,7 +1,11 @@
 """Setting a training run up from its configuration: the device and processes, the imaging
 system (sensor + network), the optimiser, where the weights start, the training patches, the
 noise, and the validation images; :func:`prepare` does it all in order, for a new run or for
-one that resumes a checkpoint."""
+one that resumes a checkpoint.
+
+A run works in one light domain (``data.domain``, SPEC section 13): a network that solves the
+LMMSE inside (``physics``, ``universal``) holds the shipped image statistics of that domain,
+also when its weights start from a network of the other one (``run.init_from``)."""
 
 from __future__ import annotations
 
@@ -21,6 +25,7 @@ from ..physics.noise import GaussianNoise, PhotonNoise
 from ..physics.sensor import LearnableSplitterSensor, SplitterSensor, SwitchingSensor
 from ..physics.system import ImagingSystem
 from ..recon.base import fast_precision
+from ..recon.closed_form import shipped_image_statistics
 from ..recon.networks import build_network
 from . import seeds
 from .config import ConfigError, TrainConfig
@@ -40,6 +45,8 @@ def prepare(
     torch's global generator is seeded before the network is built.
     """
     source = train_source(config)
+    if loaded is not None:
+        _check_resume_domain(config, loaded)
     device, dist = _processes(config)
     torch.manual_seed(seeds.global_seed(config))
     start = patterns.Pattern.from_dict(loaded.meta["start_pattern"]) if loaded else None
@@ -74,6 +81,22 @@ def prepare(
     if loaded is not None:
         restore(state, loaded, run)
     return run, state
+
+
+def _check_resume_domain(config: TrainConfig, loaded: ckpt_io.Checkpoint) -> None:
+    """A run continues in the light domain it trained in: its network estimates that domain's
+    values and holds that domain's image statistics.
+
+    Raises:
+        CheckpointError: ``data.domain`` differs from the checkpoint's.
+    """
+    saved = TrainConfig.from_saved(loaded.meta["config"]).data.domain
+    if saved != config.data.domain:
+        raise ckpt_io.CheckpointError(
+            f"cannot resume: the checkpoint was trained with data.domain={saved!r}, got "
+            f"{config.data.domain!r}; this setting defines the model, so start a new run "
+            f"instead (--init-from the run starts one from its weights)"
+        )
 
 
 def _processes(config: TrainConfig) -> tuple[torch.device, DistInfo]:
@@ -114,7 +137,12 @@ def _origin(
         meta = loaded.meta
         start_step = int(meta.get("start_step", 0))
         return meta.get("init_from"), start_step, float(meta.get("lr_scale", 1.0))
-    init_from = start_from(system, config.run.init_from) if config.run.init_from else None
+    init_from = None
+    if config.run.init_from:
+        init_from = start_from(system, config.run.init_from)
+        # The weights come from the source; the statistics are this run's domain's.
+        if hasattr(system.network, "use_statistics"):
+            system.network.use_statistics(shipped_image_statistics(config.data.domain))
     if config.run.continue_schedule:
         return (init_from, *continue_point(init_from, config))
     return init_from, 0, 1.0
@@ -167,7 +195,8 @@ def device_name(device: torch.device) -> str:
 def build_system(
     config: TrainConfig, pattern: patterns.Pattern | None = None, *, design: bool = True
 ) -> ImagingSystem:
-    """Sensor + network from a configuration (network weights freshly initialised).
+    """Sensor + network from a configuration (network weights freshly initialised; the LMMSE
+    inside a ``physics`` or ``universal`` network from the image statistics of ``data.domain``).
 
     A learned pattern with ``pattern.design_steps`` starts from the kernels that
     :func:`~splitcam.design.design_pattern` finds from its initialisation (unless
@@ -182,7 +211,8 @@ def build_system(
             "period": list(pattern.period),
             "features": config.network.features,
             "blocks": config.network.blocks,
-        }
+        },
+        statistics=shipped_image_statistics(config.data.domain),
     )
     return ImagingSystem(sensor, net)
 

@@ -25,6 +25,7 @@ from typing import Any
 import torch
 import torch.nn.functional as F
 
+from ..physics.light import decode_scene
 from .config import TrainConfig
 from .distributed import (
     DistInfo,
@@ -294,8 +295,11 @@ def _schedule(state: TrainState, run: Run) -> None:
 
 
 def _next_batch(state: TrainState, run: Run) -> torch.Tensor:
-    """This rank's next batch of patches (and, in a run over many patterns, this step's)."""
+    """This rank's next batch of patches as the light the sensor sees (and, in a run over many
+    patterns, this step's pattern): the patches' sRGB values, or in the linear domain their
+    radiance (SPEC section 13), which is then also the target of the loss."""
     batch = state.sampler.sample(run.config.data.batch_size).to(run.device, non_blocking=True)
+    batch = decode_scene(batch, run.config.data.domain)
     state.last_batch = batch
     if run.mix is not None:
         state.system.sensor.set_pattern(run.mix.pattern(state.step))
@@ -305,7 +309,11 @@ def _next_batch(state: TrainState, run: Run) -> torch.Tensor:
 def _forward_backward(
     state: TrainState, run: Run, model: torch.nn.Module, batch: torch.Tensor
 ) -> tuple[float, float]:
-    """``(loss, gradient norm)`` of a batch, its gradients computed (and clipped)."""
+    """``(loss, gradient norm)`` of a batch, its gradients computed (and clipped).
+
+    The loss compares the estimate with the batch in the run's domain: in the linear domain,
+    radiance with radiance (docs/results/exposure/linear-training.md compares this with a loss
+    on both encoded to sRGB)."""
     autocast: Any = (
         torch.autocast(run.device.type, dtype=torch.bfloat16)
         if run.fast
@@ -369,7 +377,13 @@ def _log(state: TrainState, run: Run, window: _Window, log: RunLog | None, bar: 
 
 
 def _validate(state: TrainState, run: Run) -> dict[str, float]:
-    return validate(state.system, run.val_images, run.val_levels, run.val_patterns)
+    return validate(
+        state.system,
+        run.val_images,
+        run.val_levels,
+        run.val_patterns,
+        domain=run.config.data.domain,
+    )
 
 
 def _show(bar: Any, row: dict[str, float]) -> None:

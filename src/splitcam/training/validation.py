@@ -127,12 +127,18 @@ def validate(
     images: list[tuple[str, torch.Tensor]],
     sigmas: list[float] | list[Exposure],
     val_patterns: list[patterns.Pattern] | None = None,
+    *,
+    domain: str = "srgb",
 ) -> dict[str, float]:
     """Mean PSNR per noise level (a sigma, or a photon-model exposure: ``val_psnr_N<photons>``)
     on the validation images, by the evaluation protocol itself
     (:func:`splitcam.evaluation.protocol.mean_psnr`): the pattern as a run's checkpoint records
     it, the same simulation, noise, reconstruction, rounding and averaging as ``splitcam
     evaluate``, so the logged value is what ``evaluate`` reports for this step.
+
+    ``domain`` is the run's light domain (SPEC section 13): in ``linear`` the images are decoded
+    to radiance before the sensor and the network's estimate is encoded back to 8-bit sRGB
+    before it is scored against them, as ``evaluate --domain linear`` does.
 
     With ``val_patterns`` (a run over many patterns) each of them is scored
     (``val_psnr_<pattern>_<level>``) and the plain keys hold the means over the patterns."""
@@ -141,8 +147,8 @@ def validate(
     targets = val_patterns or [system.sensor.to_pattern()]
     per_pattern = {}
     for pattern in targets:
-        method = NetworkReconstructor(system.network, pattern, "validation")
-        per_pattern[pattern.name] = mean_psnr(method, images, sigmas)
+        method = NetworkReconstructor(system.network, pattern, "validation", domain=domain)
+        per_pattern[pattern.name] = mean_psnr(method, images, sigmas, domain=domain)
     system.train(was_training)
 
     def key(s: float | Exposure) -> str:
