@@ -33,6 +33,13 @@ def check_count(value: Any, name: str, minimum: int = 0) -> int:
 def check_period(period: Any) -> tuple[int, int]:
     """A period: two positive integers ``(Ph, Pw)`` (a tuple, list or ``torch.Size``).
 
+    >>> check_period([2, 3])
+    (2, 3)
+    >>> check_period((0, 2))
+    Traceback (most recent call last):
+        ...
+    ValueError: period must be two positive integers (Ph, Pw), got (0, 2)
+
     Raises:
         ValueError: Anything else.
     """

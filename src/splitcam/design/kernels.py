@@ -203,6 +203,16 @@ def design_pattern(
     Raises:
         ValueError: Bad ``init``, ``sigmas``, ``steps``, ``lr``, ``radius`` or ``objective``;
             a start that cannot be learned (:class:`~splitcam.patterns.PatternError`).
+
+    >>> result = design_pattern("D", steps=5, sigmas=[0.0, 10.0], radius=2)
+    >>> result.pattern.name, result.pattern.period, result.pattern.kernel_size
+    ('D-designed', (2, 2), (1, 3))
+    >>> len(result.history)  # the objective (dB) before each of the 5 steps
+    5
+    >>> result.history[-1] > result.history[0]
+    True
+    >>> all(result.mse_after[s] < result.mse_before[s] for s in (0.0, 10.0))
+    True
     """
     start = get(start)
     sigma_list = check_sigmas(sigmas)

@@ -236,6 +236,15 @@ def psnr(
 
     Shape:
         - x, y: ``(3, H, W)``.
+
+    >>> import torch
+    >>> truth = torch.full((3, 4, 4), 0.5)
+    >>> guess = truth.clone()
+    >>> guess[0, 0, 0] = 0.6  # one value of 48 off by 25 steps of 255
+    >>> round(psnr(guess, truth), 2)  # 10 log10(255^2 / (25^2 / 48))
+    36.98
+    >>> psnr(guess, truth, crop=1)  # the border left out: identical images
+    inf
     """
     xq, yq = _prepare_pair(x, y, crop)
     return _psnr_quantized(xq, yq, data_range)

@@ -38,6 +38,15 @@ def names() -> list[str]:
 def get(name: str | Path | Pattern) -> Pattern:
     """A built-in pattern by name (case-insensitive), or a pattern loaded from a file path.
 
+    >>> from splitcam import patterns
+    >>> d = patterns.get("d")
+    >>> d.name, d.period, d.kernel_size
+    ('D', (2, 2), (1, 3))
+    >>> d.layout.tolist()  # the splitter at each pixel of the 2x2 unit cell
+    [[0, 1], [2, 3]]
+    >>> patterns.get("router(eta=0.5;chi=0)").name  # a router with losses, by its parameters
+    'router(eta=0.5,0.5,0.5;chi=0,0,0)'
+
     Raises:
         PatternError: Unknown name; the message lists the valid names.
     """

@@ -65,6 +65,13 @@ def srgb_to_linear(u: torch.Tensor) -> torch.Tensor:
     """Decode sRGB display values ``u`` (8-bit value / 255) to linear radiance.
 
     Any shape and floating dtype; the result has ``u``'s shape, dtype and device.
+
+    >>> import torch
+    >>> srgb_to_linear(torch.tensor([0.0, 0.04045, 0.5, 1.0], dtype=torch.float64)).tolist()
+    [0.0, 0.0031308, 0.2140411, 1.0]
+    >>> u = torch.linspace(0, 1, 256, dtype=torch.float64)
+    >>> torch.allclose(linear_to_srgb(srgb_to_linear(u)), u)  # the pair round-trips
+    True
     """
     _check_float(u)
     curve = ((u.clamp_min(SRGB_BREAK) + 0.055) / 1.055) ** _GAMMA

@@ -289,7 +289,13 @@ class PhotonNoise:
 
 def level_label(level: float | Exposure) -> str:
     """``"15"`` for a Gaussian sigma, ``"N1000"`` for an :class:`Exposure` of 1000
-    photo-electrons (in ``metrics.jsonl`` keys ``val_psnr_<label>`` and result tables)."""
+    photo-electrons (in ``metrics.jsonl`` keys ``val_psnr_<label>`` and result tables).
+
+    >>> level_label(15.0), level_label(0), level_label(Exposure(1000.0))
+    ('15', '0', 'N1000')
+    >>> parse_level_label("val_psnr_N1000")  # and back
+    ('photons', 1000.0)
+    """
     if isinstance(level, Exposure):
         return f"N{level.photons:g}"
     return f"{float(level):g}"

@@ -249,6 +249,22 @@ class SplitterSensor(nn.Module):
     Shape:
         - forward / gather input: ``(N, 3, H, W)``; output ``(N, 1, H, W)``.
         - adjoint input: ``(N, 1, H, W)``; output ``(N, 3, H, W)``.
+
+    >>> import torch
+    >>> bayer = SplitterSensor("bayer")
+    >>> bayer
+    SplitterSensor(pattern='bayer', period=(2, 2))
+    >>> red = torch.zeros(1, 3, 2, 2)
+    >>> red[:, 0] = 1.0
+    >>> bayer(red)[0, 0].tolist()  # RGGB filters: only the red pixel records red light
+    [[1.0, 0.0], [0.0, 0.0]]
+    >>> raw = SplitterSensor("A")(torch.ones(1, 3, 8, 8, dtype=torch.float64))
+    >>> raw[0, 0, 4:6, 4:6].tolist()  # white light, routed: R and B pixels gather 4 units
+    [[4.0, 2.0], [2.0, 4.0]]
+    >>> float(raw[0, 0, 4:6, 4:6].sum())  # nothing lost: 4 pixels x 3 colours
+    12.0
+    >>> SplitterSensor("A").adjoint(raw).shape
+    torch.Size([1, 3, 8, 8])
     """
 
     layout: torch.Tensor

@@ -96,6 +96,18 @@ def simulate(
 
     Shape:
         - rgb: ``(N, 3, H, W)``; output ``(N, 1, H, W)`` float32 on ``rgb``'s device.
+
+    >>> import torch
+    >>> from splitcam.physics import SplitterSensor, simulate
+    >>> sensor, grey = SplitterSensor("D"), torch.full((1, 3, 4, 4), 0.5)
+    >>> clean = simulate(sensor, grey, "photo", 0.0)
+    >>> clean.shape, clean.dtype
+    (torch.Size([1, 1, 4, 4]), torch.float32)
+    >>> noisy = simulate(sensor, grey, "photo", 10.0)
+    >>> torch.equal(noisy, simulate(sensor, grey, "photo", 10.0))  # the same noise every time
+    True
+    >>> torch.equal(noisy, simulate(sensor, grey, "other", 10.0))  # each image its own
+    False
     """
     if not isinstance(sigma, Exposure):
         sigma = check_sigma(sigma)

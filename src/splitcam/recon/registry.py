@@ -231,6 +231,16 @@ def build_method(
         ValueError: Unknown name (the message lists the valid ones), ``lmmse`` without a
             pattern, a network trained in another domain than ``domain``, or ``lmmse_train``
             in the linear domain.
+
+    >>> import torch
+    >>> lmmse = build_method("lmmse", pattern="D")
+    >>> lmmse.name, lmmse.domain
+    ('lmmse-D', 'srgb')
+    >>> raw = torch.rand(1, 1, 16, 16, generator=torch.Generator().manual_seed(0))
+    >>> lmmse.reconstruct(raw, sigma=0).shape
+    torch.Size([1, 3, 16, 16])
+    >>> build_method("D").name  # a shipped network, by its name
+    'net-D'
     """
     key = str(spec).strip().lower()
     if domain is not None:
