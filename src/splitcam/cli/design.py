@@ -85,7 +85,157 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=int, default=0, help="seed of --init random (default 0)")
     p.add_argument("--name", help="name of the designed pattern (default: START-designed)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    group = add_search_options(p, "--lr, --steps, --init, --seed and --objective (mse, psnr)")
+    group.add_argument(
+        "--report-every",
+        type=int,
+        default=50,
+        metavar="STEPS",
+        help="with --search: a trial designs in stages of STEPS steps and reports its score "
+        "after each; from step 100 on, a trial below the median of the finished ones at the "
+        "same step is pruned (0: one stage, no pruning; default 50)",
+    )
     p.set_defaults(handler=run)
+
+
+def add_search_options(p: argparse.ArgumentParser, searched: str) -> argparse._ArgumentGroup:
+    """``--search N`` and ``--study DIR`` (shared with `optics`); returns their group."""
+    g = p.add_argument_group("design search (Optuna; install with: pip install 'splitcam[search]')")
+    g.add_argument(
+        "--search",
+        type=int,
+        metavar="N",
+        help=f"run N trials of a search over {searched}: each left at its default is searched, "
+        "one given another value is held fixed. Prints the best trials, writes the best "
+        "pattern to --out and the trials' patterns and figures to --study",
+    )
+    g.add_argument(
+        "--study",
+        default="search",
+        metavar="DIR",
+        help="with --search: the study's folder (journal file, trial patterns, figures; "
+        "default search/). A search on an existing study adds trials to it; several "
+        "processes or cluster jobs can run on one study at once",
+    )
+    return g
+
+
+def fixed_settings(args: argparse.Namespace, defaults: dict[str, tuple[str, object]]) -> dict:
+    """The searched settings held fixed: those whose option has a value other than its
+    default (``defaults``: setting -> (option attribute, default))."""
+    return {
+        name: getattr(args, attr)
+        for name, (attr, default) in defaults.items()
+        if getattr(args, attr) != default
+    }
+
+
+def fmt(value: object) -> str:
+    """A parameter of a trial for a table."""
+    return f"{value:.3g}" if isinstance(value, float) else str(value)
+
+
+def search_error(command: str, exc: ModuleNotFoundError) -> int:
+    """Say that optuna is missing (exit status 1); re-raise other missing modules."""
+    import sys
+
+    if exc.name != "optuna":
+        raise exc
+    print(f"splitcam {command}: error: {exc}", file=sys.stderr)
+    return 1
+
+
+def _search(args: argparse.Namespace, out: Path) -> int:
+    """``design --search N``: the search, its table, the best pattern and the figures."""
+    from ..design.defaults import DEFAULT_LR, DEFAULT_STEPS
+    from ..design.search import search_patterns
+
+    space = fixed_settings(
+        args,
+        {
+            "lr": ("lr", DEFAULT_LR),
+            "steps": ("steps", DEFAULT_STEPS),
+            "init": ("init", "support"),
+            "seed": ("seed", 0),
+            "objective": ("objective", "mse"),
+        },
+    )
+    if space.get("objective") == "network":
+        raise ValueError("--search designs for the closed-form objectives: --objective mse or psnr")
+    if args.search < 1:
+        raise ValueError(f"--search needs a number of trials >= 1, got {args.search}")
+    try:
+        search = search_patterns(
+            args.pattern,
+            trials=args.search,
+            folder=args.study,
+            sigmas=args.sigmas,
+            space=space,
+            report_every=args.report_every,
+            progress=not args.quiet,
+        )
+    except ModuleNotFoundError as exc:
+        return search_error("design", exc)
+    _print_search(search, space)
+    return _write_best(search, args, out)
+
+
+def _print_search(search, space: dict) -> None:
+    """The state of the study and its ten best trials."""
+    trials = search.study.trials
+    states = [t.state.name.lower() for t in trials]
+    fixed = ", ".join(f"{k} {fmt(v)}" for k, v in space.items()) or "none"
+    print(
+        f"search in {search.folder}: {len(trials)} trials, {states.count('complete')} finished, "
+        f"{states.count('pruned')} pruned (fixed: {fixed})"
+    )
+    finished = search.best()
+    if not finished:
+        return
+    baseline = next((t.values[0] for t in finished if t.user_attrs.get("baseline")), None)
+    rows = []
+    for t in finished[:10]:
+        row = {"trial": str(t.number), "PSNR (dB)": f"{t.values[0]:.3f}"}
+        if baseline is not None:
+            row["vs default"] = f"{t.values[0] - baseline:+.3f}"
+        row.update({k: fmt(t.params.get(k, "-")) for k in ("lr", "steps", "init", "objective")})
+        row["seed"] = fmt(t.params.get("seed", "-"))
+        row["s"] = f"{t.user_attrs.get('seconds', 0.0):.1f}"
+        row["default"] = "yes" if t.user_attrs.get("baseline") else ""
+        rows.append(row)
+    print(f"best trials by closed-form LMMSE PSNR ({search.settings['metric']} over sigmas):")
+    print(table(rows))
+
+
+def _write_best(search, args: argparse.Namespace, out: Path) -> int:
+    """Design the best trial again, check its score, write it to ``out`` and the figures."""
+    import dataclasses
+
+    from .. import patterns
+    from ..viz.patterns import draw_design
+    from ..viz.search import draw_curves
+
+    best = search.trial()
+    result, (score,) = search.reproduce(best.number)
+    print(
+        f"best trial {best.number}: {best.values[0]:.4f} dB; designed again: {score:.4f} dB"
+        + ("" if abs(score - best.values[0]) < 1e-9 else " (differs: not reproduced)")
+    )
+    name = args.name or f"{result.start.name}-designed"
+    metadata = {**result.pattern.metadata, "search": str(search.folder), "trial": best.number}
+    pattern = dataclasses.replace(result.pattern, name=name, metadata=metadata)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    patterns.save(pattern, out)
+    figure = draw_design(result.start, pattern, out.with_suffix(".png"))
+    curves = [
+        (f"trial {t.number}", sorted(t.intermediate_values.items()), t.state.name == "PRUNED")
+        for t in search.study.trials
+        if t.intermediate_values
+    ]
+    curves_png = search.folder / "curves.png"
+    draw_curves(curves, curves_png, title=f"design search from {result.start.name}")
+    print(f"wrote {out}, {figure} and {curves_png}")
+    return 0
 
 
 def run(args: argparse.Namespace) -> int:
@@ -96,6 +246,8 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if out.suffix.lower() not in (".toml", ".json"):
         raise ValueError(f"--out must end in .toml or .json, got {out.name!r}")
+    if args.search is not None:
+        return _search(args, out)
     in_loop = _network_objective(args) if args.objective == "network" else {}
     result = design_pattern(
         args.pattern,

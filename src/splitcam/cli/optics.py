@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from .design import add_search_options
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
@@ -40,7 +42,125 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--out", required=True, help="pattern file (.toml or .json)")
     p.add_argument("--quiet", action="store_true")
+    add_search_options(
+        p,
+        "--max-height, --distance, --index, --lr, --profile (random, lens), --seed and "
+        "--objective, for two scores at once (closed-form LMMSE PSNR and light collected; "
+        "--out: the front's trial of highest PSNR)",
+    )
     p.set_defaults(handler=run)
+
+
+#: The settings a metasurface search draws: setting -> (option attribute, default).
+_SEARCHED = {
+    "max_height": ("max_height", 1.2),
+    "distance": ("distance", 2.0),
+    "index": ("index", 2.0),
+    "lr": ("lr", 0.1),
+    "init": ("profile", "lens"),
+    "seed": ("seed", 0),
+    "objective": ("objective", "lmmse"),
+}
+
+
+def _search(args: argparse.Namespace, period: tuple[int, int], optics, out: Path) -> int:
+    """``optics --search N``: the two-score search, its front, the figure and the best
+    pattern."""
+    from ..design.search import search_metasurfaces
+    from .design import fixed_settings, search_error
+
+    space = fixed_settings(args, _SEARCHED)
+    if space.get("init", "random") != "random":
+        raise ValueError("--search starts from random or lens profiles: --profile random or lens")
+    if args.search < 1:
+        raise ValueError(f"--search needs a number of trials >= 1, got {args.search}")
+    try:
+        search = search_metasurfaces(
+            period,
+            optics,
+            trials=args.search,
+            folder=args.study,
+            steps=args.steps,
+            space=space,
+            progress=not args.quiet,
+        )
+    except ModuleNotFoundError as exc:
+        return search_error("optics", exc)
+    _print_front(search, space)
+    return _write_front(search, out)
+
+
+def _print_front(search, space: dict) -> None:
+    """The state of the study and its Pareto front."""
+    from ._common import table
+    from .design import fmt
+
+    trials = search.study.trials
+    fixed = ", ".join(f"{k} {fmt(v)}" for k, v in space.items()) or "none"
+    print(
+        f"search in {search.folder}: {len(trials)} trials, {len(search.finished())} finished "
+        f"(fixed: {fixed})"
+    )
+    rows = []
+    for t in search.best():
+        row = {"trial": str(t.number), "PSNR (dB)": f"{t.values[0]:.3f}"}
+        row["light"] = f"{t.values[1]:.1%}"
+        row.update({k: fmt(t.params.get(k, "-")) for k in _SEARCHED})
+        row["default"] = "yes" if t.user_attrs.get("baseline") else ""
+        row["pattern"] = str(search.pattern_file(t.number))
+        rows.append(row)
+    if rows:
+        print("Pareto front (closed-form LMMSE PSNR against light collected), by PSNR:")
+        print(table(rows))
+
+
+def _write_front(search, out: Path) -> int:
+    """Draw the front; design its trial of highest PSNR again and write it to ``out``."""
+    import dataclasses
+
+    import numpy as np
+
+    from .. import patterns
+    from ..io import atomic_path
+    from ..viz.patterns import draw_pattern
+    from ..viz.search import draw_front
+
+    front = search.best()
+    if not front:
+        print("no finished trial yet")
+        return 1
+    finished = search.finished()
+    front_png = search.folder / "front.png"
+    draw_front(
+        [(100 * t.values[1], t.values[0]) for t in finished],
+        [(100 * t.values[1], t.values[0]) for t in front],
+        front_png,
+        xlabel="light collected (%)",
+        labels=[str(t.number) for t in front],
+        baselines=[
+            (100 * t.values[1], t.values[0]) for t in finished if t.user_attrs.get("baseline")
+        ],
+        title=f"metasurface search: {len(finished)} trials",
+    )
+    best = front[0]
+    result, values = search.reproduce(best.number)
+    same = all(abs(a - b) < 1e-9 for a, b in zip(values, best.values, strict=True))
+    print(
+        f"trial {best.number} designed again: {values[0]:.4f} dB, {values[1]:.2%} light"
+        + ("" if same else " (differs: not reproduced)")
+    )
+    metadata = {**result.pattern.metadata, "search": str(search.folder), "trial": best.number}
+    pattern = dataclasses.replace(result.pattern, name=out.stem, metadata=metadata)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    patterns.save(pattern, out)
+    with atomic_path(out.with_suffix(".npy")) as tmp:
+        np.save(tmp, result.height.cpu().numpy())
+    draw_pattern(pattern, out.with_suffix(".png"))
+    print(
+        f"wrote {out}, {out.with_suffix('.npy')} (height map, µm), {out.with_suffix('.png')} "
+        f"and {front_png}"
+    )
+    return 0
 
 
 def run(args: argparse.Namespace) -> int:
@@ -64,6 +184,8 @@ def run(args: argparse.Namespace) -> int:
         kernel_size=(args.kernel, args.kernel),
     )
     out = Path(args.out)
+    if args.search is not None:
+        return _search(args, period, optics, out)
     height = profile(args.profile, period, optics, args.seed)
     if args.design:
         from ..design import design_metasurface
