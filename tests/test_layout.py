@@ -23,6 +23,7 @@ LAYERS = [
     "design",
     "viz",
     "evaluation",
+    "integrations",
     "training",
     "cli",
 ]
