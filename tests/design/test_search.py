@@ -66,6 +66,23 @@ def test_one_stage_is_design_pattern_with_the_trials_settings(tmp_path) -> None:
     designed = patterns.load(search.pattern_file(trial.number))
     assert designed.equals(plain.pattern, atol=1e-12)
 
+    # a design that ran all its steps is kept, however far below the median
+    bad = {"lr": 1e-4, "init": "random", "seed": 0}
+    kept = search_patterns(
+        "D",
+        trials=2,
+        folder=tmp_path / "kept",
+        space={"steps": 10, "lr": ("log", 1e-4, 0.5)},
+        report_every=0,
+        startup=1,
+        warmup=0,
+        baseline=False,
+        enqueue=[{"lr": 0.1, "init": "support"}, bad],
+    )
+    good, low = kept.study.trials
+    assert (good.state, low.state) == (COMPLETE, COMPLETE)
+    assert low.values[0] < good.values[0] - 1.0
+
 
 def test_pruning_stops_a_trial_below_the_median(tmp_path) -> None:
     good = {"lr": 0.1, "init": "support"}

@@ -197,7 +197,7 @@ def _print_search(search, space: dict) -> None:
     for t in finished[:10]:
         row = {"trial": str(t.number), "PSNR (dB)": f"{t.values[0]:.3f}"}
         if baseline is not None:
-            row["vs default"] = f"{t.values[0] - baseline:+.3f}"
+            row["vs default"] = f"{round(t.values[0] - baseline, 3) + 0.0:+.3f}"
         row.update({k: fmt(t.params.get(k, "-")) for k in ("lr", "steps", "init", "objective")})
         row["seed"] = fmt(t.params.get("seed", "-"))
         row["s"] = f"{t.user_attrs.get('seconds', 0.0):.1f}"

@@ -10,8 +10,9 @@ after another (Optuna's TPE sampler), designs with them and keeps the score of e
   one score, the closed-form LMMSE PSNR of the designed pattern (``-10 log10`` of its MSE
   averaged over the sigmas, or the mean PSNR). A trial designs in stages of ``report_every``
   steps, each stage continuing from the last one's pattern (``init="exact"``, Adam starting
-  afresh), and reports the score after every stage: the curve the median rule prunes on (a
-  trial below the median of the finished trials at the same step stops there).
+  afresh), and reports the score after every stage: the curve the median rule prunes on (after
+  a warm-up, a trial below the median of the finished trials at the same step stops there; one
+  that has run all its steps is kept).
 - :func:`search_metasurfaces` drives :func:`~splitcam.design.metasurface.design_metasurface`
   and maximises two scores at once: the image quality (the closed-form LMMSE PSNR, as above) and
   the light collected (the mean RGGB collection efficiency of a 2x2 router,
@@ -459,7 +460,8 @@ def _run(
 
         def report(step: int, value: float) -> None:
             trial.report(value, step)
-            if trial.should_prune():
+            # a design that has run all its steps is kept whatever its score
+            if step < params["steps"] and trial.should_prune():
                 raise optuna.TrialPruned(f"{value:.3f} at step {step}: below the median")
 
         result, values = design(search.settings, params, report, search._name(trial.number))
