@@ -1,4 +1,9 @@
-"""Shared test settings: the tests directory is importable (naive_reference), data paths."""
+"""Shared test settings and fixtures for every folder below ``tests/``.
+
+The tests directory is put on ``sys.path``, so any test module, in any subfolder, can import
+``conftest`` (the helpers below), ``naive_reference`` and ``mirror``. Fixtures that train a run
+are session-scoped: trained once, read by the tests of every folder.
+"""
 
 from __future__ import annotations
 
@@ -9,7 +14,17 @@ import pytest
 
 TESTS = Path(__file__).resolve().parent
 sys.path.insert(0, str(TESTS))
-SHARED_DATA = TESTS.parent.parent / "shared" / "data"
+REPO = TESTS.parent
+SHARED_DATA = REPO.parent / "shared" / "data"
+
+
+@pytest.fixture(autouse=True)
+def _no_data_env(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A user's SPLITCAM_DATA or SPLITCAM_MIRROR must not change what the tests see."""
+    from splitcam.data import registry
+
+    monkeypatch.delenv(registry.DATA_ENV, raising=False)
+    monkeypatch.delenv(registry.MIRROR_ENV, raising=False)
 
 
 @pytest.fixture
@@ -72,3 +87,93 @@ def tiny_config(folder: Path, out: Path, **changes):
 
     settings = {**TINY_SETTINGS, "data.train": str(folder), "run.out": str(out), **changes}
     return TrainConfig().override(settings)
+
+
+#: A 4-step run of :data:`TINY_SETTINGS`: what model files, sweeps and the model commands use.
+SMALL = {
+    **TINY_SETTINGS,
+    "optim.steps": 4,
+    "optim.warmup_steps": 2,
+    "run.val_every": 2,
+    "run.checkpoint_every": 2,
+}
+
+#: An experiment file's settings: SMALL without the thread count (the sweep sets it).
+SWEEP_SMALL = {k: v for k, v in SMALL.items() if k != "run.threads"}
+
+
+def small_config(folder: Path, out: Path, **changes):
+    """A :class:`TrainConfig` of :data:`SMALL` on ``folder`` into ``out``."""
+    return tiny_config(folder, out, **{**SMALL, **changes})
+
+
+def experiment_file(folder: Path, name: str, **settings) -> Path:
+    """An experiment file ``folder/NAME.toml`` holding ``settings`` (``section.field`` keys)."""
+    import json
+
+    lines = []
+    sections: dict[str, dict] = {}
+    for key, value in settings.items():
+        section, _, field = key.partition(".")
+        sections.setdefault(section, {})[field] = value
+    for section, fields in sections.items():
+        lines.append(f"[{section}]")
+        lines += [f"{k} = {json.dumps(v)}" for k, v in fields.items()]
+    path = folder / f"{name}.toml"
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+@pytest.fixture(scope="session")
+def image_folder(tmp_path_factory) -> Path:
+    """Eight smooth random colour images (learnable in a few steps); tests only read them."""
+    return blocky_images(tmp_path_factory.mktemp("images"), 8)
+
+
+@pytest.fixture(scope="session")
+def run_images(tmp_path_factory) -> Path:
+    """Six smooth random colour images: the training images of :func:`trained_run`."""
+    return blocky_images(tmp_path_factory.mktemp("run-images"), 6, seed=3)
+
+
+@pytest.fixture(scope="session")
+def trained_run(run_images, tmp_path_factory) -> Path:
+    """The folder of a finished :data:`SMALL` run (pattern D, 4 steps) on ``run_images``."""
+    from splitcam.training import train
+
+    out = tmp_path_factory.mktemp("runs") / "d"
+    train(small_config(run_images, out), progress=False)
+    return out
+
+
+@pytest.fixture(scope="session")
+def tiny_universal(tmp_path_factory):
+    """A tiny universal network trained a few steps over random patterns, exported as a model;
+    its training images."""
+    from splitcam.training import train
+    from splitcam.training.models import export_model
+
+    root = tmp_path_factory.mktemp("universal")
+    data = blocky_images(root / "img", 6)
+    settings = {"pattern.name": "random", "network.arch": "universal", "optim.steps": 3}
+    train(tiny_config(data, root / "run", **settings), progress=False)
+    model = export_model(root / "run", root / "models" / "uni", name="uni")
+    return model, data
+
+
+@pytest.fixture
+def serve():
+    """``serve(folder)`` starts a local HTTP mirror of ``folder`` (:class:`mirror.Server`: its
+    ``url``, the ``log`` of paths asked for, ``cut_once`` paths to cut short); all are closed
+    after the test."""
+    from mirror import Server
+
+    servers: list[Server] = []
+
+    def start(root: Path) -> Server:
+        servers.append(Server(root))
+        return servers[-1]
+
+    yield start
+    for server in servers:
+        server.close()

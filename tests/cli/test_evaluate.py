@@ -1,0 +1,371 @@
+"""``splitcam evaluate``: methods, test sets, zooms, photon levels, light domains, the main job
+and earlier results kept in its folder."""
+
+from __future__ import annotations
+
+import csv
+import json
+import shutil
+
+import numpy as np
+import pytest
+import torch
+from conftest import blocky_images
+from PIL import Image
+
+from splitcam import patterns
+from splitcam.cli import main
+from splitcam.evaluation.tables import read_rows
+from splitcam.io import weights as io_weights
+from splitcam.patterns.random import random_pattern
+from splitcam.training.models import export_model
+
+
+def test_evaluate_draws_the_sigma_chart(tmp_path):
+    from splitcam.cli import main
+
+    out = tmp_path / "e"
+    args = [
+        "evaluate",
+        "--method",
+        "malvar2004",
+        "--max-images",
+        "1",
+        "--sigmas",
+        "0",
+        "10",
+        "--out",
+        str(out),
+        "--quiet",
+    ]
+    assert main(args) == 0
+    assert (out / "sigma_curves.png").stat().st_size > 0
+    assert not (out / "zoom").exists()  # a named method draws crops only with --save-images
+
+
+def test_max_size_scores_the_centre_of_each_image(tmp_path):
+    """--max-size cuts every image to its centre (even sizes, whole 2x2 periods); the scores are
+    those of the cropped image itself, and the dataset name keeps them apart from whole images."""
+
+    from splitcam.data.testsets import centre_crop, default_images, load_datasets
+
+    rgb = torch.arange(3 * 7 * 9, dtype=torch.float32).reshape(3, 7, 9)
+    assert torch.equal(centre_crop(rgb, 4), rgb[:, 1:5, 2:6])
+    assert torch.equal(centre_crop(rgb, 100), rgb[:, :6, :8])  # at most the image, even sizes
+    ((name, images),) = load_datasets("default", 1, 64)
+    assert name == "skimage-64px" and images[0][1].shape == (3, 64, 64)
+    whole = default_images()[0][1]
+    h, w = whole.shape[-2:]
+    top, left = (h - 64) // 2, (w - 64) // 2
+    assert torch.equal(images[0][1], whole[:, top : top + 64, left : left + 64])
+
+    out = tmp_path / "e"
+    args = [
+        "evaluate",
+        "--method",
+        "bilinear",
+        "--max-images",
+        "1",
+        "--max-size",
+        "64",
+        "--sigmas",
+        "0",
+        "--out",
+        str(out),
+        "--quiet",
+    ]
+    assert main(args) == 0
+    rows = list(csv.DictReader((out / "per_image.csv").open()))
+    assert {r["dataset"] for r in rows} == {"skimage-64px"}
+    with pytest.raises(ValueError, match="at least 2"):
+        load_datasets("default", 1, 1)
+
+
+def _images(n=2, size=(20, 24)):
+    gen = torch.Generator().manual_seed(0)
+    return [(f"img{i}", torch.rand(3, *size, generator=gen)) for i in range(n)]
+
+
+def test_evaluate_cli_with_images_and_zoom(tmp_path, capsys):
+    folder = tmp_path / "photos"
+    folder.mkdir()
+    for name, img in _images(2, size=(40, 44)):
+        Image.fromarray((img.permute(1, 2, 0).numpy() * 255).astype(np.uint8)).save(
+            folder / f"{name}.png"
+        )
+    out = tmp_path / "out"
+    assert (
+        main(
+            [
+                "evaluate",
+                "--method",
+                "bilinear",
+                "--method",
+                "lmmse",
+                "--patterns",
+                "D",
+                "--datasets",
+                str(folder),
+                "--sigmas",
+                "0",
+                "10",
+                "--out",
+                str(out),
+                "--save-images",
+                "--quiet",
+            ]
+        )
+        == 0
+    )
+    printed = capsys.readouterr().out
+    assert "| bayer+bilinear | bayer |" in printed and "| lmmse-D | D |" in printed
+    assert (out / "images/lmmse-D/photos/img0_sigma10.png").is_file()
+    assert (out / "zoom/photos_img0_sigma0.png").is_file()
+    assert (
+        main(
+            [
+                "evaluate",
+                "--method",
+                "bilinear",
+                "--datasets",
+                str(folder),
+                "--sigmas",
+                "0",
+                "--out",
+                str(tmp_path / "o2"),
+                "--save-images",
+                "--zoom",
+                "img1:4,6,20",
+                "--quiet",
+            ]
+        )
+        == 0
+    )
+    assert (tmp_path / "o2/zoom/photos_img1_sigma0.png").is_file()
+    assert not (tmp_path / "o2/zoom/photos_img0_sigma0.png").exists()
+    # A zoom with its own noise level (the paper's kodim05 at sigma 10, kodim24 at sigma 5):
+    # drawn at that level only, each image at its own.
+    assert (
+        main(
+            [
+                "evaluate",
+                "--method",
+                "bilinear",
+                "--datasets",
+                str(folder),
+                "--sigmas",
+                "0",
+                "5",
+                "10",
+                "--out",
+                str(tmp_path / "o4"),
+                "--save-images",
+                "--zoom",
+                "img0@10",
+                "--zoom",
+                "img1:4,6,20@5",
+                "--quiet",
+            ]
+        )
+        == 0
+    )
+    drawn = sorted(p.name for p in (tmp_path / "o4/zoom").glob("*.png"))
+    assert drawn == ["photos_img0_sigma10.png", "photos_img1_sigma5.png"]
+    assert (
+        main(
+            [
+                "evaluate",
+                "--method",
+                "bilinear",
+                "--datasets",
+                str(folder),
+                "--sigmas",
+                "0",
+                "--out",
+                str(tmp_path / "o5"),
+                "--save-images",
+                "--zoom",
+                "img1@x",
+            ]
+        )
+        == 1
+    )
+    assert "expected a zoom as IMAGE[:TOP,LEFT,SIZE][@SIGMA]" in capsys.readouterr().err
+    assert (
+        main(
+            [
+                "evaluate",
+                "--method",
+                "bilinear",
+                "--datasets",
+                str(folder),
+                "--sigmas",
+                "0",
+                "--out",
+                str(tmp_path / "o3"),
+                "--save-images",
+                "--zoom",
+                "img1:4,x",
+            ]
+        )
+        == 1
+    )
+    assert "expected a zoom as IMAGE[:TOP,LEFT,SIZE][@SIGMA]" in capsys.readouterr().err
+    assert main(["evaluate", "--method", "nonsense", "--datasets", str(folder)]) == 1
+    assert "unknown method 'nonsense'" in capsys.readouterr().err
+
+
+def test_evaluate_cli_photons_in_linear_light(tmp_path, capsys) -> None:
+    args = [
+        "evaluate",
+        "--method",
+        "lmmse",
+        "--patterns",
+        "D,bayer",
+        "--datasets",
+        "default",
+        "--max-images",
+        "1",
+        "--max-size",
+        "64",
+        "--photons",
+        "100",
+        "--quiet",
+        "--out",
+        str(tmp_path),
+    ]
+    assert main([*args, "--domain", "linear"]) == 0
+    out = capsys.readouterr().out
+    assert "Light domain: linear" in out and "lmmse-D (linear)" in out
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert set(summary) == {"lmmse-D (linear)", "lmmse-bayer (linear)"}
+    assert summary["lmmse-D (linear)"]["all"]["N100"]["n_images"] == 1
+    assert "Light domain: linear" in (tmp_path / "table.md").read_text()
+    assert main([*args, "--lmmse-train", str(tmp_path), "--domain", "linear"]) == 1
+    assert "lmmse-train" in capsys.readouterr().err
+    assert main([*args, "--model", "D", "--domain", "linear"]) == 1
+    assert "trained in the srgb domain" in capsys.readouterr().err
+
+
+def test_evaluate_main_job_in_linear_light_leaves_srgb_networks_out(tmp_path, capsys) -> None:
+    args = ["evaluate", "--domain", "linear", "--max-images", "1", "--max-size", "64"]
+    assert main([*args, "--sigmas", "5", "--quiet", "--out", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert "left out of this linear-domain evaluation" in out
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert {e["domain"] for e in summary.values()} == {"linear"}
+    assert "bayer+malvar2004 (linear)" in summary and not any(k.startswith("net-") for k in summary)
+
+
+def test_the_main_job_scores_every_shipped_model_on_crops(trained_run, tmp_path, monkeypatch):
+    """`splitcam evaluate` with no method named: every shipped model and the baselines, on
+    MAIN_JOB_MAX_SIZE centre crops of the built-in photos; `--max-size 0` scores them whole."""
+
+    from splitcam.cli.evaluate import MAIN_JOB_MAX_SIZE
+
+    monkeypatch.setattr(io_weights, "MODELS_DIR", tmp_path / "shipped")
+    export_model(trained_run, tmp_path / "shipped" / "D", name="D")
+    common = ["--max-images", "1", "--sigmas", "0", "--quiet"]
+    assert main(["evaluate", *common, "--out", str(tmp_path / "crops")]) == 0
+    rows = list(csv.DictReader((tmp_path / "crops" / "per_image.csv").open()))
+    assert {r["dataset"] for r in rows} == {f"skimage-{MAIN_JOB_MAX_SIZE}px"}
+    assert {"net-D", "lmmse-D", "bayer+malvar2004"} <= {r["method"] for r in rows}
+    assert main(["evaluate", *common, "--max-size", "0", "--out", str(tmp_path / "whole")]) == 0
+    rows = list(csv.DictReader((tmp_path / "whole" / "per_image.csv").open()))
+    assert {r["dataset"] for r in rows} == {"skimage"}
+
+
+def json_load(path):
+    import json
+
+    return json.loads(path.read_text())
+
+
+def test_evaluate_photons_cli(tmp_path, capsys) -> None:
+    from splitcam.cli import main
+
+    args = [
+        "evaluate",
+        "--method",
+        "lmmse",
+        "--method",
+        "malvar2004",
+        "--patterns",
+        "A,bayer",
+        "--max-images",
+        "1",
+        "--quiet",
+        "--out",
+        str(tmp_path),
+    ]
+    assert main([*args, "--photons", "20", "2000", "--read-noise", "1.5"]) == 0
+    out = capsys.readouterr().out
+    assert "N=20 e⁻" in out and "σ=" not in out  # --photons alone: no Gaussian levels
+    summary = json_load(tmp_path / "summary.json")
+    assert set(summary["bayer+malvar2004"]["all"]) == {"N20", "N2000"}
+    assert json_load(tmp_path / "evaluation.json")["photon_sensor"]["read_noise"] == 1.5
+    assert main([*args, "--photons", "-3"]) == 1
+    assert "photons" in capsys.readouterr().err
+
+
+def test_main_job_uses_the_universal_network_for_patterns_without_one(
+    tiny_universal, tmp_path, capsys, monkeypatch
+):
+    """`splitcam evaluate --patterns FILE`: a pattern no shipped network serves gets the
+    shipped universal network, and the output says so."""
+
+    from splitcam.cli import main
+    from splitcam.io import weights
+
+    model, data = tiny_universal
+    shipped = tmp_path / "shipped"
+    shipped.mkdir()
+    for suffix in (".json", ".safetensors"):
+        shutil.copy(model.with_suffix(suffix), shipped / f"universal{suffix}")
+    monkeypatch.setattr(weights, "MODELS_DIR", shipped)
+    mine = tmp_path / "mine.toml"
+    patterns.save(random_pattern(np.random.default_rng(5)), mine)
+    ev = ["evaluate", "--patterns", str(mine), "--datasets", str(data), "--sigmas", "0"]
+    assert main([*ev, "--out", str(tmp_path / "ev"), "--quiet"]) == 0
+    out = capsys.readouterr().out
+    assert f"pattern {mine} has no shipped network: reconstructed by the universal network" in out
+    assert "net-uni-mine.toml" in out and "lmmse-mine.toml" in out  # labelled by its own name
+
+
+def test_evaluate_keeps_earlier_results_of_other_methods(tmp_path, capsys):
+    """A second evaluation into the same folder used to cut the table to its own rows."""
+    import json
+
+    from splitcam.evaluation.tables import CSV_NAME
+
+    data = blocky_images(tmp_path / "img", 2)
+    out = tmp_path / "ev"
+    common = ["evaluate", "--datasets", str(data), "--out", str(out), "--quiet"]
+    assert main([*common, "--method", "lmmse", "--patterns", "D,A", "--sigmas", "0", "5"]) == 0
+    first = read_rows(out / CSV_NAME)
+    assert len(first) == 2 * 2 * 2
+    capsys.readouterr()
+    assert main([*common, "--method", "malvar2004", "--sigmas", "0"]) == 0
+    printed = capsys.readouterr().out
+    rows = read_rows(out / CSV_NAME)
+    assert {r.method for r in rows} == {"lmmse-D", "lmmse-A", "bayer+malvar2004"}
+    assert len(rows) == len(first) + 2
+    assert "keeps the earlier results" in printed and "lmmse-D" in printed
+    summary = json.loads((out / "summary.json").read_text())
+    assert set(summary) == {"lmmse-D", "lmmse-A", "bayer+malvar2004"}
+    assert "lmmse-A" in (out / "table.md").read_text()
+    assert (out / "sigma_curves.png").is_file()  # the table has two levels: the chart too
+    # Another border crop cannot share the table: refused, nothing lost.
+    assert main([*common, "--method", "bilinear", "--sigmas", "0", "--crop", "4"]) == 1
+    assert "--restart" in capsys.readouterr().err
+    assert len(read_rows(out / CSV_NAME)) == len(rows)
+
+
+def test_a_tiny_image_in_an_evaluation_folder_is_named(tmp_path, capsys):
+    data = blocky_images(tmp_path / "img", 2)
+    Image.fromarray(np.zeros((6, 6, 3), np.uint8)).save(data / "tiny.png")
+    ev = ["evaluate", "--method", "lmmse", "--patterns", "D", "--datasets", str(data)]
+    assert main([*ev, "--out", str(tmp_path / "e")]) == 1
+    err = capsys.readouterr().err
+    assert "img/tiny (6x6)" in err and "11x11" in err
+    assert not (tmp_path / "e" / "per_image.csv").exists()  # refused before any work

@@ -1,0 +1,67 @@
+"""``splitcam models``: export a run, list the models, and never replace a model unasked."""
+
+from __future__ import annotations
+
+import json
+import re
+
+from conftest import blocky_images, tiny_config
+
+from splitcam.cli import main
+from splitcam.io import weights as io_weights
+from splitcam.recon.loading import load_model
+from splitcam.training import train
+
+
+def test_cli_models_export_list_and_evaluate(trained_run, tmp_path, monkeypatch, capsys):
+    monkeypatch.setattr(io_weights, "MODELS_DIR", tmp_path / "shipped")
+    (tmp_path / "shipped").mkdir()
+    assert main(["models", "export", str(trained_run), "--name", "D", "--ship"]) == 0
+    assert main(["models"]) == 0
+    out = capsys.readouterr().out
+    assert re.search(r"\| D +\| D +\| physics \| 4 +\| 4 +\|", out), out
+    assert (
+        main(
+            [
+                "evaluate",
+                "--model",
+                "D",
+                "--max-images",
+                "1",
+                "--sigmas",
+                "5",
+                "--out",
+                str(tmp_path / "ev"),
+                "--quiet",
+            ]
+        )
+        == 0
+    )
+    summary = json.loads((tmp_path / "ev" / "summary.json").read_text())
+    assert list(summary) == ["net-D"]
+    assert main(["reconstruct", "--model", "Q", "--image", "x.png", "--out", "y.png"]) == 1
+    assert "shipped models: D" in capsys.readouterr().err
+
+
+def test_models_export_never_replaces_a_model_unasked(tmp_path, monkeypatch, capsys):
+    """As the README showed it, `models export RUN --name D` replaced the shipped model D."""
+    from splitcam.io import weights
+
+    data = blocky_images(tmp_path / "img", 5)
+    run = tmp_path / "run"
+    train(tiny_config(data, run, **{"optim.steps": 2}), progress=False)
+    shipped = tmp_path / "shipped"
+    shipped.mkdir()
+    (shipped / "D.json").write_text("{}")
+    monkeypatch.setattr(weights, "MODELS_DIR", shipped)
+    monkeypatch.chdir(tmp_path)
+    assert main(["models", "export", str(run), "--name", "D"]) == 0
+    assert (tmp_path / "models" / "D.json").is_file()  # a user folder by default
+    assert (shipped / "D.json").read_text() == "{}"
+    assert main(["models", "export", str(run), "--name", "D"]) == 1  # exists now
+    assert "--force" in capsys.readouterr().err
+    assert main(["models", "export", str(run), "--name", "D", "--ship"]) == 1
+    assert (shipped / "D.json").read_text() == "{}"
+    assert main(["models", "export", str(run), "--name", "D", "--ship", "--force"]) == 0
+
+    assert load_model("D").meta["name"] == "D"

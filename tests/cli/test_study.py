@@ -1,0 +1,57 @@
+"""``splitcam study exposure``: filters against splitters at equal light."""
+
+from __future__ import annotations
+
+import json
+
+from splitcam.cli import main
+
+
+def test_study_exposure_is_in_linear_light_by_default(tmp_path) -> None:
+    args = ["study", "exposure", "--max-images", "1", "--photons", "30", "3000"]
+    args += ["--patterns", "D,bayer", "--quiet"]
+    assert main([*args, "--out", str(tmp_path / "lin")]) == 0
+    assert main([*args, "--domain", "srgb", "--out", str(tmp_path / "srgb")]) == 0
+    lin = json.loads((tmp_path / "lin" / "exposure.json").read_text())
+    srgb = json.loads((tmp_path / "srgb" / "exposure.json").read_text())
+    assert lin["domain"] == "linear" and srgb["domain"] == "srgb"
+    assert lin["results"]["D"]["30"]["psnr"] != srgb["results"]["D"]["30"]["psnr"]
+    assert "Light domain: linear" in (tmp_path / "lin" / "exposure.md").read_text()
+    assert "Light domain: srgb" in (tmp_path / "srgb" / "exposure.md").read_text()
+
+
+def test_study_exposure_cli(tmp_path, capsys) -> None:
+    from splitcam.cli import main
+
+    assert (
+        main(
+            [
+                "study",
+                "exposure",
+                "--max-images",
+                "1",
+                "--photons",
+                "3",
+                "300",
+                "--patterns",
+                "D,bayer",
+                "--out",
+                str(tmp_path),
+                "--quiet",
+            ]
+        )
+        == 0
+    )
+    text = (tmp_path / "exposure.md").read_text()
+    assert "| D |" in text and "Crossover" in text and "Raw SNR" in text
+    assert (tmp_path / "exposure.png").is_file()
+    data = json_load(tmp_path / "exposure.json")
+    assert data["results"]["D"]["300"]["psnr"] > data["results"]["D"]["3"]["psnr"]
+    assert main(["study", "exposure", "--photons", "-1", "--out", str(tmp_path)]) == 1
+    assert "photons" in capsys.readouterr().err
+
+
+def json_load(path):
+    import json
+
+    return json.loads(path.read_text())

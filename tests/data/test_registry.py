@@ -1,0 +1,143 @@
+"""The test-set registry (splitcam.data.registry): every file with its hashes, the parser, and
+importing it without numpy or torch."""
+
+from __future__ import annotations
+
+import csv
+import hashlib
+import importlib.resources
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+import splitcam.data.download as downloading
+from splitcam.data import registry, testsets
+
+
+def _git_blob(data: bytes) -> str:
+    return hashlib.sha1(b"blob %d\0" % len(data) + data).hexdigest()
+
+
+def _entry(dataset: str, name: str) -> registry.DatasetFile:
+    return next(f for f in registry.datasets()[dataset].files if f.name == name)
+
+
+def _registry_rows() -> list[dict[str, str]]:
+    """The rows of the shipped registry file, read without the module's parser."""
+    text = importlib.resources.files("splitcam.data").joinpath("registry.tsv").read_text()
+    lines = [line for line in text.splitlines() if line and not line.startswith("#")]
+    return list(csv.DictReader(lines, delimiter="\t"))
+
+
+def test_registry_lists_every_file_with_well_formed_hashes() -> None:
+    rows = _registry_rows()
+    assert list(rows[0]) == [
+        "dataset",
+        "file",
+        "source_path",
+        "sha256",
+        "git_blob",
+        "pixels_sha256",
+    ]
+    kodak = [row for row in rows if row["dataset"] == "kodak24"]
+    mcmaster = [row for row in rows if row["dataset"] == "mcmaster"]
+    assert len(kodak) + len(mcmaster) == len(rows)
+    assert [row["file"] for row in kodak] == [f"kodim{i:02d}.png" for i in range(1, 25)]
+    assert [row["source_path"] for row in kodak] == [
+        f"testsets/Set24/kodim{i:02d}.png" for i in range(1, 25)
+    ]
+    assert [row["file"] for row in mcmaster] == [f"{i:02d}.png" for i in range(1, 19)]
+    assert [row["source_path"] for row in mcmaster] == [
+        f"testsets/McMaster/{i}.tif" for i in range(1, 19)
+    ]
+    for row in rows:
+        assert re.fullmatch(r"[0-9a-f]{64}", row["sha256"]), row
+        assert re.fullmatch(r"[0-9a-f]{40}", row["git_blob"]), row
+    assert all(row["pixels_sha256"] == "-" for row in kodak)
+    assert all(re.fullmatch(r"[0-9a-f]{64}", row["pixels_sha256"]) for row in mcmaster)
+    for column in ("sha256", "git_blob"):
+        assert len({row[column] for row in rows}) == len(rows), column
+
+    # The module serves exactly these rows, and keeps no hashes of its own.
+    assert registry.dataset_names() == ("kodak24", "mcmaster")
+    loaded = [(d.name, f) for d in registry.datasets().values() for f in d.files]
+    assert [
+        (name, f.name, f.source_path, f.sha256, f.git_blob, f.pixels_sha256 or "-")
+        for name, f in loaded
+    ] == [tuple(row.values()) for row in rows]
+    assert all(f.converted for f in registry.datasets()["mcmaster"].files)
+    assert not any(f.converted for f in registry.datasets()["kodak24"].files)
+    for module in (registry, downloading, testsets):
+        source = Path(module.__file__).read_text()
+        assert not re.search(r"[0-9a-f]{64}", source), module.__name__
+        assert not any(row["git_blob"] in source for row in rows), module.__name__
+
+
+def test_registry_matches_shared_data(shared_data: Path) -> None:
+    for name in registry.dataset_names():
+        folder = shared_data / name
+        lines = (folder / "MANIFEST.sha256").read_text().splitlines()
+        manifest = {file: digest for digest, file in (line.split(maxsplit=1) for line in lines)}
+        with open(folder / "SOURCES.tsv", newline="") as fh:
+            sources = {row["file"]: row for row in csv.DictReader(fh, delimiter="\t")}
+        dataset = registry.datasets()[name]
+        assert {f.name for f in dataset.files} == set(sources)
+        assert {f.name for f in dataset.files} == set(manifest) - {"SOURCES.tsv"}
+        ((repo, commit),) = {(row["source_repo"], row["source_commit"]) for row in sources.values()}
+        assert dataset.base_url == f"https://raw.githubusercontent.com/{repo}/{commit}/"
+        for entry in dataset.files:
+            row = sources[entry.name]
+            assert entry.sha256 == manifest[entry.name]
+            assert entry.source_path == row["source_path"]
+            assert entry.git_blob == (
+                row.get("git_blob_sha1") or row["git_blob_sha1_of_source_tif"]
+            )
+            data = (folder / entry.name).read_bytes()
+            assert hashlib.sha256(data).hexdigest() == entry.sha256
+            if entry.converted:
+                assert downloading._pixels_sha256(folder / entry.name) == entry.pixels_sha256
+            else:
+                # The SHA-256 pooch checks pins the same bytes as the published git blob id.
+                assert _git_blob(data) == entry.git_blob
+
+
+def test_registry_parser_rejects_malformed_tables() -> None:
+    text = importlib.resources.files("splitcam.data").joinpath("registry.tsv").read_text()
+    assert registry.parse_registry(text) == registry.datasets()
+    kodim01 = _entry("kodak24", "kodim01.png")
+    with pytest.raises(RuntimeError, match="malformed hash in row kodak24/kodim01.png"):
+        registry.parse_registry(text.replace(kodim01.sha256, kodim01.sha256[:-1]))
+    mcm03 = _entry("mcmaster", "03.png")
+    with pytest.raises(RuntimeError, match="mcmaster/03.png is converted but has no pixel"):
+        registry.parse_registry(text.replace(mcm03.pixels_sha256 or "?", "-"))
+    with pytest.raises(RuntimeError, match="expected the columns"):
+        registry.parse_registry(text.replace("pixels_sha256\n", "pixels\n"))
+    kodak_only = "\n".join(line for line in text.splitlines() if not line.startswith("mcmaster"))
+    with pytest.raises(RuntimeError, match="no files listed for mcmaster"):
+        registry.parse_registry(kodak_only)
+
+
+def _fresh_modules(code: str) -> set[str]:
+    """The modules a fresh interpreter has loaded after running ``code``."""
+    script = f"import sys\n{code}\nprint(' '.join(sys.modules))"
+    result = subprocess.run(
+        [sys.executable, "-c", script], capture_output=True, text=True, check=True
+    )
+    return set(result.stdout.split())
+
+
+@pytest.mark.integration
+def test_registry_and_download_import_neither_torch_nor_numpy() -> None:
+    # The command line builds its parser from the registry: no numpy, no torch, and the
+    # registry file is read on first use, not at import.
+    loaded = _fresh_modules(
+        "import splitcam.data.registry as r\n"
+        "assert r.datasets.cache_info().currsize == 0\n"
+        "assert r.dataset_names() == ('kodak24', 'mcmaster')\n"
+        "import splitcam.data.download"
+    )
+    assert {"splitcam.data.registry", "splitcam.data.download"} <= loaded
+    assert not {"torch", "numpy", "pooch", "PIL"} & loaded

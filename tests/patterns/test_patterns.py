@@ -1,0 +1,27 @@
+"""Looking patterns up by name (splitcam.patterns.get, splitcam.patterns.names)."""
+
+from __future__ import annotations
+
+import pytest
+
+from splitcam import patterns
+from splitcam.patterns import PatternError
+
+
+def test_registry_names_and_case_insensitive_lookup():
+    assert patterns.names() == [
+        "A",
+        "B",
+        "C",
+        "D",
+        "E",
+        "bayer",
+        "rgbw",
+        "quad",
+        "router-zou",
+        "router-best",
+    ]
+    assert patterns.get("d").name == "D"
+    assert patterns.get("BAYER").name == "bayer"
+    with pytest.raises(PatternError, match="unknown pattern 'F'; valid names: A, B, C, D, E, bay"):
+        patterns.get("F")

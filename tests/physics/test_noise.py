@@ -1,0 +1,187 @@
+"""Noise (splitcam.physics.noise): Gaussian training and evaluation noise, and the photon-limited
+sensor model (SPEC section 11)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from splitcam.physics.noise import (
+    Exposure,
+    GaussianNoise,
+    PhotonNoise,
+    add_evaluation_noise,
+    add_exposure_noise,
+    evaluation_noise,
+    evaluation_seed,
+)
+from splitcam.physics.sensor import SplitterSensor
+from splitcam.recon.closed_form import (
+    closed_form_filters,
+)
+
+
+def test_fixed_sigma_has_the_right_statistics():
+    raw = torch.zeros(4, 1, 256, 256)
+    noisy, sigma = GaussianNoise(10.0, seed=0)(raw)
+    assert torch.all(sigma == 10.0)
+    assert noisy.std().item() == pytest.approx(10 / 255, rel=0.01)
+    assert abs(noisy.mean().item()) < 1e-3
+
+
+def test_sigma_range_per_batch_and_per_sample():
+    raw = torch.zeros(8, 1, 64, 64)
+    noisy, sigma = GaussianNoise((5.0, 20.0), seed=1)(raw)
+    assert torch.all(sigma == sigma[0]) and 5 <= sigma[0] <= 20
+    noisy, sigma = GaussianNoise((5.0, 20.0), per_sample=True, seed=1)(raw)
+    assert len(set(sigma.tolist())) == 8 and torch.all((sigma >= 5) & (sigma <= 20))
+    per_image_std = noisy.flatten(1).std(dim=1) * 255
+    torch.testing.assert_close(per_image_std, sigma, rtol=0.05, atol=0)
+
+
+def test_seeded_and_resumable():
+    raw = torch.zeros(2, 1, 8, 8)
+    a, b = GaussianNoise(seed=3), GaussianNoise(seed=3)
+    assert torch.equal(a(raw)[0], b(raw)[0])
+    state = a.state_dict()
+    first = a(raw)[0]
+    c = GaussianNoise(seed=99)
+    c.load_state_dict(state)
+    assert torch.equal(c(raw)[0], first)
+    assert not torch.equal(GaussianNoise(seed=4)(raw)[0], GaussianNoise(seed=5)(raw)[0])
+
+
+def test_bad_sigma():
+    for bad in [(-1.0, 2.0), (3.0, 2.0), (0.0, float("nan")), (0.0, float("inf"))]:
+        with pytest.raises(ValueError, match="expected 0 <= sigma_lo <= sigma_hi"):
+            GaussianNoise(bad)
+    for bad in (-1, float("nan"), float("inf")):
+        with pytest.raises(ValueError, match="expected a finite sigma >= 0"):
+            evaluation_noise((1, 1, 2, 2), "x", bad)
+    with pytest.raises(TypeError, match="sigma as a number"):
+        evaluation_noise((1, 1, 2, 2), "x", "5")
+
+
+def test_evaluation_noise_is_deterministic_and_per_image():
+    a = evaluation_noise((1, 1, 32, 32), "kodim01", 10)
+    assert torch.equal(a, evaluation_noise((1, 1, 32, 32), "kodim01", 10))
+    assert torch.equal(a, evaluation_noise((1, 1, 32, 32), "kodim01", 10.0))
+    assert not torch.equal(a, evaluation_noise((1, 1, 32, 32), "kodim02", 10))
+    assert evaluation_seed("kodim01", 10) != evaluation_seed("kodim01", 15)
+    # Same normalised draw at every sigma would correlate the noise levels; check they differ.
+    b = evaluation_noise((1, 1, 32, 32), "kodim01", 20)
+    assert not torch.allclose(b, 2 * a)
+    raw = torch.ones(1, 1, 32, 32, dtype=torch.float64)
+    assert torch.equal(add_evaluation_noise(raw, "kodim01", 0), raw)
+    noisy = add_evaluation_noise(raw, "kodim01", 10)
+    assert noisy.dtype == torch.float64
+    torch.testing.assert_close((noisy - raw).float(), a, rtol=0, atol=1e-7)
+
+
+def _flat(value: float, size: int = 400) -> torch.Tensor:
+    return torch.full((1, 1, size, size), value, dtype=torch.float64)
+
+
+def test_shot_noise_has_poisson_mean_and_variance() -> None:
+    exposure = Exposure(300.0, read_noise=0.0)  # g = 1 -> 100 electrons
+    out = exposure.apply(_flat(1.0), torch.Generator().manual_seed(1))
+    electrons = out * 100.0
+    assert torch.allclose(electrons, electrons.round(), atol=1e-9)  # whole electrons
+    assert float(electrons.mean()) == pytest.approx(100.0, rel=0.005)
+    assert float(electrons.var()) == pytest.approx(100.0, rel=0.03)  # Poisson: var = mean
+    a, b = exposure.variance_coefficients()
+    assert float(out.var()) == pytest.approx(a * 1.0 + b, rel=0.03)
+
+
+def test_read_and_quantisation_noise_add_their_variance() -> None:
+    exposure = Exposure(300.0, read_noise=5.0, gain=3.0, bits=16)
+    out = exposure.apply(_flat(0.5), torch.Generator().manual_seed(2))
+    dn = out * 100.0 / 3.0
+    assert torch.allclose(dn, dn.round(), atol=1e-9)  # an ADC output: whole DN times the gain
+    a, b = exposure.variance_coefficients()
+    # 0.5 -> 50 e-: shot 50 + read 25 + quantisation 3^2/12, in raw units (3/300)^2.
+    assert a * 0.5 + b == pytest.approx((50 + 25 + 9 / 12) * (3 / 300) ** 2, rel=1e-12)
+    assert float(out.var()) == pytest.approx(a * 0.5 + b, rel=0.03)
+
+
+def test_full_well_and_adc_range_saturate() -> None:
+    gen = torch.Generator().manual_seed(3)
+    full = Exposure(300.0, read_noise=1.0, full_well=60.0).apply(_flat(1.0, 50), gen)
+    assert float(full.max()) == pytest.approx(60.0 * 3 / 300)  # 100 e- clipped at 60
+    adc = Exposure(300.0, read_noise=0.0, gain=1.0, bits=6).apply(_flat(1.0, 50), gen)
+    assert float(adc.max()) == pytest.approx(63 * 3 / 300)  # 2^6 - 1 DN at 1 e-/DN
+    dark = Exposure(300.0, read_noise=3.0, gain=1.0).apply(_flat(0.0, 50), gen)
+    assert float(dark.min()) == 0.0  # the ADC clips at 0
+
+
+def test_evaluation_noise_is_deterministic_per_image_and_exposure() -> None:
+    raw = torch.rand(1, 1, 32, 32, generator=torch.Generator().manual_seed(4))
+    e = Exposure(100.0)
+    a = add_exposure_noise(raw, "kodim01", e)
+    assert torch.equal(a, add_exposure_noise(raw, "kodim01", e))
+    assert not torch.equal(a, add_exposure_noise(raw, "kodim02", e))
+    assert not torch.equal(a, add_exposure_noise(raw, "kodim01", Exposure(200.0)))
+
+
+def test_equal_exposure_pattern_a_red_pixel_gathers_four_times_bayer() -> None:
+    """On a white scene the R pixel of pattern A collects 4 times the light of a Bayer R pixel
+    at the same exposure (SPEC section 11): 4N/3 against N/3 photo-electrons."""
+    white = torch.ones(1, 3, 12, 12, dtype=torch.float64)
+    exposure = Exposure(300.0, read_noise=0.0, shot=False)
+    gen = torch.Generator().manual_seed(0)
+    a = exposure.apply(SplitterSensor("A")(white), gen) * exposure.electrons_per_unit
+    bayer = exposure.apply(SplitterSensor("bayer")(white), gen) * exposure.electrons_per_unit
+    assert float(bayer[0, 0, 4, 4]) == pytest.approx(100.0)  # bayer R at (0, 0) of its period
+    interior = a[0, 0, 4:8, 4:8]
+    assert float(interior.max()) == pytest.approx(400.0)  # A's R (and B) pixels: 4N/3
+    assert float(interior.max()) / float(bayer[0, 0, 4, 4]) == pytest.approx(4.0)
+
+
+def test_without_shot_noise_and_adc_it_is_the_gaussian_model() -> None:
+    sigma, photons = 12.0, 500.0
+    exposure = Exposure(photons, read_noise=photons * sigma / (3 * 255), shot=False)
+    assert exposure.variance_coefficients() == pytest.approx((0.0, (sigma / 255) ** 2))
+    clean = _flat(0.7)
+    noise = exposure.apply(clean, torch.Generator().manual_seed(5)) - clean
+    assert float(noise.std()) == pytest.approx(sigma / 255, rel=0.01)
+    assert abs(float(noise.mean())) < 3 * sigma / 255 / 400
+    weights, bias = closed_form_filters("D", exposure)
+    w_g, b_g = closed_form_filters("D", sigma)
+    torch.testing.assert_close(weights, w_g, rtol=1e-10, atol=1e-12)
+    torch.testing.assert_close(bias, b_g, rtol=1e-10, atol=1e-12)
+
+
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [
+        ({"photons": -1.0}, "photons"),
+        ({"photons": 0.0}, "photons"),
+        ({"photons": math.inf}, "photons"),
+        ({"photons": 10.0, "read_noise": -1.0}, "read_noise"),
+        ({"photons": 10.0, "gain": 0.0}, "gain"),
+        ({"photons": 10.0, "full_well": -5.0}, "full_well"),
+        ({"photons": 10.0, "bits": 0}, "bits"),
+    ],
+)
+def test_bad_parameters_are_refused(kwargs, message) -> None:
+    with pytest.raises(ValueError, match=message):
+        Exposure(**kwargs)
+
+
+def test_training_draws_exposures_log_uniformly_and_resumes() -> None:
+    noise = PhotonNoise((10.0, 1e4), per_sample=True, seed=3)
+    raw = torch.full((400, 1, 2, 2), 0.5)
+    _, exposures = noise(raw)
+    logs = np.log10([e.photons for e in exposures])
+    assert logs.min() >= 1 - 1e-6 and logs.max() <= 4 + 1e-6
+    assert abs(np.mean(logs) - 2.5) < 0.1 and abs(np.mean(logs < 2) - 1 / 3) < 0.08
+    state = noise.state_dict()
+    a = noise(raw[:4])
+    noise.load_state_dict(state)
+    b = noise(raw[:4])
+    assert torch.equal(a[0], b[0]) and a[1] == b[1]
+    with pytest.raises(ValueError, match="lo <= hi"):
+        PhotonNoise((100.0, 10.0))

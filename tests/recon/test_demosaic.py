@@ -1,0 +1,110 @@
+"""Classical demosaicking (splitcam.recon.demosaic): the package's methods, exactly, and their
+radius."""
+
+from __future__ import annotations
+
+import math
+
+import colour_demosaicing as cd
+import pytest
+import torch
+
+from splitcam.evaluation.metrics import psnr
+from splitcam.physics.sensor import SplitterSensor
+from splitcam.recon.base import Reconstructor as Method
+from splitcam.recon.demosaic import ClassicalDemosaic
+from splitcam.recon.tiling import tiled
+
+
+def _smooth_images(n: int, h: int, w: int, seed: int) -> torch.Tensor:
+    """Random images with some spatial correlation (a 3x3 box blur of uniform noise)."""
+    gen = torch.Generator().manual_seed(seed)
+    x = torch.rand(n, 3, h + 2, w + 2, generator=gen, dtype=torch.float64)
+    return torch.nn.functional.avg_pool2d(x, 3, stride=1)
+
+
+def test_bayer_raw_is_the_rggb_mosaic_exactly():
+    rgb = torch.rand(2, 3, 7, 10, dtype=torch.float64, generator=torch.Generator().manual_seed(1))
+    raw = SplitterSensor("bayer")(rgb)
+    for n in range(2):
+        mosaic = cd.mosaicing_CFA_Bayer(rgb[n].permute(1, 2, 0).numpy(), "RGGB")
+        assert torch.equal(raw[n, 0], torch.from_numpy(mosaic))
+
+
+@pytest.mark.parametrize("method", ClassicalDemosaic.METHODS)
+def test_classical_demosaic_equals_the_package(method):
+    rgb = _smooth_images(2, 16, 20, seed=2)
+    raw = SplitterSensor("bayer")(rgb)
+    demosaic = ClassicalDemosaic(method)
+    out = demosaic.reconstruct(raw, 0.0)
+    function = getattr(
+        cd,
+        {
+            "bilinear": "demosaicing_CFA_Bayer_bilinear",
+            "malvar2004": "demosaicing_CFA_Bayer_Malvar2004",
+            "menon2007": "demosaicing_CFA_Bayer_Menon2007",
+        }[method],
+    )
+    for n in range(2):
+        mosaic = cd.mosaicing_CFA_Bayer(rgb[n].permute(1, 2, 0).numpy(), "RGGB")
+        expected = torch.from_numpy(function(mosaic, "RGGB")).permute(2, 0, 1)
+        assert torch.equal(out[n], expected)
+    assert out.dtype == torch.float64
+    # sigma is ignored: no denoising.
+    assert torch.equal(demosaic.reconstruct(raw, 25.0), out)
+    assert demosaic.reconstruct(raw.float(), 0).dtype == torch.float32
+    assert isinstance(demosaic, Method) and demosaic.pattern.name == "bayer"
+
+
+def test_bilinear_on_a_smooth_image():
+    yy, xx = torch.meshgrid(torch.arange(64.0), torch.arange(64.0), indexing="ij")
+    rgb = torch.stack(
+        [
+            0.5 + 0.3 * torch.sin(2 * math.pi * xx / 40),
+            0.5 + 0.3 * torch.cos(2 * math.pi * yy / 50),
+            0.5 + 0.2 * torch.sin(2 * math.pi * (xx + yy) / 60),
+        ]
+    ).double()
+    out = ClassicalDemosaic("bilinear").reconstruct(SplitterSensor("bayer")(rgb[None]), 0)
+    # The package's reflective border handling mixes the mosaic's zeros into the outermost
+    # pixels (errors up to 0.6 there), so only the interior is held to a tight bound.
+    assert psnr(out[0], rgb, crop=2) > 45
+
+
+def test_unknown_demosaic_method():
+    with pytest.raises(ValueError, match="bilinear, malvar2004, menon2007.*'ahd'"):
+        ClassicalDemosaic("ahd")
+
+
+def _mosaic(size: tuple[int, int], seed: int) -> torch.Tensor:
+    g = torch.Generator().manual_seed(seed)
+    return torch.rand(1, 1, *size, generator=g, dtype=torch.float64)
+
+
+@pytest.mark.parametrize("method", ClassicalDemosaic.METHODS)
+def test_demosaic_radius_is_exact_both_ways(method) -> None:
+    """Tiles overlapping by the documented radius reproduce the whole image exactly; one pixel
+    less does not; and one changed mosaic pixel changes nothing farther than the radius."""
+    demosaic = ClassicalDemosaic(method, tile=None)
+    radius = demosaic.radius
+    raw = _mosaic((64, 72), 1)
+    whole = demosaic.demosaic(raw)
+    tile = 24 + 2 * radius
+    out = tiled(demosaic.demosaic, raw, (2, 2), radius, tile=tile, overlap=radius)
+    torch.testing.assert_close(out, whole, rtol=0, atol=0)
+    if radius > 1:
+        short = tiled(demosaic.demosaic, raw, (2, 2), radius - 1, tile=tile, overlap=radius - 1)
+        assert not torch.equal(short, whole)
+    # Reach: poke one pixel of each phase of the period in the middle, see how far the output
+    # changes (it differs between phases: menon2007 reaches 6, 4, 7 and 6 pixels).
+    reach = 0
+    for dy in (0, 1):
+        for dx in (0, 1):
+            y, x = 32 + dy, 36 + dx
+            poked = raw.clone()
+            poked[0, 0, y, x] += 0.5
+            diff = (demosaic.demosaic(poked) - whole).abs().amax(1)[0]
+            ys, xs = torch.nonzero(diff > 0, as_tuple=True)
+            reach = max(reach, int(torch.maximum((ys - y).abs(), (xs - x).abs()).max()))
+    assert reach <= radius
+    assert method == "bilinear" or reach >= radius - 1  # the radius is not loose either

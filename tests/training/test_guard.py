@@ -1,0 +1,43 @@
+"""The divergence guard (splitcam.training.guard): snapshots, roll-back, giving up."""
+
+from __future__ import annotations
+
+import pytest
+import torch
+from conftest import blocky_images, tiny_config
+
+from splitcam.training import train
+
+
+def test_divergence_guard_restores_the_older_snapshot() -> None:
+    from splitcam.training.guard import DivergenceGuard
+
+    model = torch.nn.Linear(2, 1)
+    optimizer = torch.optim.Adam(model.parameters(), lr=0.1)
+    guard = DivergenceGuard(10.0, every=3, min_history=2)
+    states = []
+    for _ in range(7):  # snapshots after 0, 3 and 6 healthy steps: kept 3 and 6
+        states.append(model.weight.detach().clone())
+        guard.applied(1.0, model, optimizer)
+        model.weight.data += 1.0
+    assert not guard.diverged(5.0) and guard.diverged(11.0) and guard.diverged(float("nan"))
+    guard.roll_back(model, optimizer)
+    assert torch.equal(model.weight, states[3]) and guard.lr_scale == 0.5
+    assert not guard.diverged(1e9)  # the window starts afresh
+    with pytest.raises(ValueError, match="factor"):
+        DivergenceGuard(-1.0)
+
+
+def test_the_guard_gives_up_after_halving_the_rate_ten_times(tmp_path):
+    from splitcam.training.trainer import GUARD_GIVES_UP
+
+    data = blocky_images(tmp_path / "img", 5)
+    # A factor below 1 makes every step once the window is full a divergence.
+    config = tiny_config(
+        data,
+        tmp_path / "r",
+        **{"optim.steps": 400, "optim.divergence_factor": 1e-9, "run.val_every": 1000},
+    )
+    result = train(config, progress=False)
+    assert result.step < 400
+    assert result.failure and f"halved the learning rate {GUARD_GIVES_UP} times" in result.failure

@@ -1,0 +1,92 @@
+"""Trained models as files (splitcam.training.models): export, 16-bit storage, repeatable bytes,
+provenance."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+
+import pytest
+import torch
+from conftest import small_config
+
+from splitcam.evaluation.protocol import mean_psnr
+from splitcam.recon.loading import load_model
+from splitcam.recon.registry import build_method, build_model
+from splitcam.training import load_system, train
+from splitcam.training.models import export_model
+
+
+def _images(n=2, size=24):
+    g = torch.Generator().manual_seed(9)
+    x = torch.rand(n, 3, size + 4, size + 4, generator=g)
+    x = torch.nn.functional.avg_pool2d(x, 5, stride=1)
+    return [(f"img{i}", x[i]) for i in range(n)]
+
+
+@pytest.mark.parametrize("storage", ["float16", "float32"])
+def test_export_round_trip_matches_the_run(trained_run, tmp_path, storage):
+    """A model reconstructs like its run: exactly in float32, within a hair in float16 (the
+    difference is measured on the PSNR, which must move by far less than 0.01 dB)."""
+    path = export_model(trained_run, tmp_path / "mine", storage=storage)
+    meta = json.loads(path.read_text())
+    assert meta["name"] == "mine" and meta["storage"] == storage
+    assert meta["provenance"]["total_steps"] == 4
+    assert meta["provenance"]["segments"][0]["batch_size"] == 4
+    assert [row["step"] for row in meta["provenance"]["validation"]] == [0, 2, 4]
+    system = load_model(path)
+    run_system = load_system(trained_run)
+    for key, value in run_system.network.state_dict().items():
+        mine = system.network.state_dict()[key]
+        tol = 0 if storage == "float32" or not value.is_floating_point() else 1e-3
+        torch.testing.assert_close(mine, value, rtol=tol, atol=tol)
+    images = _images()
+    ours = mean_psnr(build_model(path), images, [0.0, 10.0])
+    theirs = mean_psnr(build_method(str(trained_run)), images, [0.0, 10.0])
+    for sigma in ours:
+        assert abs(ours[sigma] - theirs[sigma]) < (1e-9 if storage == "float32" else 0.01)
+    if storage == "float16":  # half the bytes of the weights (the statistics stay float64)
+        full = export_model(trained_run, tmp_path / "full", storage="float32")
+        assert (
+            path.with_suffix(".safetensors").stat().st_size
+            < full.with_suffix(".safetensors").stat().st_size
+        )
+
+
+def test_export_is_byte_for_byte_repeatable(trained_run, tmp_path):
+    """The same weights give the same file: safetensors writes its metadata map in hash order
+    (before the header was made canonical, 8 exports of one run gave files with different bytes
+    about every other time), so shipped checksums moved with every re-export."""
+    from safetensors.torch import load_file
+
+    blobs = set()
+    for i in range(8):
+        meta = json.loads(export_model(trained_run, tmp_path / f"m{i}").read_text())
+        blob = (tmp_path / f"m{i}.safetensors").read_bytes()
+        assert hashlib.sha256(blob).hexdigest() == meta["sha256"]
+        blobs.add(blob)
+    assert len(blobs) == 1
+    loaded = load_file(str(tmp_path / "m0.safetensors"))  # still plain safetensors
+    system = load_model(tmp_path / "m0")
+    for key, value in system.network.state_dict().items():
+        torch.testing.assert_close(loaded[key].to(value.dtype), value, rtol=0, atol=0)
+
+
+def test_provenance_records_each_thread_count_of_a_resumed_run(run_images, tmp_path):
+    """A run trained on 1 thread, then resumed on 2: the exported provenance says both, from the
+    run's changes.jsonl (the checkpoint alone only knows the last count)."""
+    out = tmp_path / "t"
+    train(small_config(run_images, out, **{"optim.steps": 2, "run.threads": 1}), progress=False)
+    config = small_config(run_images, out, **{"optim.steps": 4, "run.threads": 2})
+    train(config, resume=True, progress=False)
+    meta = json.loads(export_model(out, tmp_path / "m", name="m").with_suffix(".json").read_text())
+    segment = meta["provenance"]["segments"][-1]
+    assert segment["threads"] == [[0, 1], [2, 2]]
+    assert "1 thread, 2 from step 2)" in segment["device"]
+    assert torch.backends.cpu.get_cpu_capability() in segment["device"]
+    assert meta["provenance"]["total_steps"] == 4
+    # One thread count all along: said once, in the singular.
+    once = tmp_path / "once"
+    train(small_config(run_images, once, **{"optim.steps": 2, "run.threads": 1}), progress=False)
+    meta = json.loads(export_model(once, tmp_path / "o").read_text())
+    assert meta["provenance"]["segments"][-1]["device"].endswith("; 1 thread)")

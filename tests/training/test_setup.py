@@ -1,0 +1,108 @@
+"""Building a run's system (splitcam.training.setup): designed starting kernels, metasurface
+sensors."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+from conftest import blocky_images, tiny_config
+
+from splitcam import patterns
+from splitcam.io import checkpoints as ckpt_io
+from splitcam.physics.optics import pattern_of
+from splitcam.training import CheckpointError, load_system, train
+
+
+def test_training_a_metasurface_with_the_network(tmp_path) -> None:
+    """`train --metasurface random`: the height map is learned through the optics and the
+    reconstruction; the run's checkpoint holds the pattern it makes."""
+    from conftest import tiny_config
+
+    from splitcam.physics.optics import MetasurfaceSensor
+    from splitcam.training import build_system, train
+
+    folder = blocky_images(tmp_path / "img", 4)
+    config = tiny_config(
+        folder,
+        tmp_path / "run",
+        **{"pattern.metasurface": "random", "optim.steps": 2, "pattern.lr": 0.5},
+    )
+    start = build_system(config).sensor
+    assert isinstance(start, MetasurfaceSensor)
+    train(config, progress=False)
+    system = load_system(tmp_path / "run")
+    learned = system.sensor.to_pattern()
+    assert learned.provenance == "optics" and learned.kernels.sum((2, 3)).max() <= 1.0
+    assert not np.allclose(learned.kernels, start.to_pattern().kernels, atol=1e-4)
+    # the run exports the learned profile and the pattern it makes
+    height = np.load(tmp_path / "run/height.npy")
+    remade = pattern_of(torch.from_numpy(height), (2, 2), start.optics)  # the optics again
+    np.testing.assert_allclose(remade.kernels, learned.kernels, atol=1e-5)
+    assert (tmp_path / "run/height.png").is_file()
+    from splitcam import patterns
+
+    exported = patterns.load(tmp_path / "run/pattern.toml")
+    np.testing.assert_allclose(exported.kernels, learned.kernels, atol=1e-6)
+    with pytest.raises(Exception, match="metasurface"):
+        build_system(
+            tiny_config(
+                folder, tmp_path / "x", **{"pattern.metasurface": str(tmp_path / "none.npy")}
+            )
+        )
+
+
+def test_joint_run_with_design_steps_starts_from_the_designed_kernels(
+    image_folder, tmp_path, monkeypatch
+):
+    """pattern.design_steps: the learned kernels start where `design` takes the initialisation
+    (lower closed-form error than the support start), and a resume keeps the trained kernels
+    instead of designing again."""
+    from splitcam.design import design_pattern
+    from splitcam.recon.closed_form import closed_form_mse
+    from splitcam.training import setup
+    from splitcam.training.trainer import build_system
+
+    learn = {"pattern.learn": True, "pattern.design_steps": 30, "optim.steps": 3}
+    config = tiny_config(image_folder, tmp_path / "j", **learn)
+    expected = design_pattern("D", init="support", steps=30, seed=config.run.seed + 17)
+    start = build_system(config).sensor.pixel_kernels().detach()
+    support = (
+        build_system(
+            tiny_config(image_folder, tmp_path / "s", **{**learn, "pattern.design_steps": 0})
+        )
+        .sensor.pixel_kernels()
+        .detach()
+    )
+    torch.testing.assert_close(
+        start.double(), patterns_kernels(expected.pattern), atol=1e-6, rtol=0
+    )
+    assert float(closed_form_mse(start, 10.0)) < 0.95 * float(closed_form_mse(support, 10.0))
+    train(config, progress=False)
+
+    def no_design(*args, **kwargs):
+        raise AssertionError("a resumed run must not design its kernels again")
+
+    monkeypatch.setattr(setup, "design_pattern", no_design)
+    train(
+        tiny_config(image_folder, tmp_path / "j", **{**learn, "optim.steps": 4}),
+        resume=True,
+        progress=False,
+    )
+    assert ckpt_io.load(tmp_path / "j").meta["step"] == 4
+    with pytest.raises(CheckpointError, match="design_steps"):
+        train(
+            tiny_config(
+                image_folder,
+                tmp_path / "j",
+                **{**learn, "pattern.design_steps": 5, "optim.steps": 5},
+            ),
+            resume=True,
+            progress=False,
+        )
+
+
+def patterns_kernels(pattern: patterns.Pattern) -> torch.Tensor:
+    from splitcam.physics.sensor import pattern_pixel_kernels
+
+    return pattern_pixel_kernels(pattern)

@@ -1,0 +1,118 @@
+"""Validation during training (splitcam.training.validation): the held-out split, and the PSNR it
+logs equal to what evaluate reports."""
+
+from __future__ import annotations
+
+import json
+import logging
+
+import numpy as np
+import pytest
+import torch
+from conftest import blocky_images, tiny_config
+from PIL import Image
+
+from splitcam.cli import main
+from splitcam.training import TrainConfig, train
+
+
+def _images(n=2, size=(20, 24)):
+    gen = torch.Generator().manual_seed(0)
+    return [(f"img{i}", torch.rand(3, *size, generator=gen)) for i in range(n)]
+
+
+def _write_photos(folder, n=2, size=(40, 44)):
+    folder.mkdir()
+    for name, img in _images(n, size=size):
+        Image.fromarray((img.permute(1, 2, 0).numpy() * 255).astype(np.uint8)).save(
+            folder / f"{name}.png"
+        )
+
+
+def test_validation_psnr_equals_what_evaluate_reports(tmp_path):
+    """Training validation and `splitcam evaluate` are one protocol: the PSNR a run logs for its
+    checkpoint is the PSNR evaluate reports for that checkpoint on the same images and sigmas."""
+    train_dir, val_dir = tmp_path / "train", tmp_path / "val"
+    _write_photos(train_dir, n=3, size=(32, 32))
+    _write_photos(val_dir, n=2, size=(36, 40))
+    cfg = TrainConfig().override(
+        {
+            "data.train": str(train_dir),
+            "data.val": str(val_dir),
+            "data.val_crop": None,
+            "data.val_sigmas": [0.0, 15.0],
+            "data.patch_size": 16,
+            "data.batch_size": 2,
+            "network.features": 4,
+            "network.blocks": 1,
+            "optim.steps": 3,
+            "run.val_every": 3,
+            "run.out": str(tmp_path / "run"),
+            "run.threads": 1,
+        }
+    )
+    train(cfg, progress=False)
+    logged = [
+        json.loads(line) for line in (tmp_path / "run/metrics.jsonl").read_text().splitlines()
+    ]
+    last = [r for r in logged if "val_psnr_0" in r][-1]
+    assert last["step"] == 3
+    assert (
+        main(
+            [
+                "evaluate",
+                "--checkpoint",
+                str(tmp_path / "run"),
+                "--datasets",
+                str(val_dir),
+                "--sigmas",
+                "0",
+                "15",
+                "--out",
+                str(tmp_path / "ev"),
+                "--quiet",
+            ]
+        )
+        == 0
+    )
+    summary = json.loads((tmp_path / "ev/summary.json").read_text())["run"]["all"]
+    assert summary["0"]["psnr"] == pytest.approx(last["val_psnr_0"], abs=1e-9)
+    assert summary["15"]["psnr"] == pytest.approx(last["val_psnr_15"], abs=1e-9)
+
+
+def test_validation_is_on_by_default_on_a_held_out_split(image_folder, tmp_path):
+    from splitcam.training.trainer import _train_source, val_split
+
+    config = tiny_config(image_folder, tmp_path / "v", **{"data.val_split": None})
+    assert val_split(config) == 1  # 8 images: max(1, 8 // 10)
+    held_out = {p.name for p in _train_source(config)}
+    assert "im7.png" not in held_out and len(held_out) == 7
+    train(config, progress=False)
+    rows = [json.loads(x) for x in (tmp_path / "v/metrics.jsonl").read_text().splitlines()]
+    assert any("val_psnr" in r for r in rows)
+    assert val_split(tiny_config(image_folder, tmp_path / "w", **{"data.val_split": 0})) == 0
+
+
+def test_validation_never_uses_an_image_smaller_than_its_crop(tmp_path, caplog):
+    """A 16x16 image sorting last would have been the whole validation set."""
+
+    from splitcam.training import train
+    from splitcam.training.trainer import held_out
+
+    data = blocky_images(tmp_path / "img", 5)
+    Image.fromarray(np.zeros((16, 16, 3), np.uint8)).save(data / "zz_tiny.png")
+    config = tiny_config(data, tmp_path / "run", **{"data.val_crop": 32, "data.val_split": 1})
+    chosen = held_out(config)
+    assert [p.name for p in chosen] == ["im4.png"]
+    caplog.set_level(logging.INFO, logger="splitcam")
+    train(config, progress=True)
+    assert "validation: 1 of the last 1 images" in caplog.text and "training: im4" in caplog.text
+    # The tiny image is trained on, not lost: the training set is the rest.
+    from splitcam.training.trainer import _train_source
+
+    assert {p.name for p in _train_source(config)} == {f"im{i}.png" for i in range(4)} | {
+        "zz_tiny.png"
+    }
+    # Images all smaller than the crop: the largest ones, never the tiny one.
+    big = tiny_config(data, tmp_path / "r2", **{"data.val_crop": 64, "data.val_split": 2})
+    assert [p.name for p in held_out(big)] == ["im3.png", "im4.png"]
