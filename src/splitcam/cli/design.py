@@ -117,6 +117,14 @@ def add_search_options(p: argparse.ArgumentParser, searched: str) -> argparse._A
         "default search/). A search on an existing study adds trials to it; several "
         "processes or cluster jobs can run on one study at once",
     )
+    g.add_argument(
+        "--search-seed",
+        type=int,
+        default=0,
+        metavar="S",
+        help="with --search: seed of the sampler (default 0); give each process that shares "
+        "a study its own, or they draw the same settings",
+    )
     return g
 
 
@@ -172,6 +180,7 @@ def _search(args: argparse.Namespace, out: Path) -> int:
             sigmas=args.sigmas,
             space=space,
             report_every=args.report_every,
+            seed=args.search_seed,
             progress=not args.quiet,
         )
     except ModuleNotFoundError as exc:

@@ -82,6 +82,7 @@ def _search(args: argparse.Namespace, period: tuple[int, int], optics, out: Path
             folder=args.study,
             steps=args.steps,
             space=space,
+            seed=args.search_seed,
             progress=not args.quiet,
         )
     except ModuleNotFoundError as exc:
