@@ -1,4 +1,4 @@
-"""The worked result of `splitcam.optics` (docs/results/optics/): 2x2 Bayer-type routers designed
+"""The worked result of `physics.optics` (docs/results/optics/): 2x2 Bayer-type routers designed
 from a random and from a lens-array start, for the reconstruction (closed-form LMMSE) and for
 routing (RGGB collection efficiency), in two geometries; their collection efficiency, kernels and
 height maps, and their image quality against pattern A and the Bayer filter at equal noise and
@@ -25,12 +25,12 @@ import torch
 
 from splitcam import patterns
 from splitcam.data.testsets import load_images
+from splitcam.design import design_metasurface
 from splitcam.evaluation import evaluate
 from splitcam.evaluation.exposure import default_exposures, exposure_study, write_study
 from splitcam.evaluation.tables import markdown_tables, summarise
-from splitcam.optics import Optics, bayer_collection, pattern_of, profile
+from splitcam.physics.optics import Optics, bayer_collection, pattern_of, profile
 from splitcam.recon.closed_form import closed_form_lmmse
-from splitcam.recon.design import design_metasurface
 from splitcam.viz.patterns import draw_height_maps, draw_pattern
 
 #: The two geometries: the package defaults (1 µm pixels, 2 µm above the photodiodes), and 2 µm

@@ -167,12 +167,11 @@ def design_pattern(
     (float64); the loss of all sigmas comes from one batched closed-form solve per step. The
     designed pattern is the one of the last step.
 
-    Budget: the defaults (300 steps at lr 0.1) took 4.7-5.6 s for A and D (2x2 period,
-    radius 4, 5 sigmas; 16-19 ms a step) on one core of this project's 2-core CPU while a
-    training run kept both cores busy. By then the objective is within 0.02 dB of where 600
-    steps take it from the support and exact starts of A and D, within 0.06 dB from random
-    ones; at lr 0.02 and 0.05 it ended lower at step 300 from every start
-    (``docs/results/design.md``).
+    Budget: the defaults (300 steps at lr 0.1) take about 5 s for A and D (2x2 period,
+    radius 4, 5 sigmas; 16-19 ms a step on one thread of a 2-core CPU with other work
+    running). By then the objective is within 0.02 dB of where 600 steps take it from the
+    support and exact starts of A and D, within 0.06 dB from random ones; at lr 0.02 and 0.05
+    it ends lower at step 300 from every start (``docs/results/design.md``).
 
     Args:
         start: Starting pattern (name, file or :class:`Pattern`); its layout and kernel size are
@@ -196,8 +195,8 @@ def design_pattern(
         batch_size: For ``network``: patches per step.
         name: Name of the designed pattern (default ``<start>-designed``).
         threads: Intra-op threads during the optimisation (restored afterwards; ``None`` leaves
-            them). The problem is small: on this 2-core machine, busy with a training run, a step
-            took 11 ms with 1 thread and 800 ms with 2 (threads waiting for each other).
+            them). The problem is small: on a 2-core CPU with other work running, a step takes
+            11 ms with 1 thread and 800 ms with 2 (threads waiting for each other).
         progress: Show a progress bar (tqdm).
 
     Raises:
