@@ -74,7 +74,12 @@ def design_metasurface(
         optics: A :class:`splitcam.physics.optics.Optics`.
         init: ``random`` (uniform heights), ``lens`` (a microlens over every pixel, focused at
             the distance) or a height map.
-        steps, lr, seed, radius, statistics, sigmas: As :func:`design_pattern`.
+        sigmas: As :func:`design_pattern`.
+        steps: As :func:`design_pattern`.
+        lr: As :func:`design_pattern`.
+        seed: As :func:`design_pattern`.
+        radius: As :func:`design_pattern`.
+        statistics: As :func:`design_pattern`.
     """
     sigma_list = check_sigmas(sigmas)
     if objective not in ("lmmse", "routing"):

@@ -645,12 +645,19 @@ def search_metasurfaces(
         optics: The fixed geometry and materials (an :class:`~splitcam.physics.optics.Optics`;
             default ``Optics()``); each trial replaces its ``max_height``, ``distance`` and
             ``index``.
-        trials, folder, sigmas, radius, metric, seed, baseline, enqueue, progress: As
-            :func:`search_patterns` (baselines: the geometry of ``optics`` designed with the
-            designer's defaults, ``lmmse`` and ``routing``).
+        trials: As :func:`search_patterns`.
+        folder: As :func:`search_patterns`.
         steps: Adam steps of every design.
+        sigmas: As :func:`search_patterns`.
+        radius: As :func:`search_patterns`.
         space: Entries replacing those of :data:`METASURFACE_SPACE`.
+        metric: As :func:`search_patterns`.
         startup: Random trials before the sampler models the scores.
+        seed: As :func:`search_patterns`.
+        baseline: As :func:`search_patterns` (baselines: the geometry of ``optics`` designed
+            with the designer's defaults, ``lmmse`` and ``routing``).
+        enqueue: As :func:`search_patterns`.
+        progress: As :func:`search_patterns`.
 
     Raises:
         ImportError: Optuna is not installed.

@@ -142,7 +142,10 @@ def screen_patterns(
         train_dir: Folder of training images (or an already decoded :class:`ImageCache`).
         test_images: ``(name, image)`` pairs or a folder (see :func:`evaluate_method`).
         sigmas: Noise levels in 8-bit units.
-        radius, patches, patch_size, seed: See :func:`fit_lmmse`.
+        radius: See :func:`fit_lmmse`.
+        patches: See :func:`fit_lmmse`.
+        patch_size: See :func:`fit_lmmse`.
+        seed: See :func:`fit_lmmse`.
         psnr_crops: Extra border-cropped PSNRs (see :func:`evaluate_method`), averaged into the
             rows as ``psnr_crop<c>``.
         progress: Show progress bars.

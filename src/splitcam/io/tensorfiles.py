@@ -101,7 +101,8 @@ def load_pair(
     """Read a pair written by :func:`save_pair`: ``(tensors, meta, json path)``.
 
     Args:
-        fmt, version: What the JSON file must declare.
+        fmt: The format the JSON file must declare.
+        version: The version the JSON file must declare.
         what: Words for the kind of file in messages ("LMMSE statistics").
         error: The exception class raised (a subclass of ``ValueError``).
 

@@ -176,7 +176,8 @@ class PatternMix:
         named_fraction: Probability that a step uses one of ``named`` (equally likely) instead of
             a random draw.
         seed: Seed of the draws.
-        max_period, max_kernel: Limits of the random draws (:func:`random_pattern`).
+        max_period: Limit of the random draws (:func:`random_pattern`).
+        max_kernel: Limit of the random draws (:func:`random_pattern`).
     """
 
     def __init__(

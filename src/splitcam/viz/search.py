@@ -40,7 +40,8 @@ def draw_front(
         points: ``(x, y)`` of every finished trial.
         front: ``(x, y)`` of the trials on the front.
         out: PNG to write (``None``: only return the figure).
-        xlabel, ylabel: Axis labels.
+        xlabel: Label of the x axis.
+        ylabel: Label of the y axis.
         labels: One label per front point (e.g. the trial numbers).
         baselines: ``(x, y)`` of trials to mark as baselines.
         title: Figure title.
