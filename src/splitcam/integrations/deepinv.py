@@ -273,7 +273,8 @@ def noise_model(level: NoiseLevel, *, seed: int = 0) -> dinv.physics.NoiseModel:
     :class:`~deepinv.physics.NoiseModel` is returned as it is.
 
     Raises:
-        TypeError, ValueError: A level that is none of these
+        TypeError: A level that is neither a number nor one of these.
+        ValueError: A negative or non-finite sigma
             (:func:`~splitcam.physics.noise.check_level`).
     """
     if level is None:
@@ -379,7 +380,11 @@ class DeepinvReconstructor:
         self.physics = physics
         self.name = name
         self.domain = domain
-        self.pattern = physics.pattern
+
+    @property
+    def pattern(self) -> Pattern:
+        """The pattern the physics' sensor holds now (learned kernels included)."""
+        return self.physics.pattern
 
     def reconstruct(self, raw: torch.Tensor, sigma: float | Exposure) -> torch.Tensor:
         self.physics.set_noise_model(check_level(sigma))
