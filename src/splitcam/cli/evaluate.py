@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 
 from ..io.domains import DOMAINS
+from ..io.paper import PAPER_PATTERNS, PAPER_SIGMAS
 from ._common import (
     add_method_options,
     add_sensor_options,
@@ -55,7 +56,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--patterns",
         type=lambda s: [x for x in s.split(",") if x],
-        default=["A", "B", "C", "D", "E", "bayer"],
+        default=list(PAPER_PATTERNS),
         help="patterns for lmmse, comma-separated names or files (default: all)",
     )
     p.add_argument(
@@ -173,7 +174,7 @@ def run(args: argparse.Namespace) -> int:
             f"no effect without --photons (the exposures to score)"
         )
     exposures = [Exposure(n, **sensor_settings(args)) for n in args.photons or ()]  # checked first
-    paper_sigmas = [0.0, 5.0, 10.0, 15.0, 20.0]  # SPEC section 7
+    paper_sigmas = list(PAPER_SIGMAS)
     sigmas = args.sigmas if args.sigmas is not None else [] if exposures else paper_sigmas
     datasets = load_datasets(args.datasets, args.max_images, max_size or None)
     try:

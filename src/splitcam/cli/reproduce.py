@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from ..io.paper import PAPER_PATTERNS, PAPER_SIGMAS
 from ._common import add_precision
 
 
@@ -19,7 +20,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "Resumable: run it again to continue.",
     )
     p.add_argument("--datasets", default="kodak24,mcmaster")
-    p.add_argument("--sigmas", type=float, nargs="+", default=[0.0, 5.0, 10.0, 15.0, 20.0])
+    p.add_argument("--sigmas", type=float, nargs="+", default=list(PAPER_SIGMAS))
     p.add_argument("--out", default="reproduce")
     p.add_argument("--max-images", type=int, help="at most this many images per dataset")
     p.add_argument("--no-baselines", action="store_true")
@@ -33,7 +34,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from ..data.testsets import load_datasets
     from ..evaluation.protocol import evaluate
-    from ..evaluation.report import PAPER_MODELS, TABLE1, paper_tables
+    from ..evaluation.report import PAPER_MODELS, paper_tables
     from ..evaluation.tables import summarise
     from ..recon.loading import load_model, model_names
     from ..recon.registry import build_method, build_model
@@ -47,7 +48,7 @@ def run(args: argparse.Namespace) -> int:
     methods = [build_model(m, tile=args.tile, precision=args.precision) for m in rows.values()]
     if not args.no_baselines:
         methods.append(build_method("malvar2004"))
-        methods += [build_method("lmmse", pattern=p) for p in (*TABLE1, "bayer")]
+        methods += [build_method("lmmse", pattern=p) for p in PAPER_PATTERNS]
     datasets = load_datasets(args.datasets, args.max_images)
     names = {n for _, images in datasets for n, _ in images}
     # The paper's Figs. 4, 5, 7, 8: kodim05 at sigma 10, kodim24 at sigma 5.
@@ -88,7 +89,7 @@ def run(args: argparse.Namespace) -> int:
         budgets=budgets,
         learned=learned,
         zooms=zooms,
-        baselines={r: f"lmmse-{r}" for r in (*TABLE1, "bayer")},
+        baselines={r: f"lmmse-{r}" for r in PAPER_PATTERNS},
     )
     print(report.read_text(encoding="utf-8"))
     print(f"wrote {report}")

@@ -6,6 +6,7 @@ import argparse
 import sys
 
 from ..io.domains import DOMAINS
+from ..io.paper import PAPER_PATTERNS
 from ._common import add_sensor_options, model_methods, sensor_settings
 
 
@@ -25,7 +26,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--patterns",
         type=lambda s: [x for x in s.split(",") if x],
-        default=["A", "B", "C", "D", "E", "bayer"],
+        default=list(PAPER_PATTERNS),
     )
     p.add_argument(
         "--photons", type=float, nargs="+", help="exposures (default: log-spaced from 1 to 10^4)"

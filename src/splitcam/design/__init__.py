@@ -1,6 +1,7 @@
 """Pattern design: optimise a pattern's kernels (:mod:`.kernels`, for the closed-form LMMSE or a
 frozen network for any pattern) or a metasurface height map (:mod:`.metasurface`), both with the
-one loop of :mod:`.ascent`; searches over their settings with Optuna (:mod:`.search`); defaults in :mod:`.defaults` (importable without torch).
+one loop of :mod:`.ascent`; search over their settings with Optuna (:mod:`.search`); defaults
+in :mod:`.defaults` (importable without torch).
 
 Design sits above reconstruction (its objectives are reconstructions) and below training, which
 starts a joint optimisation from a designed pattern. The names below load on first use, so

@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+from ..io.paper import PAPER_SIGMAS
+
 #: Noise levels (8-bit units) the design averages over by default: the paper's test levels.
-DEFAULT_SIGMAS = (0.0, 5.0, 10.0, 15.0, 20.0)
+DEFAULT_SIGMAS = PAPER_SIGMAS
 #: Adam steps and learning rate (on the logits) of :func:`design_pattern` by default.
 DEFAULT_STEPS = 300
 DEFAULT_LR = 0.1

@@ -10,6 +10,7 @@ from pathlib import Path
 
 from .. import patterns
 from ..io import write_text
+from ..io.paper import PAPER_SIGMAS, TABLE1_PATTERNS
 from ..physics.noise import level_heading, level_key, parse_level_label
 from ..viz.charts import exposure_chart, sigma_chart
 from ..viz.patterns import draw_pattern
@@ -41,7 +42,8 @@ PAPER = {
         (34.34, 0.9219),
     ],
 }
-PAPER_SIGMAS = ("0", "5", "10", "15", "20")
+#: The level labels of the paper's columns (``"0"`` ... ``"20"``).
+PAPER_LEVELS = tuple(f"{s:g}" for s in PAPER_SIGMAS)
 
 #: The shipped model that reproduces each row of the paper's Tables 1-3 (and bayer beside them).
 PAPER_MODELS = {
@@ -150,8 +152,8 @@ def make_report(results: list[str | os.PathLike], out: str | os.PathLike) -> Pat
                 cells.append("–")
                 continue
             cell = f"{st['psnr']:.2f} / {st['ssim']:.4f}"
-            if ref and s in PAPER_SIGMAS:
-                p_psnr = PAPER[ref][PAPER_SIGMAS.index(s)][0]
+            if ref and s in PAPER_LEVELS:
+                p_psnr = PAPER[ref][PAPER_LEVELS.index(s)][0]
                 cell += f" ({p_psnr:.2f}, {st['psnr'] - p_psnr:+.2f})"
             cells.append(cell)
         n = max(st["n_images"] for st in entry["all"].values())
@@ -193,7 +195,7 @@ def make_report(results: list[str | os.PathLike], out: str | os.PathLike) -> Pat
         if comparable(method, entry) and (r := paper_row(pattern))
     )
     references = {
-        ref: [(float(s), p) for s, (p, _) in zip(PAPER_SIGMAS, PAPER[ref], strict=True)]
+        ref: [(float(s), p) for s, (p, _) in zip(PAPER_LEVELS, PAPER[ref], strict=True)]
         for ref in refs
     }
     if any(parse_level_label(s)[0] == "sigma" for s in sigmas):
@@ -221,7 +223,7 @@ def make_report(results: list[str | os.PathLike], out: str | os.PathLike) -> Pat
 
 
 #: The models of the paper's tables, by the names of the paper's rows (and Fig. 9's curves).
-TABLE1 = ("A", "B", "C", "D", "E")
+TABLE1 = TABLE1_PATTERNS
 FIG9 = ("bayer", "D", "D optimised", "D optimised (random init.)")
 
 
@@ -362,8 +364,8 @@ class _Tables:
     @staticmethod
     def paper(row: str, s: str) -> tuple[float, float] | None:
         """The paper's PSNR and SSIM of a row at one level, where the paper has them."""
-        if row in PAPER and s in PAPER_SIGMAS:
-            return PAPER[row][PAPER_SIGMAS.index(s)]
+        if row in PAPER and s in PAPER_LEVELS:
+            return PAPER[row][PAPER_LEVELS.index(s)]
         return None
 
     @property
@@ -463,7 +465,7 @@ def _fig9_section(t: _Tables) -> list[str]:
         [(r, t.summary[t.rows[r]]["all"]) for r in fig9],
         t.out / "fig9_sigma_curves.png",
         {
-            r: [(float(s), p) for s, (p, _) in zip(PAPER_SIGMAS, PAPER[r], strict=True)]
+            r: [(float(s), p) for s, (p, _) in zip(PAPER_LEVELS, PAPER[r], strict=True)]
             for r in fig9
             if r in PAPER
         },

@@ -27,6 +27,7 @@ else:  # pragma: no cover
 
 from ..io import write_text
 from ..io.domains import DEFAULT_DOMAIN, DOMAINS
+from ..io.paper import PAPER_PATTERNS
 
 
 class ConfigError(ValueError):
@@ -62,7 +63,7 @@ class PatternConfig:
         flag="pattern",
     )
     mix: list[str] = _opt(
-        ["A", "B", "C", "D", "E", "bayer"],
+        list(PAPER_PATTERNS),
         "with --pattern random: the named patterns (or files) mixed with the random draws",
     )
     mix_fraction: float = _opt(
