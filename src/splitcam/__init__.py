@@ -20,9 +20,11 @@ The package is layered; each part imports only the parts above it in this list (
 8. :mod:`splitcam.viz` — every figure (matplotlib ``Figure`` objects; no backend switching).
 9. :mod:`splitcam.evaluation` — metrics, the evaluation protocol (also used by training
    validation), result tables, LMMSE screening, the exposure study, reports beside the paper.
-10. :mod:`splitcam.training` — typed configuration, the training loop and its run folders,
+10. :mod:`splitcam.integrations` — splitcam in other libraries (deepinv), optional extras;
+    nothing in the package imports it.
+11. :mod:`splitcam.training` — typed configuration, the training loop and its run folders,
     exporting models with their provenance, sweeps.
-11. :mod:`splitcam.cli` — the ``splitcam`` command: one module per command; parsing imports no
+12. :mod:`splitcam.cli` — the ``splitcam`` command: one module per command; parsing imports no
     torch.
 
 :mod:`splitcam.weights` holds shipped data (networks, LMMSE fits, image statistics), no code.
