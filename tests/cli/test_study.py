@@ -55,3 +55,20 @@ def json_load(path):
     import json
 
     return json.loads(path.read_text())
+
+
+def test_study_breakeven_cli(tmp_path) -> None:
+    args = ["study", "breakeven", "--max-images", "1", "--crop", "32", "--photons", "3", "300"]
+    args += ["--eta", "0.5", "1", "--chi", "0", "0.6", "--quiet", "--out", str(tmp_path)]
+    assert main(args) == 0
+    data = json_load(tmp_path / "breakeven.json")
+    assert data["reference"] == "rgbw" and data["domain"] == "linear"
+    assert [c["verdict"] for c in data["cells"]][-1] == "infeasible"  # 1 + 0.6 > 1
+    assert (tmp_path / "breakeven.png").is_file()
+    assert "| 1 |" in (tmp_path / "breakeven.md").read_text()
+
+
+def test_study_exposure_states_crossovers_against_rgbw(tmp_path) -> None:
+    args = ["study", "exposure", "--max-images", "1", "--crop", "32", "--photons", "3", "300"]
+    assert main([*args, "--patterns", "A,bayer,rgbw", "--quiet", "--out", str(tmp_path)]) == 0
+    assert "vs rgbw: PSNR" in (tmp_path / "exposure.md").read_text()

@@ -34,3 +34,49 @@ def test_raw_snr_follows_the_signal_gain() -> None:
         assert abs(snr[name]["shot_gain_db"] - snr[name]["shot_theory_db"]) < 0.6
         assert abs(snr[name]["read_gain_db"] - snr[name]["read_theory_db"]) < 0.6
     assert snr["bayer"]["k"] == 1.0 and snr["bayer"]["read_gain_db"] == 0.0
+
+
+def _synthetic_results() -> dict:
+    """PSNR / CIEDE2000 curves over N = 1, 10, 100, 1000: the router beats bayer below
+    N = 10^2.5 and rgbw below N = 10^1.5; quad loses to rgbw below N = 10^1.5 and wins above."""
+    ns = (1.0, 10.0, 100.0, 1000.0)
+
+    def curve(psnr):
+        return {
+            n: {"psnr": p, "ssim": 0.5, "ciede2000": 40.0 - p}
+            for n, p in zip(ns, psnr, strict=True)
+        }
+
+    return {
+        "bayer": curve([10.0, 20.0, 30.0, 40.0]),
+        "rgbw": curve([12.0, 22.0, 32.0, 42.0]),
+        "router": curve([13.0, 23.0, 31.0, 39.0]),
+        "quad": curve([11.0, 21.0, 33.0, 43.0]),
+    }
+
+
+def test_crossover_against_rgbw_on_synthetic_curves() -> None:
+    from splitcam.evaluation.exposure import crossover
+
+    r = _synthetic_results()
+    at = {k: {n: v["psnr"] for n, v in c.items()} for k, c in r.items()}
+    assert crossover(at["router"], at["bayer"]) == pytest.approx(10**2.5)
+    assert crossover(at["router"], at["rgbw"]) == pytest.approx(10**1.5)
+    assert crossover(at["quad"], at["rgbw"]) is None
+
+
+def test_write_study_states_crossovers_against_both_references(tmp_path) -> None:
+    from splitcam.evaluation.exposure import write_study
+
+    r = _synthetic_results()
+    text = write_study(r, None, tmp_path / "two", references=("bayer", "rgbw")).read_text()
+    assert "| pattern | vs bayer: PSNR | vs bayer: CIEDE2000 | vs rgbw: PSNR |" in text
+    table = text.split("## Crossover")[1].splitlines()
+    row = next(line for line in table if line.startswith("| router |"))
+    assert row.count("N ≈ 316") == 2 and row.count("N ≈ 31.6") == 2
+    quad = next(line for line in table if line.startswith("| quad |"))
+    assert "never below; above N ≈ 31.6" in quad
+    # the default: the Bayer filter only, as before
+    text = write_study(r, None, tmp_path / "one").read_text()
+    assert "beats the Bayer filter" in text and "vs rgbw" not in text
+    assert "| bayer |" not in text.split("## Crossover")[1]

@@ -1,4 +1,5 @@
-"""`splitcam study exposure`: filters and splitters at equal light."""
+"""`splitcam study exposure`: filters and splitters at equal light; `splitcam study breakeven`:
+where a lossy router ties a filter array."""
 
 from __future__ import annotations
 
@@ -9,20 +10,29 @@ from ..io.domains import DOMAINS
 from ..io.paper import PAPER_PATTERNS
 from ._common import add_sensor_options, model_methods, sensor_settings
 
+#: The patterns `study exposure` states crossovers against (those among --patterns).
+REFERENCES = ("bayer", "rgbw")
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "study",
-        help="studies beyond the paper: `study exposure` (filters and splitters at equal light)",
+        help="studies beyond the paper: `study exposure` (filters and splitters at equal light), "
+        "`study breakeven` (where a lossy router ties RGBW)",
         description="`splitcam study exposure`: PSNR and CIEDE2000 of the closed-form LMMSE of "
         "every pattern against exposure under the photon model (shot and read noise, the same "
         "photon flux for every pattern), the exposure below which each splitter beats the Bayer "
-        "filter, and the raw SNR of each pattern against the filter next to theory; in linear "
-        "light by default.",
+        "filter and the RGBW array (where they are among --patterns), and the raw SNR of each "
+        "pattern against the filter next to theory. `splitcam study breakeven`: over a grid of "
+        "router efficiency and crosstalk (router(eta=E;chi=X)), the exposure where the router's "
+        "LMMSE ties the reference's (default rgbw) as a map (breakeven.md, .json, .png); one "
+        "pass, no resume (about 25 ms per grid point, exposure and 128x128 image on one CPU "
+        "thread). In linear light by default.",
     )
-    p.add_argument("study", choices=["exposure"])
+    p.add_argument("study", choices=["exposure", "breakeven"])
     p.add_argument("--datasets", default="default")
     p.add_argument("--max-images", type=int, help="at most this many images per dataset")
+    p.add_argument("--crop", type=int, help="centre crops of at most this many pixels a side")
     p.add_argument(
         "--patterns",
         type=lambda s: [x for x in s.split(",") if x],
@@ -48,26 +58,66 @@ def register(sub: argparse._SubParsersAction) -> None:
         default=[],
         help="a trained run too (e.g. one trained with --noise photon)",
     )
-    p.add_argument("--out", default="results/exposure")
+    p.add_argument(
+        "--eta", type=float, nargs="+", help="breakeven: efficiencies (default 0.3 to 1, 8 steps)"
+    )
+    p.add_argument(
+        "--chi", type=float, nargs="+", help="breakeven: crosstalks (default 0 to 0.35, 8 steps)"
+    )
+    p.add_argument("--reference", default="rgbw", help="breakeven: the pattern to tie")
+    p.add_argument("--metric", choices=["psnr", "ssim", "ciede2000"], default="psnr")
+    p.add_argument(
+        "--tol", type=float, default=0.0, help="breakeven: differences within this count as ties"
+    )
+    p.add_argument("--out", help="default results/exposure or results/breakeven")
     p.add_argument("--quiet", action="store_true")
     p.set_defaults(handler=run)
 
 
+def _command(args: argparse.Namespace) -> str:
+    return f"`splitcam study {' '.join(sys.argv[2:])}`"
+
+
 def run(args: argparse.Namespace) -> int:
     from ..data.testsets import load_datasets
-    from ..evaluation.exposure import (
-        default_exposures,
-        exposure_study,
-        raw_snr_check,
-        write_study,
-    )
+    from ..evaluation.exposure import default_exposures
 
     if args.points < 1:
         raise ValueError(f"--points must be at least 1, got {args.points}")
     photons = args.photons or default_exposures(args.points)
-    datasets = load_datasets(args.datasets, args.max_images)
+    datasets = load_datasets(args.datasets, args.max_images, args.crop)
     images = [img for _, imgs in datasets for img in imgs]
     names = ", ".join(f"{d} ({len(i)})" for d, i in datasets)
+    if args.study == "breakeven":
+        return _run_breakeven(args, images, names, photons)
+    return _run_exposure(args, images, names, photons)
+
+
+def _run_breakeven(args: argparse.Namespace, images: list, names: str, photons: list) -> int:
+    from ..evaluation.breakeven import DEFAULT_CHIS, DEFAULT_ETAS, break_even, write_break_even
+
+    sensor = sensor_settings(args)
+    result = break_even(
+        images,
+        etas=args.eta or DEFAULT_ETAS,
+        chis=args.chi or DEFAULT_CHIS,
+        photons=photons,
+        reference=args.reference,
+        metric=args.metric,
+        domain=args.domain,
+        tol=args.tol,
+        progress=not args.quiet,
+        **sensor,
+    )
+    note = f"Images: {names}. Command: {_command(args)}"
+    path = write_break_even(result, args.out or "results/breakeven", note=note)
+    print(path.read_text(encoding="utf-8"))
+    print(f"wrote {path}, breakeven.json and breakeven.png")
+    return 0
+
+
+def _run_exposure(args: argparse.Namespace, images: list, names: str, photons: list) -> int:
+    from ..evaluation.exposure import exposure_study, raw_snr_check, write_study
     from ..recon.registry import build_method
 
     options = {"domain": args.domain}
@@ -92,10 +142,10 @@ def run(args: argparse.Namespace) -> int:
         f"Images: {names}. Read noise {sensor['read_noise']:g} e-, "
         + (f"full well {args.full_well:g} e-, " if args.full_well else "no saturation, ")
         + (f"ADC {sensor['bits']} bits at {args.gain:g} e-/DN. " if args.gain else "no ADC. ")
-        + "Command: "
-        f"`splitcam study exposure {' '.join(sys.argv[3:])}`"
+        + f"Command: {_command(args)}"
     )
-    path = write_study(results, snr, args.out, note=note, domain=args.domain)
+    out = args.out or "results/exposure"
+    path = write_study(results, snr, out, note=note, domain=args.domain, references=REFERENCES)
     print(path.read_text(encoding="utf-8"))
     print(f"wrote {path}, exposure.json and exposure.png")
     return 0

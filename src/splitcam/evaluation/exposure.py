@@ -124,6 +124,46 @@ def crossover(
     return None
 
 
+def _fmt_crossover(v: float | None, curve: dict[float, float], ref: dict[float, float]) -> str:
+    """A crossover as the table shows it; where the curve never wins at low exposure but does
+    at the highest, the exposure above which it wins."""
+    if v is not None:
+        return "every exposure studied" if math.isinf(v) else f"N ≈ {v:.3g}"
+    xs = sorted(curve)
+    flipped = crossover({x: -curve[x] for x in xs}, {x: -ref[x] for x in xs})
+    if flipped is not None and not math.isinf(flipped) and curve[xs[-1]] > ref[xs[-1]]:
+        return f"never below; above N ≈ {flipped:.3g}"
+    return "never"
+
+
+def _crossover_table(
+    results: dict[str, dict[float, dict[str, float]]], photons: list[float], refs: list[str]
+) -> list[str]:
+    """The crossover section of ``exposure.md``: one row per pattern, PSNR and CIEDE2000
+    columns per reference."""
+    if refs == ["bayer"]:
+        title = "## Crossover: the exposure below which each pattern beats the Bayer filter"
+        head = "| pattern | PSNR | CIEDE2000 |"
+    else:
+        title = "## Crossover: the exposure below which each pattern beats " + " and ".join(refs)
+        head = "| pattern | " + " | ".join(f"vs {r}: PSNR | vs {r}: CIEDE2000" for r in refs) + " |"
+    lines = ["", title, "", head, "|---|" + "---|---|" * len(refs)]
+    for p, r in results.items():
+        if p in refs and len(refs) == 1:
+            continue
+        row = []
+        for name in refs:
+            if p == name:
+                row += ["—", "—"]
+                continue
+            for key, sign in (("psnr", 1), ("ciede2000", -1)):
+                curve = {n: sign * r[n][key] for n in photons}
+                ref = {n: sign * results[name][n][key] for n in photons}
+                row.append(_fmt_crossover(crossover(curve, ref), curve, ref))
+        lines.append(f"| {p} | " + " | ".join(row) + " |")
+    return lines
+
+
 def raw_snr_check(
     images: Images,
     *,
@@ -189,10 +229,13 @@ def write_study(
     *,
     note: str = "",
     domain: str = "linear",
+    references: Sequence[str] = ("bayer",),
 ) -> Path:
     """``exposure.md`` (tables, crossovers, raw SNR check), ``exposure.json`` and
     ``exposure.png`` (PSNR and CIEDE2000 against exposure) in ``out``; ``domain``: the light
-    domain the results are of, stated in both files."""
+    domain the results are of, stated in both files. ``references``: the patterns every other
+    is compared with in the crossover table (those among ``results``; default the Bayer
+    filter), two columns (PSNR, CIEDE2000) each."""
     domain = check_domain(domain)
     from ..viz.charts import exposure_chart
 
@@ -235,31 +278,9 @@ def write_study(
     lines += ["", "## CIEDE2000 (lower is better)", "", head, rule]
     for p, r in results.items():
         lines.append(f"| {p} | " + " | ".join(f"{r[n]['ciede2000']:.3f}" for n in photons) + " |")
-    if "bayer" in results:
-        lines += [
-            "",
-            "## Crossover: the exposure below which each pattern beats the Bayer filter",
-            "",
-            "| pattern | PSNR | CIEDE2000 |",
-            "|---|---|---|",
-        ]
-        ref = results["bayer"]
-
-        def fmt(v: float | None) -> str:
-            if v is None:
-                return "never"
-            return "every exposure studied" if math.isinf(v) else f"N ≈ {v:.3g}"
-
-        for p, r in results.items():
-            if p == "bayer":
-                continue
-            cp = crossover({n: r[n]["psnr"] for n in photons}, {n: ref[n]["psnr"] for n in photons})
-            cc = crossover(
-                {n: r[n]["ciede2000"] for n in photons},
-                {n: ref[n]["ciede2000"] for n in photons},
-                higher_is_better=False,
-            )
-            lines.append(f"| {p} | {fmt(cp)} | {fmt(cc)} |")
+    refs = [r for r in references if r in results]
+    if refs:
+        lines += _crossover_table(results, photons, refs)
     if snr:
         lines += [
             "",

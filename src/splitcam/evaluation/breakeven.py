@@ -1,0 +1,220 @@
+"""Where a lossy colour router ties a filter array: the break-even map (SPEC sections 11, 14, 15).
+
+:func:`break_even` scores the closed-form LMMSE of ``router(eta, chi)`` (the same efficiency and
+crosstalk in every band, on pattern A's geometry) over a grid of ``(eta, chi)`` against a
+reference pattern (default ``rgbw``, an ideal RGBW filter array) at each exposure of the photon
+model, and finds for each grid point the exposure where the difference router − reference
+changes sign. :func:`verdict` classifies one difference curve; it is what every grid point goes
+through. Cells with ``eta + chi > 1`` would create light and are marked ``infeasible``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..io import write_text
+from ..patterns import Pattern, get, router
+from .exposure import default_exposures, exposure_study
+from .protocol import Images
+
+__all__ = [
+    "DEFAULT_CHIS",
+    "DEFAULT_ETAS",
+    "break_even",
+    "crossings",
+    "preset_points",
+    "verdict",
+    "write_break_even",
+]
+
+DEFAULT_ETAS = tuple(round(float(v), 3) for v in np.linspace(0.3, 1.0, 8))
+"""Band efficiencies of the default grid: 0.3 to 1 in 8 steps."""
+DEFAULT_CHIS = tuple(round(float(v), 3) for v in np.linspace(0.0, 0.35, 8))
+"""Crosstalk of the default grid: 0 to 0.35 in 8 steps."""
+
+
+def crossings(photons: Sequence[float], diff: Sequence[float], tol: float = 0.0) -> list[tuple]:
+    """``[(N, "down" | "up")]``: where ``diff`` (in order of ``photons``) changes sign,
+    interpolated linearly in log exposure; ``down``: positive below, negative above. Values
+    within ``tol`` of 0 count as 0 and are stepped over."""
+    signed = [(x, d) for x, d in zip(photons, diff, strict=True) if abs(d) > tol]
+    out = []
+    for (x0, d0), (x1, d1) in zip(signed, signed[1:], strict=False):
+        if (d0 > 0) != (d1 > 0):
+            t = d0 / (d0 - d1)
+            at = 10 ** (math.log10(x0) + t * (math.log10(x1) - math.log10(x0)))
+            out.append((float(at), "down" if d0 > 0 else "up"))
+    return out
+
+
+def verdict(photons: Sequence[float], diff: Sequence[float], tol: float = 0.0) -> dict[str, Any]:
+    """Classify a difference curve ``candidate − reference`` (higher is better) over exposure.
+
+    Returns:
+        ``{"verdict", "break_even", "crossings"}``. ``verdict``: ``tie`` (every difference
+        within ``tol`` of 0), ``always`` (never worse, better somewhere), ``never`` (never
+        better), ``below`` (better below ``break_even`` only), ``above`` (better above it only)
+        or ``mixed`` (several crossings). ``break_even``: the exposure of the crossing (of
+        several, the highest), None without one.
+    """
+    found = crossings(photons, diff, tol)
+    if all(abs(d) <= tol for d in diff):
+        kind = "tie"
+    elif not found:
+        kind = "always" if max(diff) > tol else "never"
+    elif len(found) == 1:
+        kind = "below" if found[0][1] == "down" else "above"
+    else:
+        kind = "mixed"
+    return {
+        "verdict": kind,
+        "break_even": found[-1][0] if found else None,
+        "crossings": [[n, way] for n, way in found],
+    }
+
+
+def _label(eta: float, chi: float) -> str:
+    return f"router(eta={eta:g};chi={chi:g})"
+
+
+def break_even(
+    images: Images,
+    *,
+    etas: Sequence[float] = DEFAULT_ETAS,
+    chis: Sequence[float] = DEFAULT_CHIS,
+    photons: Sequence[float] | None = None,
+    reference: str | Pattern = "rgbw",
+    metric: str = "psnr",
+    candidate: Callable[[float, float], Pattern] | None = None,
+    read_noise: float = 2.0,
+    domain: str = "linear",
+    tol: float = 0.0,
+    progress: bool = False,
+    **settings: Any,
+) -> dict[str, Any]:
+    """The break-even map of routers against ``reference`` (closed-form LMMSE of each).
+
+    Args:
+        images: Test images ``[(name, (3, H, W))]``.
+        etas, chis: The grid: band efficiency and crosstalk, the same for R, G and B.
+        photons: Exposures ``N`` (default: 9 log-spaced from 1 to 10^4).
+        reference: The pattern to tie (name or :class:`~splitcam.patterns.Pattern`).
+        metric: ``psnr`` or ``ssim`` (higher is better) or ``ciede2000`` (lower is better; the
+            difference is then taken reference − router so that positive still means the
+            router is better).
+        candidate: ``(eta, chi) -> Pattern`` (default :func:`~splitcam.patterns.router`).
+        read_noise, domain, settings: The photon model and light domain, as in
+            :func:`~splitcam.evaluation.exposure.exposure_study`.
+        tol: Differences within ``tol`` of 0 (in the metric's unit) count as ties
+            (:func:`verdict`).
+
+    Returns:
+        ``{"reference", "metric", "read_noise", "domain", "photons", "etas", "chis",
+        "reference_curve": [value per N], "cells": [{"eta", "chi", "label", "verdict",
+        "break_even", "crossings", "difference": [per N]}]}``, cells row by row (eta outer);
+        :func:`verdict` says what each verdict means, ``infeasible`` marks ``eta + chi > 1``.
+
+    Raises:
+        ValueError: An unknown metric, or a bad exposure setting.
+    """
+    if metric not in ("psnr", "ssim", "ciede2000"):
+        raise ValueError(f"metric must be psnr, ssim or ciede2000, got {metric!r}")
+    sign = -1.0 if metric == "ciede2000" else 1.0
+    photons = sorted(float(n) for n in (photons or default_exposures()))
+    make = candidate or (lambda e, x: router(e, x, name=_label(e, x)))
+    study = {"photons": photons, "read_noise": read_noise, "domain": domain, "progress": False}
+    ref = get(reference)
+    ref_curve = exposure_study(images, patterns=[ref], **study, **settings)[ref.name]
+    ref_values = [ref_curve[n][metric] for n in photons]
+    grid = [(float(e), float(x)) for e in etas for x in chis]
+    bar = None
+    if progress:
+        from tqdm.auto import tqdm
+
+        bar = tqdm(total=len(grid), desc="break-even map")
+    cells = []
+    for eta, chi in grid:
+        cell: dict[str, Any] = {"eta": eta, "chi": chi, "label": _label(eta, chi)}
+        if eta + chi > 1 + 1e-12:
+            cell.update(verdict="infeasible", break_even=None, crossings=[], difference=None)
+        else:
+            pattern = make(eta, chi)
+            curve = exposure_study(images, patterns=[pattern], **study, **settings)[pattern.name]
+            diff = [sign * (curve[n][metric] - r) for n, r in zip(photons, ref_values, strict=True)]
+            cell.update(verdict(photons, diff, tol), difference=diff)
+        cells.append(cell)
+        if bar is not None:
+            bar.update(1)
+    if bar is not None:
+        bar.close()
+    return {
+        "reference": ref.name,
+        "metric": metric,
+        "read_noise": read_noise,
+        "domain": domain,
+        "tol": tol,
+        "photons": photons,
+        "etas": [float(e) for e in etas],
+        "chis": [float(x) for x in chis],
+        "reference_curve": ref_values,
+        "cells": cells,
+    }
+
+
+def preset_points(names: Sequence[str] = ("router-zou", "router-best")) -> dict[str, tuple]:
+    """``{name: (eta, chi)}``: a router preset's effective efficiency and crosstalk, the means
+    over R, G and B of the ``eta`` and ``chi`` in its metadata (white light)."""
+    out = {}
+    for name in names:
+        meta = get(name).metadata
+        out[name] = (float(np.mean(meta["eta"])), float(np.mean(meta["chi"])))
+    return out
+
+
+def write_break_even(
+    result: dict[str, Any], out: str | os.PathLike[str], *, note: str = ""
+) -> Path:
+    """``breakeven.json`` (the result), ``breakeven.png`` (the map,
+    :func:`splitcam.viz.breakeven.breakeven_chart`, with the router presets marked) and
+    ``breakeven.md`` (the map as a table) in ``out``; returns the ``.md`` path."""
+    from ..viz.breakeven import breakeven_chart, cell_text
+
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    presets = preset_points()
+    write_text(out / "breakeven.json", json.dumps({**result, "presets": presets}, indent=1) + "\n")
+    chart = breakeven_chart(result, out / "breakeven.png", presets=presets)
+    cells = {(c["eta"], c["chi"]): c for c in result["cells"]}
+    lines = [
+        f"# Break-even map: router(η, χ) against {result['reference']}",
+        "",
+        note,
+        "",
+        f"Light domain: {result['domain']}. Closed-form LMMSE of each sensor, "
+        f"{result['metric'].upper()}, read noise {result['read_noise']:g} e-, exposures "
+        + ", ".join(f"{n:.3g}" for n in result["photons"])
+        + f"; differences within {result['tol']:g} count as ties.",
+        "",
+        "Each cell: `<N` the router is better below exposure N, `>N` above it, `N*` several "
+        "crossings (the highest shown), `all` / `none` better at every / no exposure, empty: "
+        "η + χ > 1 (infeasible). Rows η, columns χ.",
+        "",
+        "| η \\ χ | " + " | ".join(f"{x:g}" for x in result["chis"]) + " |",
+        "|---|" + "---|" * len(result["chis"]),
+    ]
+    for e in result["etas"]:
+        row = [cell_text(cells[(e, x)]) for x in result["chis"]]
+        lines.append(f"| {e:g} | " + " | ".join(row) + " |")
+    lines += ["", "Router presets (mean η, χ over R, G, B):", ""]
+    lines += [f"- {name}: η = {e:.3f}, χ = {x:.3f}" for name, (e, x) in presets.items()]
+    lines += ["", f"![break-even map]({chart.name})", ""]
+    path = out / "breakeven.md"
+    write_text(path, "\n".join(lines))
+    return path

@@ -1,0 +1,125 @@
+"""The break-even map of routers against a filter array (splitcam.evaluation.breakeven)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+PHOTONS = [3.0, 300.0]
+
+
+@pytest.fixture(scope="module")
+def tiny() -> list:
+    """One small smooth colour image (fast)."""
+    y, x = torch.meshgrid(torch.linspace(0, 1, 16), torch.linspace(0, 1, 16), indexing="ij")
+    return [("ramp", torch.stack([0.2 + 0.6 * x, 0.3 + 0.4 * y, 0.8 - 0.5 * x * y]))]
+
+
+def test_verdict_on_synthetic_curves() -> None:
+    from splitcam.evaluation.breakeven import verdict
+
+    n = [1.0, 10.0, 100.0, 1000.0]
+    assert verdict(n, [0.0, 0.0, 0.0, 0.0])["verdict"] == "tie"
+    assert verdict(n, [1.0, 0.5, 0.2, 0.1]) == {
+        "verdict": "always",
+        "break_even": None,
+        "crossings": [],
+    }
+    assert verdict(n, [-1.0, -0.5, 0.0, -0.1])["verdict"] == "never"
+    below = verdict(n, [2.0, 1.0, -1.0, -2.0])
+    assert below["verdict"] == "below" and below["break_even"] == pytest.approx(10**1.5)
+    above = verdict(n, [-2.0, -1.0, 1.0, 2.0])
+    assert above["verdict"] == "above" and above["crossings"][0][1] == "up"
+    mixed = verdict(n, [1.0, -1.0, 1.0, -1.0])
+    assert mixed["verdict"] == "mixed" and mixed["break_even"] == pytest.approx(10**2.5)
+    # a small wobble inside the tolerance is no crossing
+    assert verdict(n, [0.01, -0.01, 0.5, 0.4], tol=0.05)["verdict"] == "always"
+
+
+def test_a_router_with_rgbw_light_and_kernels_ties_rgbw(tiny) -> None:
+    from splitcam import patterns
+    from splitcam.evaluation.breakeven import break_even
+
+    result = break_even(
+        tiny,
+        etas=[0.5, 1.0],
+        chis=[0.0],
+        photons=PHOTONS,
+        candidate=lambda e, x: patterns.get("rgbw"),
+    )
+    assert [c["verdict"] for c in result["cells"]] == ["tie", "tie"]
+    assert all(d == 0.0 for c in result["cells"] for d in c["difference"])
+    assert result["reference"] == "rgbw" and result["photons"] == PHOTONS
+
+
+def test_a_router_better_everywhere_reports_always_and_infeasible_cells(tiny) -> None:
+    """router(1, 0) = A gathers more light with the same kernels' shape than the dim
+    router(0.3, 0): better at every exposure; eta + chi > 1 is never simulated."""
+    from splitcam import patterns
+    from splitcam.evaluation.breakeven import break_even
+
+    result = break_even(
+        tiny,
+        etas=[1.0],
+        chis=[0.0, 0.2],
+        photons=PHOTONS,
+        reference=patterns.router(0.3, 0.0),
+    )
+    better, impossible = result["cells"]
+    assert better["verdict"] == "always" and min(better["difference"]) > 0
+    assert impossible["verdict"] == "infeasible" and impossible["difference"] is None
+    # the opposite way round, lower-is-better metric: never better
+    worse = break_even(
+        tiny,
+        etas=[0.3],
+        chis=[0.0],
+        photons=PHOTONS,
+        reference="A",
+        metric="ciede2000",
+    )["cells"][0]
+    assert worse["verdict"] == "never"
+
+
+def test_router_one_zero_is_a_and_never_creates_light() -> None:
+    from splitcam import patterns
+
+    a = patterns.get("A")
+    assert np.array_equal(patterns.router(1.0, 0.0).kernels, a.kernels)
+    for eta in np.linspace(0.3, 1.0, 4):
+        for chi in np.linspace(0.0, 0.35, 4):
+            if eta + chi > 1:
+                with pytest.raises(patterns.PatternError):
+                    patterns.router(eta, chi)
+                continue
+            k = patterns.router(eta, chi).kernels  # (splitter, colour, kh, kw)
+            assert k.min() >= 0
+            # every splitter sends on eta + chi of each colour's light: lost, never created
+            assert np.allclose(k.sum(axis=(2, 3)), eta + chi)
+            assert np.all(k.sum(axis=(2, 3)) <= 1 + 1e-12)
+
+
+def test_presets_are_read_from_the_library() -> None:
+    from splitcam import patterns
+    from splitcam.evaluation.breakeven import preset_points
+
+    points = preset_points()
+    for name, (eta, chi) in points.items():
+        meta = patterns.get(name).metadata
+        assert eta == pytest.approx(np.mean(meta["eta"]))
+        assert chi == pytest.approx(np.mean(meta["chi"]))
+        assert 0 < eta < 1 and 0 < chi < 1 and eta + chi <= 1
+
+
+def test_write_break_even(tmp_path, tiny) -> None:
+    import json
+
+    from splitcam.evaluation.breakeven import break_even, write_break_even
+
+    result = break_even(tiny, etas=[0.5, 1.0], chis=[0.0, 0.6], photons=PHOTONS)
+    path = write_break_even(result, tmp_path, note="note")
+    text = path.read_text()
+    assert "| 0.5 |" in text and "router-zou" in text
+    assert (tmp_path / "breakeven.png").stat().st_size > 1000
+    data = json.loads((tmp_path / "breakeven.json").read_text())
+    assert len(data["cells"]) == 4 and "router-best" in data["presets"]
