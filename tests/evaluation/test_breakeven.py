@@ -123,3 +123,13 @@ def test_write_break_even(tmp_path, tiny) -> None:
     assert (tmp_path / "breakeven.png").stat().st_size > 1000
     data = json.loads((tmp_path / "breakeven.json").read_text())
     assert len(data["cells"]) == 4 and "router-best" in data["presets"]
+
+
+def test_cell_text() -> None:
+    from splitcam.viz.breakeven import cell_text
+
+    window = {"verdict": "mixed", "crossings": [[1.4, "down"], [5.1, "up"], [68.0, "down"]]}
+    assert cell_text({**window, "break_even": 68.0}) == "5.1–68"
+    assert cell_text({"verdict": "below", "break_even": 1234.0}) == "<1.2e3"
+    assert cell_text({"verdict": "above", "break_even": 40.0}) == ">40"
+    assert cell_text({"verdict": "infeasible", "break_even": None}) == ""

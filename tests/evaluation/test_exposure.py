@@ -76,6 +76,12 @@ def test_write_study_states_crossovers_against_both_references(tmp_path) -> None
     assert row.count("N ≈ 316") == 2 and row.count("N ≈ 31.6") == 2
     quad = next(line for line in table if line.startswith("| quad |"))
     assert "never below; above N ≈ 31.6" in quad
+    # a window: loses at the lowest exposure, wins between two crossings
+    r["window"] = {n: {**v, "psnr": v["psnr"] + d} for (n, v), d in zip(
+        r["rgbw"].items(), (-0.5, 1.0, 1.0, -1.0), strict=True)}  # fmt: skip
+    text = write_study(r, None, tmp_path / "three", references=("rgbw",)).read_text()
+    window = next(x for x in text.split("## Crossover")[1].splitlines() if "| window |" in x)
+    assert "never below; between N ≈ 2.15 and 316" in window
     # the default: the Bayer filter only, as before
     text = write_study(r, None, tmp_path / "one").read_text()
     assert "beats the Bayer filter" in text and "vs rgbw" not in text

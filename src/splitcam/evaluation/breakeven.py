@@ -11,7 +11,6 @@ through. Cells with ``eta + chi > 1`` would create light and are marked ``infeas
 from __future__ import annotations
 
 import json
-import math
 import os
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -21,7 +20,7 @@ import numpy as np
 
 from ..io import write_text
 from ..patterns import Pattern, get, router
-from .exposure import default_exposures, exposure_study
+from .exposure import crossings, default_exposures, exposure_study
 from .protocol import Images
 
 __all__ = [
@@ -38,20 +37,6 @@ DEFAULT_ETAS = tuple(round(float(v), 3) for v in np.linspace(0.3, 1.0, 8))
 """Band efficiencies of the default grid: 0.3 to 1 in 8 steps."""
 DEFAULT_CHIS = tuple(round(float(v), 3) for v in np.linspace(0.0, 0.35, 8))
 """Crosstalk of the default grid: 0 to 0.35 in 8 steps."""
-
-
-def crossings(photons: Sequence[float], diff: Sequence[float], tol: float = 0.0) -> list[tuple]:
-    """``[(N, "down" | "up")]``: where ``diff`` (in order of ``photons``) changes sign,
-    interpolated linearly in log exposure; ``down``: positive below, negative above. Values
-    within ``tol`` of 0 count as 0 and are stepped over."""
-    signed = [(x, d) for x, d in zip(photons, diff, strict=True) if abs(d) > tol]
-    out = []
-    for (x0, d0), (x1, d1) in zip(signed, signed[1:], strict=False):
-        if (d0 > 0) != (d1 > 0):
-            t = d0 / (d0 - d1)
-            at = 10 ** (math.log10(x0) + t * (math.log10(x1) - math.log10(x0)))
-            out.append((float(at), "down" if d0 > 0 else "up"))
-    return out
 
 
 def verdict(photons: Sequence[float], diff: Sequence[float], tol: float = 0.0) -> dict[str, Any]:
@@ -202,8 +187,9 @@ def write_break_even(
         + ", ".join(f"{n:.3g}" for n in result["photons"])
         + f"; differences within {result['tol']:g} count as ties.",
         "",
-        "Each cell: `<N` the router is better below exposure N, `>N` above it, `N*` several "
-        "crossings (the highest shown), `all` / `none` better at every / no exposure, empty: "
+        "Each cell: `<N` the router is better below exposure N, `>N` above it, `a–b` between "
+        "a and b (several crossings, the last two shown), `N*` other crossings (the highest), "
+        "`all` / `none` better at every / no exposure, empty: "
         "η + χ > 1 (infeasible). Rows η, columns χ.",
         "",
         "| η \\ χ | " + " | ".join(f"{x:g}" for x in result["chis"]) + " |",

@@ -38,7 +38,7 @@ from .metrics import mean_over_images
 from .protocol import Images, check_method_domains, score, simulate_and_reconstruct
 from .tables import domain_line
 
-__all__ = ["crossover", "exposure_study", "raw_snr_check", "write_study"]
+__all__ = ["crossings", "crossover", "exposure_study", "raw_snr_check", "write_study"]
 
 DEFAULT_PATTERNS = ("A", "B", "C", "D", "E", "bayer")
 
@@ -124,16 +124,33 @@ def crossover(
     return None
 
 
+def crossings(photons: Sequence[float], diff: Sequence[float], tol: float = 0.0) -> list[tuple]:
+    """``[(N, "down" | "up")]``: where ``diff`` (in order of ``photons``) changes sign,
+    interpolated linearly in log exposure; ``down``: positive below, negative above. Values
+    within ``tol`` of 0 count as 0 and are stepped over."""
+    signed = [(x, d) for x, d in zip(photons, diff, strict=True) if abs(d) > tol]
+    out = []
+    for (x0, d0), (x1, d1) in zip(signed, signed[1:], strict=False):
+        if (d0 > 0) != (d1 > 0):
+            t = d0 / (d0 - d1)
+            at = 10 ** (math.log10(x0) + t * (math.log10(x1) - math.log10(x0)))
+            out.append((float(at), "down" if d0 > 0 else "up"))
+    return out
+
+
 def _fmt_crossover(v: float | None, curve: dict[float, float], ref: dict[float, float]) -> str:
-    """A crossover as the table shows it; where the curve never wins at low exposure but does
-    at the highest, the exposure above which it wins."""
+    """A crossover as the table shows it; where the curve does not win at the lowest exposure
+    but does higher up, the exposures where it wins (between two crossings, or above one)."""
     if v is not None:
         return "every exposure studied" if math.isinf(v) else f"N ≈ {v:.3g}"
     xs = sorted(curve)
-    flipped = crossover({x: -curve[x] for x in xs}, {x: -ref[x] for x in xs})
-    if flipped is not None and not math.isinf(flipped) and curve[xs[-1]] > ref[xs[-1]]:
-        return f"never below; above N ≈ {flipped:.3g}"
-    return "never"
+    found = crossings(xs, [curve[x] - ref[x] for x in xs])
+    if not found:
+        return "never"
+    if found[-1][1] == "up":
+        return f"never below; above N ≈ {found[-1][0]:.3g}"
+    lo = next(n for n, way in reversed(found) if way == "up")
+    return f"never below; between N ≈ {lo:.3g} and {found[-1][0]:.3g}"
 
 
 def _crossover_table(

@@ -16,16 +16,24 @@ __all__ = ["breakeven_chart", "cell_text"]
 _NOTE = {"always": "all", "never": "none", "tie": "tie", "infeasible": ""}
 
 
+def _short(n: float) -> str:
+    return (f"{n:.2g}" if n < 1e3 else f"{n:.1e}").replace("e+0", "e")
+
+
 def cell_text(cell: Mapping[str, Any]) -> str:
     """What a cell of the map says: ``<N`` (the router wins below exposure N), ``>N`` (above),
-    ``N*`` (several crossings, the highest shown), ``all``, ``none``, ``tie`` or nothing
-    (``eta + chi > 1``)."""
+    ``a–b`` (several crossings, the last two an up and a down one: the router wins between
+    exposures a and b, and perhaps again below), ``N*`` (other crossings, the highest shown),
+    ``all``, ``none``, ``tie`` or nothing (``eta + chi > 1``)."""
     kind = cell["verdict"]
     if kind in _NOTE:
         return _NOTE[kind]
-    n = f"{cell['break_even']:.2g}" if cell["break_even"] < 1e3 else f"{cell['break_even']:.1e}"
-    n = n.replace("e+0", "e")
-    return {"below": f"<{n}", "above": f">{n}"}.get(kind, f"{n}*")
+    if kind == "mixed":
+        (lo, up), (hi, down) = cell["crossings"][-2:]
+        if (up, down) == ("up", "down"):
+            return f"{_short(lo)}–{_short(hi)}"
+        return f"{_short(cell['break_even'])}*"
+    return {"below": "<", "above": ">"}[kind] + _short(cell["break_even"])
 
 
 def breakeven_chart(
@@ -36,9 +44,10 @@ def breakeven_chart(
     title: str | None = None,
 ) -> Path:
     """A heat map of the break-even exposure over (crosstalk, efficiency): colour log10 of the
-    exposure where router − reference changes sign; green where the router is better at every
-    exposure studied, grey where it never is, hatched where ``eta + chi > 1``; each cell's text
-    from :func:`cell_text`. ``presets``: ``{name: (eta, chi)}`` marked with a star."""
+    exposure where router − reference changes sign (of several, the highest); green where the
+    router is better at every exposure studied, grey where it never is, hatched where
+    ``eta + chi > 1``; each cell's text from :func:`cell_text`. ``presets``:
+    ``{name: (eta, chi)}``, marked with a star."""
     import numpy as np
     from matplotlib.figure import Figure
     from matplotlib.patches import Rectangle
@@ -86,8 +95,8 @@ def breakeven_chart(
     ax.set_title(
         title
         or f"router(η, χ) against {result['reference']}, {result['metric'].upper()}, LMMSE, "
-        f"read noise {result['read_noise']:g} e⁻\n<N: router better below N; >N: above; "
-        "all / none: at every / no exposure; hatched: η + χ > 1",
+        f"read noise {result['read_noise']:g} e⁻\n<N: router better below N; >N: above; a–b: "
+        "between; all / none: at every / no exposure; hatched: η + χ > 1",
         fontsize=9,
     )
     fig.tight_layout()
