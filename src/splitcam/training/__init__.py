@@ -6,8 +6,7 @@ the ``train`` flags) imports no torch.
 
 from __future__ import annotations
 
-import importlib
-from typing import Any
+from ..io.lazy import lazy_exports
 
 _EXPORTS = {
     "CheckpointError": "checkpoint",
@@ -22,11 +21,4 @@ _EXPORTS = {
 __all__ = sorted(_EXPORTS)
 
 
-def __getattr__(name: str) -> Any:
-    if name not in _EXPORTS:
-        raise AttributeError(f"module 'splitcam.training' has no attribute {name!r}")
-    return getattr(importlib.import_module(f".{_EXPORTS[name]}", __name__), name)
-
-
-def __dir__() -> list[str]:
-    return __all__
+__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)

@@ -9,7 +9,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from ..io import atomic_path
+from ._save import save_figure
 
 __all__ = ["breakeven_chart", "cell_text"]
 
@@ -100,8 +100,4 @@ def breakeven_chart(
         fontsize=9,
     )
     fig.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=120)
-    return path
+    return save_figure(fig, path, dpi=120)

@@ -6,8 +6,8 @@ import os
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
-from ..io import atomic_path
 from ..physics.noise import level_key, parse_level_label
+from ._save import save_figure
 
 __all__ = ["exposure_chart", "sigma_chart"]
 
@@ -98,11 +98,7 @@ def sigma_chart(
         ax.set_xticklabels([f"{x:g}" for x in sorted(measured)])
     ax2.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1))
     fig.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=120)
-    return path
+    return save_figure(fig, path, dpi=120)
 
 
 def exposure_chart(
@@ -134,8 +130,4 @@ def exposure_chart(
     ax1.set_title(title, fontsize=10)
     ax2.legend(fontsize=8, loc="upper right")
     fig.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=120)
-    return path
+    return save_figure(fig, path, dpi=120)

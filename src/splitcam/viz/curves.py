@@ -9,8 +9,8 @@ import warnings
 from numbers import Real
 from pathlib import Path
 
-from ..io import atomic_path
 from ..physics.noise import level_heading, level_key
+from ._save import save_figure
 
 
 def _valid(row: object) -> bool:
@@ -106,10 +106,7 @@ def plot_run(run: str | os.PathLike, out: str | os.PathLike | None = None) -> Pa
         + (f", validation PSNR {last['val_psnr']:.2f} dB (mean over sigmas)" if val else "")
     )
     fig.tight_layout()
-    out.parent.mkdir(parents=True, exist_ok=True)
-    with atomic_path(out) as tmp:
-        fig.savefig(tmp, dpi=120)
-    return out
+    return save_figure(fig, out)
 
 
 def active_minutes(rows: list[dict]) -> list[float]:
@@ -173,8 +170,4 @@ def compare_runs(runs: list[str | os.PathLike], out: str | os.PathLike) -> Path:
     fig.legend(handles, labels, fontsize=8, loc="lower center", ncol=1, frameon=False)
     fig.set_size_inches(11, 4 + 0.17 * len(labels))
     fig.tight_layout(rect=(0, 0.17 * len(labels) / (4 + 0.17 * len(labels)) + 0.02, 1, 1))
-    out = Path(out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    with atomic_path(out) as tmp:
-        fig.savefig(tmp, dpi=120)
-    return out
+    return save_figure(fig, out, dpi=120)

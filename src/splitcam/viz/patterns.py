@@ -9,8 +9,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..io import atomic_path
 from ..patterns import COLOURS, Pattern, measure, pixel_response
+from ._save import save_figure
 
 _RGB = {"R": (0.84, 0.15, 0.16), "G": (0.17, 0.63, 0.17), "B": (0.12, 0.37, 0.84)}
 
@@ -140,9 +140,7 @@ def draw_pattern(pattern: Pattern, out: str | os.PathLike | None = None, *, dpi:
         color="#555555",
     )
     if out is not None:
-        Path(out).parent.mkdir(parents=True, exist_ok=True)
-        with atomic_path(out) as tmp:
-            fig.savefig(tmp, dpi=dpi)
+        save_figure(fig, out, dpi=dpi)
     return fig
 
 
@@ -182,11 +180,7 @@ def draw_height_maps(
         ax.tick_params(labelsize=6)
         fig.colorbar(image, ax=ax, fraction=0.046, pad=0.03, label="height (µm)")
     fig.tight_layout()
-    out = Path(out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    with atomic_path(out) as tmp:
-        fig.savefig(tmp, dpi=120)
-    return out
+    return save_figure(fig, out, dpi=120)
 
 
 def draw_design(
@@ -215,6 +209,4 @@ def draw_design(
     image = np.concatenate([halves[0], gap, halves[1]], axis=1)
     fig = Figure(figsize=(image.shape[1] / dpi, image.shape[0] / dpi), dpi=dpi)
     fig.figimage(image)
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=dpi)
-    return Path(path)
+    return save_figure(fig, path, dpi=dpi)

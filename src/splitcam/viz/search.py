@@ -6,15 +6,14 @@ from __future__ import annotations
 import os
 from collections.abc import Sequence
 
-from ..io import atomic_path
+from ._save import save_figure
 
 __all__ = ["draw_curves", "draw_front"]
 
 
 def _save(fig, out: str | os.PathLike | None):
     if out is not None:
-        with atomic_path(out) as tmp:
-            fig.savefig(tmp, dpi=120)
+        save_figure(fig, out)
     return fig
 
 

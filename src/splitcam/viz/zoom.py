@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from ..io import atomic_path
+from ._save import save_figure
 
 __all__ = ["check_region", "detail_region", "zoom_figure"]
 
@@ -106,8 +106,4 @@ def zoom_figure(
         ax.set_yticks([])
     fig.suptitle(title, fontsize=9)
     fig.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=130)
-    return path
+    return save_figure(fig, path, dpi=130)
