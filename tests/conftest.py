@@ -18,6 +18,17 @@ REPO = TESTS.parent
 SHARED_DATA = REPO.parent / "shared" / "data"
 
 
+def fresh_modules(code: str) -> set[str]:
+    """The modules a fresh interpreter has loaded after running ``code``."""
+    import subprocess
+
+    script = f"import sys\n{code}\nprint(' '.join(sys.modules))"
+    result = subprocess.run(
+        [sys.executable, "-c", script], capture_output=True, text=True, check=True
+    )
+    return set(result.stdout.split())
+
+
 @pytest.fixture(autouse=True)
 def _no_data_env(monkeypatch: pytest.MonkeyPatch) -> None:
     """A user's SPLITCAM_DATA or SPLITCAM_MIRROR must not change what the tests see."""

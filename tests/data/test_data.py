@@ -2,21 +2,10 @@
 
 from __future__ import annotations
 
-import subprocess
-import sys
-
 import pytest
+from conftest import fresh_modules
 
 from splitcam.data import registry, testsets
-
-
-def _fresh_modules(code: str) -> set[str]:
-    """The modules a fresh interpreter has loaded after running ``code``."""
-    script = f"import sys\n{code}\nprint(' '.join(sys.modules))"
-    result = subprocess.run(
-        [sys.executable, "-c", script], capture_output=True, text=True, check=True
-    )
-    return set(result.stdout.split())
 
 
 @pytest.mark.integration
@@ -24,7 +13,7 @@ def test_data_package_imports_its_names_on_first_use() -> None:
     import splitcam.data as data
     from splitcam.data import images, patches, raw
 
-    assert "torch" not in _fresh_modules("import splitcam.data")
+    assert "torch" not in fresh_modules("import splitcam.data")
     assert data.read_image is images.read_image
     assert data.write_raw is raw.write_raw
     assert data.ImageCache is patches.ImageCache

@@ -7,11 +7,10 @@ import csv
 import hashlib
 import importlib.resources
 import re
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
+from conftest import fresh_modules
 
 import splitcam.data.download as downloading
 from splitcam.data import registry, testsets
@@ -120,20 +119,11 @@ def test_registry_parser_rejects_malformed_tables() -> None:
         registry.parse_registry(kodak_only)
 
 
-def _fresh_modules(code: str) -> set[str]:
-    """The modules a fresh interpreter has loaded after running ``code``."""
-    script = f"import sys\n{code}\nprint(' '.join(sys.modules))"
-    result = subprocess.run(
-        [sys.executable, "-c", script], capture_output=True, text=True, check=True
-    )
-    return set(result.stdout.split())
-
-
 @pytest.mark.integration
 def test_registry_and_download_import_neither_torch_nor_numpy() -> None:
     # The command line builds its parser from the registry: no numpy, no torch, and the
     # registry file is read on first use, not at import.
-    loaded = _fresh_modules(
+    loaded = fresh_modules(
         "import splitcam.data.registry as r\n"
         "assert r.datasets.cache_info().currsize == 0\n"
         "assert r.dataset_names() == ('kodak24', 'mcmaster')\n"

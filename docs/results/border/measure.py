@@ -23,7 +23,7 @@ import torch
 from splitcam.data.imageio import read_image
 from splitcam.data.patches import list_images
 from splitcam.evaluation.metrics import mean_over_images
-from splitcam.evaluation.protocol import score_images
+from splitcam.evaluation.protocol import score, score_images
 from splitcam.recon.loading import model_names, model_serves_any_pattern
 from splitcam.recon.registry import build_method
 
@@ -33,13 +33,14 @@ BORDER = 4
 
 
 def border_loss(method, images, sigmas=SIGMAS) -> dict[float, tuple[float, float]]:
-    """``{sigma: (whole-image PSNR, PSNR with BORDER pixels left out)}``, means over images."""
+    """``{sigma: (whole-image PSNR, PSNR with BORDER pixels left out)}``, means over images;
+    each reconstruction is scored both ways."""
     whole: dict[float, list[float]] = {s: [] for s in sigmas}
     inner: dict[float, list[float]] = {s: [] for s in sigmas}
-    for _, sigma, _, values in score_images(method, images, sigmas):
+    originals = dict(images)
+    for name, sigma, pred, values in score_images(method, images, sigmas):
         whole[sigma].append(values["psnr"])
-    for _, sigma, _, values in score_images(method, images, sigmas, crop=BORDER):
-        inner[sigma].append(values["psnr"])
+        inner[sigma].append(score(pred, originals[name], crop=BORDER)["psnr"])
     return {s: (mean_over_images(whole[s]).mean, mean_over_images(inner[s]).mean) for s in sigmas}
 
 
