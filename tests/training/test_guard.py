@@ -29,7 +29,7 @@ def test_divergence_guard_restores_the_older_snapshot() -> None:
 
 
 def test_the_guard_gives_up_after_halving_the_rate_ten_times(tmp_path):
-    from splitcam.training.trainer import GUARD_GIVES_UP
+    from splitcam.training.rundir import GUARD_GIVES_UP
 
     data = blocky_images(tmp_path / "img", 5)
     # A factor below 1 makes every step once the window is full a divergence.

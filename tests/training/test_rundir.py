@@ -232,7 +232,7 @@ def test_resume_of_a_run_killed_before_its_first_checkpoint(image_folder, tmp_pa
 
 
 def test_a_run_saved_before_partial_periods_existed_resumes_without_them(image_folder, tmp_path):
-    from splitcam.training.trainer import resume_config
+    from splitcam.training.rundir import resume_config
 
     run = tmp_path / "old"
     train(

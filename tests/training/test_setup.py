@@ -61,7 +61,7 @@ def test_joint_run_with_design_steps_starts_from_the_designed_kernels(
     from splitcam.design import design_pattern
     from splitcam.recon.closed_form import closed_form_mse
     from splitcam.training import setup
-    from splitcam.training.trainer import build_system
+    from splitcam.training.setup import build_system
 
     learn = {"pattern.learn": True, "pattern.design_steps": 30, "optim.steps": 3}
     config = tiny_config(image_folder, tmp_path / "j", **learn)

@@ -19,7 +19,7 @@ from splitcam.recon.closed_form import (
     closed_form_lmmse,
 )
 from splitcam.training import TrainConfig, load_system, train
-from splitcam.training.trainer import _val_images
+from splitcam.training.validation import val_images
 
 
 def losses(run) -> list[float]:
@@ -40,7 +40,7 @@ def test_a_few_steps_lower_the_loss(image_folder, tmp_path, arch):
     assert val[0]["step"] == 0 and val[-1]["step"] == 40
     assert val[-1]["val_psnr"] > val[0]["val_psnr"] + 0.5
     if arch == "physics":  # it starts at the LMMSE estimate: its correction is zero
-        lmmse = mean_psnr(closed_form_lmmse("D"), _val_images(config), config.data.val_sigmas)
+        lmmse = mean_psnr(closed_form_lmmse("D"), val_images(config), config.data.val_sigmas)
         assert val[0]["val_psnr"] == pytest.approx(np.mean(list(lmmse.values())), abs=1e-3)
     assert json.loads((tmp_path / "r/config.json").read_text())["optim"]["steps"] == 40
 
@@ -253,7 +253,7 @@ def test_training_under_the_photon_model(tmp_path) -> None:
     from splitcam.io import checkpoints as ckpt_io
     from splitcam.recon.closed_form import closed_form_lmmse
     from splitcam.training import train
-    from splitcam.training.trainer import _val_images
+    from splitcam.training.validation import val_images
 
     folder = blocky_images(tmp_path / "img", 5)
     config = tiny_config(
@@ -277,7 +277,7 @@ def test_training_under_the_photon_model(tmp_path) -> None:
     assert first["step"] == 0 and "val_psnr_N1000" in first
     assert first["val_psnr_N1000"] > first["val_psnr_N30"]
     levels = [Exposure(30.0), Exposure(1000.0)]
-    lmmse = mean_psnr(closed_form_lmmse("D"), _val_images(config), levels)
+    lmmse = mean_psnr(closed_form_lmmse("D"), val_images(config), levels)
     assert first["val_psnr_N30"] == pytest.approx(lmmse[levels[0]], abs=1e-3)
     assert ckpt_io.load(tmp_path / "run").meta["config"]["noise"]["model"] == "photon"
     # The exposure study takes the trained network beside the LMMSE of its pattern.
@@ -285,7 +285,7 @@ def test_training_under_the_photon_model(tmp_path) -> None:
     from splitcam.recon.registry import build_method
 
     study = exposure_study(
-        _val_images(config),
+        val_images(config),
         patterns=["D"],
         photons=[30.0, 1000.0],
         methods=[build_method(str(tmp_path / "run"))],

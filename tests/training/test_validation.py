@@ -81,11 +81,11 @@ def test_validation_psnr_equals_what_evaluate_reports(tmp_path):
 
 
 def test_validation_is_on_by_default_on_a_held_out_split(image_folder, tmp_path):
-    from splitcam.training.trainer import _train_source, val_split
+    from splitcam.training.validation import train_source, val_split
 
     config = tiny_config(image_folder, tmp_path / "v", **{"data.val_split": None})
     assert val_split(config) == 1  # 8 images: max(1, 8 // 10)
-    held_out = {p.name for p in _train_source(config)}
+    held_out = {p.name for p in train_source(config)}
     assert "im7.png" not in held_out and len(held_out) == 7
     train(config, progress=False)
     rows = [json.loads(x) for x in (tmp_path / "v/metrics.jsonl").read_text().splitlines()]
@@ -97,7 +97,7 @@ def test_validation_never_uses_an_image_smaller_than_its_crop(tmp_path, caplog):
     """A 16x16 image sorting last would have been the whole validation set."""
 
     from splitcam.training import train
-    from splitcam.training.trainer import held_out
+    from splitcam.training.validation import held_out
 
     data = blocky_images(tmp_path / "img", 5)
     Image.fromarray(np.zeros((16, 16, 3), np.uint8)).save(data / "zz_tiny.png")
@@ -108,9 +108,9 @@ def test_validation_never_uses_an_image_smaller_than_its_crop(tmp_path, caplog):
     train(config, progress=True)
     assert "validation: 1 of the last 1 images" in caplog.text and "training: im4" in caplog.text
     # The tiny image is trained on, not lost: the training set is the rest.
-    from splitcam.training.trainer import _train_source
+    from splitcam.training.validation import train_source
 
-    assert {p.name for p in _train_source(config)} == {f"im{i}.png" for i in range(4)} | {
+    assert {p.name for p in train_source(config)} == {f"im{i}.png" for i in range(4)} | {
         "zz_tiny.png"
     }
     # Images all smaller than the crop: the largest ones, never the tiny one.

@@ -16,7 +16,7 @@ def fine_tuning(init_from: str, overrides: dict) -> dict:
     """Settings implied by ``--init-from`` a network for any pattern (``universal``) when
     ``--arch`` is left out: its architecture, unless ``--steps`` or ``--time-limit`` is given a
     budget of :data:`FINE_TUNE_MINUTES`, and unless ``--lr`` is given :data:`FINE_TUNE_LR`."""
-    from ..training.trainer import source_network
+    from ..training.init_from import source_network
 
     network = source_network(init_from)
     if not network or network.get("arch") != "universal":
@@ -64,8 +64,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from ..training import TrainConfig, train
     from ..training.config import train_flags
+    from ..training.rundir import resume_config
     from ..training.sweep import STOPPED
-    from ..training.trainer import resume_config
 
     if args.resume and not args.config:
         # Continue with the run's own settings (those of its checkpoint, or the config.json of a

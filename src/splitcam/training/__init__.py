@@ -14,7 +14,7 @@ _EXPORTS = {
     "ConfigError": "config",
     "TrainConfig": "config",
     "TrainResult": "trainer",
-    "build_system": "trainer",
+    "build_system": "setup",
     "train": "trainer",
 }
 

@@ -28,22 +28,15 @@ import torch.nn.functional as F
 from ..physics.light import decode_scene
 from .config import TrainConfig
 from .distributed import (
-    DistInfo,
     agree,
     distributed_initialized,
     end_distributed,
-    init_distributed,
     is_main_process,
     max_over_ranks,
     wrap_model,
 )
-from .init_from import source_network
 from .rundir import (
-    CHANGES_NAME,
-    FAILED_DROP_DB,
-    FIXED_ON_RESUME,
     GUARD_GIVES_UP,
-    LOCK_NAME,
     METRICS_NAME,
     RunLog,
     RunStart,
@@ -52,42 +45,16 @@ from .rundir import (
     lock_run,
     open_run,
     resumable,
-    resume_config,
 )
 from .schedule import learning_rate
 from .schedule import progress as progress_of
-from .setup import build_system, device_name, pattern_mix, prepare, resolve_device
+from .setup import prepare
 from .state import Run, TrainState, save_checkpoint
-from .validation import held_out, train_source, val_images, val_split, validate
+from .validation import validate
 
-__all__ = [
-    "CHANGES_NAME",
-    "FAILED_DROP_DB",
-    "FIXED_ON_RESUME",
-    "GUARD_GIVES_UP",
-    "LOCK_NAME",
-    "METRICS_NAME",
-    "DistInfo",
-    "TrainResult",
-    "build_system",
-    "device_name",
-    "failure_of",
-    "held_out",
-    "init_distributed",
-    "pattern_mix",
-    "resolve_device",
-    "resume_config",
-    "source_network",
-    "train",
-    "val_split",
-    "validate",
-]
+__all__ = ["TrainResult", "train"]
 
 logger = logging.getLogger(__name__)
-
-#: Also importable from here under these names.
-_train_source = train_source
-_val_images = val_images
 
 
 @dataclass
