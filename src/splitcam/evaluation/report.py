@@ -10,7 +10,7 @@ from pathlib import Path
 
 from .. import patterns
 from ..io import write_text
-from ..io.paper import PAPER_SIGMAS, TABLE1_PATTERNS
+from ..io.paper import PAPER_PATTERNS, PAPER_SIGMAS, TABLE1_PATTERNS
 from ..physics.noise import level_heading, level_key, parse_level_label
 from ..viz.charts import exposure_chart, sigma_chart
 from ..viz.patterns import draw_pattern
@@ -222,8 +222,7 @@ def make_report(results: list[str | os.PathLike], out: str | os.PathLike) -> Pat
     return report
 
 
-#: The models of the paper's tables, by the names of the paper's rows (and Fig. 9's curves).
-TABLE1 = TABLE1_PATTERNS
+#: The curves of the paper's Fig. 9, by the names of its rows.
 FIG9 = ("bayer", "D", "D optimised", "D optimised (random init.)")
 
 
@@ -266,8 +265,8 @@ def checks(summary: dict, rows: dict[str, str], sigmas: list[str]) -> list[tuple
     if have("A", "B", "C", "D"):
         # With E not yet evaluated the ranking is among the four there are: B and C last among
         # A-D is what "last of A-E" requires of them (E is third in the paper).
-        present = [k for k in TABLE1 if have(k)]
-        among = "" if len(present) == len(TABLE1) else f" (among {', '.join(present)})"
+        present = [k for k in TABLE1_PATTERNS if have(k)]
+        among = "" if len(present) == len(TABLE1_PATTERNS) else f" (among {', '.join(present)})"
         bottom = {len(present) - 1, len(present)}
         last = []
         for s in sigmas:
@@ -419,9 +418,9 @@ def _budget_section(t: _Tables, budgets: dict[str, str] | None) -> list[str]:
 def _table1_section(t: _Tables) -> list[str]:
     """Table 1 (A-E and bayer) and, for A-E, the ranks by PSNR at every level."""
     lines = ["", "## Table 1: every pattern, fixed", "", t.head, t.rule]
-    present = [r for r in (*TABLE1, "bayer") if t.has(r)]
+    present = [r for r in PAPER_PATTERNS if t.has(r)]
     lines += [t.cells_row(row) for row in present]
-    ranked = [r for r in TABLE1 if r in present]
+    ranked = [r for r in TABLE1_PATTERNS if r in present]
     if not ranked:
         return lines
     lines += [
@@ -516,7 +515,7 @@ def _lmmse_section(t: _Tables, baselines: dict[str, str] | None) -> list[str]:
         t.head,
         t.rule,
     ]
-    lines += [_lmmse_row(t, row, base[row]) for row in (*TABLE1, "bayer") if row in base]
+    lines += [_lmmse_row(t, row, base[row]) for row in PAPER_PATTERNS if row in base]
     if "bayer+malvar2004" in t.summary:
         malvar = t.summary["bayer+malvar2004"]["all"]
         lines.append(_line("bayer, Malvar 2004", [_cell(malvar.get(s), None) for s in t.sigmas]))
@@ -538,7 +537,7 @@ def _lmmse_row(t: _Tables, row: str, method: str) -> str:
 
 def _lmmse_ranks(t: _Tables, base: dict[str, str]) -> list[str]:
     """The baselines of A-E ordered by PSNR at every level (none with fewer than two)."""
-    ranked = [r for r in TABLE1 if r in base]
+    ranked = [r for r in TABLE1_PATTERNS if r in base]
     if len(ranked) <= 1:
         return []
     order = {
