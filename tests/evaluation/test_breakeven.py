@@ -133,3 +133,32 @@ def test_cell_text() -> None:
     assert cell_text({"verdict": "below", "break_even": 1234.0}) == "<1.2e3"
     assert cell_text({"verdict": "above", "break_even": 40.0}) == ">40"
     assert cell_text({"verdict": "infeasible", "break_even": None}) == ""
+
+
+def test_the_map_with_a_method_reconstructs_every_sensor_with_it(tiny) -> None:
+    """`method` replaces the LMMSE for the reference and every router: the LMMSE passed as a
+    method (under another name) gives the default map exactly; a method that ignores the raw
+    image makes every router tie."""
+    from splitcam.evaluation.breakeven import break_even
+    from splitcam.recon.closed_form import closed_form_lmmse
+
+    grid = {"etas": [0.5, 1.0], "chis": [0.0, 0.25], "photons": PHOTONS}
+    default = break_even(tiny, **grid)
+    same = break_even(
+        tiny, **grid, method=lambda p: closed_form_lmmse(p, domain="linear", name=f"x-{p.name}")
+    )
+    assert same["method"] == "x" and default["method"] == "closed-form LMMSE"
+    assert [c["difference"] for c in same["cells"]] == [c["difference"] for c in default["cells"]]
+
+    class Grey:
+        domain = "linear"
+
+        def __init__(self, pattern) -> None:
+            self.pattern, self.name = pattern, f"grey-{pattern.name}"
+
+        def reconstruct(self, raw, level):
+            return torch.full((raw.shape[0], 3, *raw.shape[-2:]), 0.5)
+
+    blind = break_even(tiny, **grid, method=Grey)
+    feasible = [c for c in blind["cells"] if c["verdict"] != "infeasible"]
+    assert feasible and all(c["verdict"] == "tie" for c in feasible)

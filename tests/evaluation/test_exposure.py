@@ -86,3 +86,64 @@ def test_write_study_states_crossovers_against_both_references(tmp_path) -> None
     text = write_study(r, None, tmp_path / "one").read_text()
     assert "beats the Bayer filter" in text and "vs rgbw" not in text
     assert "| bayer |" not in text.split("## Crossover")[1]
+
+
+def test_write_study_compares_each_network_with_the_references_network(tmp_path) -> None:
+    """Networks get a crossover table of their own: the router's network against the filter's
+    network (not against the filter's LMMSE), labels as a model for any pattern names them."""
+    from splitcam.evaluation.exposure import write_study
+
+    r = _synthetic_results()
+    # the networks: each LMMSE curve shifted; the router's network loses to rgbw's above N = 10
+    shift = {"bayer": 2.0, "rgbw": 2.0, "router": 1.0}
+    for name, d in shift.items():
+        r[f"net-u-{name}"] = {
+            n: {**v, "psnr": v["psnr"] + d, "ciede2000": v["ciede2000"] - d}
+            for n, v in r[name].items()
+        }
+    networks = {f"net-u-{name}": name for name in shift}
+    text = write_study(
+        r, None, tmp_path, references=("bayer", "rgbw"), networks=networks
+    ).read_text()
+    lmmse, nets = text.split("## Crossover")[1:3]
+    assert "(closed-form LMMSE)" in lmmse and "net-u-" not in lmmse
+    assert "against the reference's network" in nets
+    row = next(line for line in nets.splitlines() if line.startswith("| net-u-router |"))
+    # router + 1 against rgbw + 2: wins by 0, 0, -2, -4 -> 1 - 1 = 0 at N = 1, loses above
+    diff = [r["router"][n]["psnr"] + 1 - r["rgbw"][n]["psnr"] - 2 for n in (1, 10, 100, 1000)]
+    assert diff == [0.0, 0.0, -2.0, -4.0] and row.split(" | ")[3] == "never"
+    # against bayer's network: +2 -1 = +1 difference over LMMSE's crossover curve
+    assert row.split(" | ")[1].startswith("N ≈ ")
+
+
+def test_exposure_study_continues_an_interrupted_run(tmp_path) -> None:
+    """With `out`, a second run reuses every score of the first (no reconstruction repeated)
+    and gives the same numbers; a new exposure computes only the new rows."""
+    from splitcam import patterns
+    from splitcam.evaluation.exposure import exposure_study
+
+    class Counted:
+        name = "net-count-A"
+        pattern = patterns.get("A")
+        domain = "linear"
+
+        def __init__(self) -> None:
+            self.calls = 0
+
+        def reconstruct(self, raw, level):
+            self.calls += 1
+            return raw.expand(-1, 3, -1, -1).clone()
+
+    images = [("flat", torch.full((3, 20, 22), 0.4)), ("ramp", torch.rand(3, 20, 22))]
+    first = Counted()
+    a = exposure_study(images, patterns=["A"], photons=[10.0], methods=[first], out=tmp_path,
+                       progress=False)  # fmt: skip
+    again = Counted()
+    b = exposure_study(images, patterns=["A"], photons=[10.0], methods=[again], out=tmp_path,
+                       progress=False)  # fmt: skip
+    assert first.calls == 2 and again.calls == 0 and a == b
+    more = Counted()
+    c = exposure_study(images, patterns=["A"], photons=[10.0, 100.0], methods=[more],
+                       out=tmp_path, progress=False)  # fmt: skip
+    assert more.calls == 2 and c["net-count-A"][10.0] == a["net-count-A"][10.0]
+    assert c["A"][100.0]["psnr"] > c["A"][10.0]["psnr"]  # the LMMSE: more light, better

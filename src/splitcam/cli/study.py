@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
 
 from ..io.domains import DOMAINS
 from ..io.paper import PAPER_PATTERNS
@@ -23,7 +24,11 @@ def register(sub: argparse._SubParsersAction) -> None:
         "every pattern against exposure under the photon model (shot and read noise, the same "
         "photon flux for every pattern), the exposure below which each splitter beats the Bayer "
         "filter and the RGBW array (where they are among --patterns), and the raw SNR of each "
-        "pattern against the filter next to theory. `splitcam study breakeven`: over a grid of "
+        "pattern against the filter next to theory; with --model or --checkpoint, networks "
+        "beside the LMMSE, each compared with the reference's network. Each image's scores are "
+        "written to OUT/evaluation as they come: the same command again continues an interrupted "
+        "run. "
+        "`splitcam study breakeven`: over a grid of "
         "router efficiency and crosstalk (router(eta=E;chi=X)), the exposure where the router's "
         "LMMSE ties the reference's (default rgbw) as a map (breakeven.md, .json, .png); one "
         "pass, no resume (about 25 ms per grid point, exposure and 128x128 image on one CPU "
@@ -51,7 +56,13 @@ def register(sub: argparse._SubParsersAction) -> None:
         "and the photon noise, reconstructions encoded back to 8-bit sRGB before scoring) or "
         "srgb (8-bit values taken as light, the paper's protocol)",
     )
-    p.add_argument("--model", action="append", default=[], help="a shipped model too")
+    p.add_argument(
+        "--model",
+        action="append",
+        default=[],
+        help="a shipped model too (exposure); breakeven: the model for any pattern that "
+        "reconstructs every sensor of the map instead of the LMMSE",
+    )
     p.add_argument(
         "--checkpoint",
         action="append",
@@ -97,8 +108,26 @@ def _run_breakeven(args: argparse.Namespace, images: list, names: str, photons: 
     from ..evaluation.breakeven import DEFAULT_CHIS, DEFAULT_ETAS, break_even, write_break_even
 
     sensor = sensor_settings(args)
+    method = None
+    if args.checkpoint or len(args.model) > 1:
+        raise ValueError(
+            "study breakeven reconstructs every sensor of its map with one method: at most one "
+            "--model (a model for any pattern), no --checkpoint"
+        )
+    if args.model:
+        from ..recon.loading import model_serves_any_pattern
+        from ..recon.registry import build_model
+
+        spec = args.model[0]
+        if not model_serves_any_pattern(spec):
+            raise ValueError(
+                f"study breakeven --model {spec}: the map needs a model for any pattern (such as "
+                f"universal-photon); {spec} was trained on one pattern"
+            )
+        method = lambda pattern: build_model(spec, pattern=pattern, domain=args.domain)  # noqa: E731
     result = break_even(
         images,
+        method=method,
         etas=args.eta or DEFAULT_ETAS,
         chis=args.chi or DEFAULT_CHIS,
         photons=photons,
@@ -123,6 +152,7 @@ def _run_exposure(args: argparse.Namespace, images: list, names: str, photons: l
     options = {"domain": args.domain}
     methods = model_methods(args.model, args.patterns, main_job=False, options=options)
     methods += [build_method(c, domain=args.domain) for c in args.checkpoint]
+    out = args.out or "results/exposure"
     results = exposure_study(
         images,
         patterns=args.patterns,
@@ -131,6 +161,7 @@ def _run_exposure(args: argparse.Namespace, images: list, names: str, photons: l
         **sensor_settings(args),
         progress=not args.quiet,
         domain=args.domain,
+        out=Path(out) / "evaluation",
     )
     snr = (
         raw_snr_check(images, patterns=args.patterns, domain=args.domain)
@@ -144,8 +175,16 @@ def _run_exposure(args: argparse.Namespace, images: list, names: str, photons: l
         + (f"ADC {sensor['bits']} bits at {args.gain:g} e-/DN. " if args.gain else "no ADC. ")
         + f"Command: {_command(args)}"
     )
-    out = args.out or "results/exposure"
-    path = write_study(results, snr, out, note=note, domain=args.domain, references=REFERENCES)
+    networks = {m.name: m.pattern.name for m in methods}
+    path = write_study(
+        results,
+        snr,
+        out,
+        note=note,
+        domain=args.domain,
+        references=REFERENCES,
+        networks=networks,
+    )
     print(path.read_text(encoding="utf-8"))
     print(f"wrote {path}, exposure.json and exposure.png")
     return 0

@@ -20,6 +20,7 @@ import numpy as np
 
 from ..io import write_text
 from ..patterns import Pattern, get, router
+from ..recon.base import Reconstructor
 from .exposure import crossings, default_exposures, exposure_study
 from .protocol import Images
 
@@ -78,13 +79,15 @@ def break_even(
     reference: str | Pattern = "rgbw",
     metric: str = "psnr",
     candidate: Callable[[float, float], Pattern] | None = None,
+    method: Callable[[Pattern], Reconstructor] | None = None,
     read_noise: float = 2.0,
     domain: str = "linear",
     tol: float = 0.0,
     progress: bool = False,
     **settings: Any,
 ) -> dict[str, Any]:
-    """The break-even map of routers against ``reference`` (closed-form LMMSE of each).
+    """The break-even map of routers against ``reference`` (closed-form LMMSE of each, or
+    ``method``'s reconstruction of each).
 
     Args:
         images: Test images ``[(name, (3, H, W))]``.
@@ -95,6 +98,9 @@ def break_even(
             difference is then taken reference − router so that positive still means the
             router is better).
         candidate: ``(eta, chi) -> Pattern`` (default :func:`~splitcam.patterns.router`).
+        method: ``pattern -> Reconstructor``, how every sensor of the map (the reference too)
+            is reconstructed, e.g. a network for any pattern trained under the photon model
+            (default: each pattern's closed-form LMMSE).
         read_noise, domain, settings: The photon model and light domain, as in
             :func:`~splitcam.evaluation.exposure.exposure_study`.
         tol: Differences within ``tol`` of 0 (in the metric's unit) count as ties
@@ -115,8 +121,17 @@ def break_even(
     photons = sorted(float(n) for n in (photons or default_exposures()))
     make = candidate or (lambda e, x: router(e, x, name=_label(e, x)))
     study = {"photons": photons, "read_noise": read_noise, "domain": domain, "progress": False}
+
+    def curve_of(pattern: Pattern) -> dict[float, dict[str, float]]:
+        if method is None:
+            return exposure_study(images, patterns=[pattern], **study, **settings)[pattern.name]
+        rec = method(pattern)
+        return exposure_study(images, patterns=[], methods=[rec], **study, **settings)[rec.name]
+
     ref = get(reference)
-    ref_curve = exposure_study(images, patterns=[ref], **study, **settings)[ref.name]
+    ref_curve = curve_of(ref)
+    # the map's reconstruction, named as the reference's without the pattern: net-universal-photon
+    label = "closed-form LMMSE" if method is None else method(ref).name.removesuffix(f"-{ref.name}")
     ref_values = [ref_curve[n][metric] for n in photons]
     grid = [(float(e), float(x)) for e in etas for x in chis]
     bar = None
@@ -130,8 +145,7 @@ def break_even(
         if eta + chi > 1 + 1e-12:
             cell.update(verdict="infeasible", break_even=None, crossings=[], difference=None)
         else:
-            pattern = make(eta, chi)
-            curve = exposure_study(images, patterns=[pattern], **study, **settings)[pattern.name]
+            curve = curve_of(make(eta, chi))
             diff = [sign * (curve[n][metric] - r) for n, r in zip(photons, ref_values, strict=True)]
             cell.update(verdict(photons, diff, tol), difference=diff)
         cells.append(cell)
@@ -141,6 +155,7 @@ def break_even(
         bar.close()
     return {
         "reference": ref.name,
+        "method": label,
         "metric": metric,
         "read_noise": read_noise,
         "domain": domain,
@@ -182,7 +197,8 @@ def write_break_even(
         "",
         note,
         "",
-        f"Light domain: {result['domain']}. Closed-form LMMSE of each sensor, "
+        f"Light domain: {result['domain']}. "
+        f"{result.get('method', 'closed-form LMMSE').capitalize()} of each sensor, "
         f"{result['metric'].upper()}, read noise {result['read_noise']:g} e-, exposures "
         + ", ".join(f"{n:.3g}" for n in result["photons"])
         + f"; differences within {result['tol']:g} count as ties.",

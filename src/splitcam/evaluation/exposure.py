@@ -28,14 +28,14 @@ import numpy as np
 import torch
 
 from ..io import write_text
-from ..patterns import get
+from ..patterns import Pattern, get
 from ..physics.light import check_domain, decode_scene
-from ..physics.noise import Exposure, add_exposure_noise
+from ..physics.noise import Exposure, add_exposure_noise, level_label
 from ..physics.sensor import SplitterSensor
 from ..recon.base import Reconstructor
 from ..recon.closed_form import closed_form_lmmse
 from .metrics import mean_over_images
-from .protocol import Images, check_method_domains, score, simulate_and_reconstruct
+from .protocol import Images, check_method_domains, evaluate
 from .tables import domain_line
 
 __all__ = ["crossings", "crossover", "exposure_study", "raw_snr_check", "write_study"]
@@ -51,12 +51,13 @@ def default_exposures(count: int = 9) -> list[float]:
 def exposure_study(
     images: Images,
     *,
-    patterns: Sequence[str] = DEFAULT_PATTERNS,
+    patterns: Sequence[str | Pattern] = DEFAULT_PATTERNS,
     photons: Sequence[float] | None = None,
     read_noise: float = 2.0,
     methods: Sequence[Reconstructor] = (),
     progress: bool = True,
     domain: str = "linear",
+    out: str | os.PathLike[str] | None = None,
     **settings: Any,
 ) -> dict[str, dict[float, dict[str, float]]]:
     """``{label: {photons: {"psnr", "ssim", "ciede2000"}}}``: the closed-form LMMSE of each
@@ -66,40 +67,43 @@ def exposure_study(
     ``settings``: the other settings of :class:`~splitcam.physics.noise.Exposure`
     (``full_well``, ``gain``, ``bits``).
 
+    It is :func:`~splitcam.evaluation.protocol.evaluate` at the photon model's exposures, so
+    the numbers are the protocol's; with ``out``, its files are written there as each image is
+    scored, and a run interrupted and started again with the same ``out`` continues where it
+    stopped (results of the same method, image, exposure and sensor are reused).
+
     Raises:
-        ValueError: A bad exposure setting, an unknown domain, or a method of another domain.
+        ValueError: A bad exposure setting, an unknown domain, a method of another domain, or
+            two methods of one name.
     """
     domain = check_method_domains(methods, domain)
     photons = list(photons or default_exposures())
-    for n in photons:
-        Exposure(n, read_noise=read_noise, **settings)  # bad values fail before any work
-    results: dict[str, dict[float, dict[str, float]]] = {}
-    bar = None
-    if progress:
-        from tqdm.auto import tqdm
-
-        total = (len(patterns) + len(methods)) * len(photons) * len(images)
-        bar = tqdm(total=total, desc="exposure study")
+    exposures = [Exposure(n, read_noise=read_noise, **settings) for n in photons]  # checked first
     loaded = [get(p) for p in patterns]  # a pattern file is labelled by its pattern's name
-    todo = [(p.name, closed_form_lmmse(p, domain=domain)) for p in loaded]
-    todo += [(m.name, m) for m in methods]
-    for name, method in todo:
-        sensor = SplitterSensor(method.pattern)
-        results[name] = {}
-        for n in photons:
-            exposure = Exposure(n, read_noise=read_noise, **settings)
-            values: dict[str, list[float]] = {"psnr": [], "ssim": [], "ciede2000": []}
-            for image_name, rgb in images:
-                pred = simulate_and_reconstruct(
-                    method, sensor, image_name, rgb, exposure, domain=domain
-                )
-                for key, value in score(pred, rgb).items():
-                    values[key].append(value)
-                if bar is not None:
-                    bar.update(1)
-            results[name][n] = {k: mean_over_images(v).mean for k, v in values.items()}
-    if bar is not None:
-        bar.close()
+    lmmse = {f"lmmse-{p.name}": p.name for p in loaded}
+    todo: list[Reconstructor] = [
+        closed_form_lmmse(p, domain=domain, name=label)
+        for p, label in zip(loaded, lmmse, strict=True)
+    ]
+    todo += list(methods)
+    rows = evaluate(
+        todo,
+        [("images", list(images))],
+        exposures,
+        out,
+        progress=progress,
+        domain=domain,
+    )
+    results: dict[str, dict[float, dict[str, float]]] = {}
+    for method in todo:
+        mine = [r for r in rows if r.method == method.name]
+        results[lmmse.get(method.name, method.name)] = {
+            n: {
+                key: mean_over_images(getattr(r, key) for r in mine if r.level == level).mean
+                for key in ("psnr", "ssim", "ciede2000")
+            }
+            for n, level in zip(photons, map(level_label, exposures), strict=True)
+        }
     return results
 
 
@@ -154,31 +158,65 @@ def _fmt_crossover(v: float | None, curve: dict[float, float], ref: dict[float, 
 
 
 def _crossover_table(
-    results: dict[str, dict[float, dict[str, float]]], photons: list[float], refs: list[str]
+    results: dict[str, dict[float, dict[str, float]]],
+    photons: list[float],
+    refs: list[str],
+    references_of: dict[str, dict[str, str]] | None = None,
+    title_suffix: str = "",
 ) -> list[str]:
-    """The crossover section of ``exposure.md``: one row per pattern, PSNR and CIEDE2000
-    columns per reference."""
+    """A crossover section of ``exposure.md``: one row per label of ``results`` (a pattern's,
+    or a network's), PSNR and CIEDE2000 columns per reference; ``references_of[label][ref]``:
+    the label ``label`` is compared with for reference pattern ``ref`` (default ``ref``
+    itself); a reference a row has none of shows ``—``."""
     if refs == ["bayer"]:
         title = "## Crossover: the exposure below which each pattern beats the Bayer filter"
         head = "| pattern | PSNR | CIEDE2000 |"
     else:
         title = "## Crossover: the exposure below which each pattern beats " + " and ".join(refs)
         head = "| pattern | " + " | ".join(f"vs {r}: PSNR | vs {r}: CIEDE2000" for r in refs) + " |"
-    lines = ["", title, "", head, "|---|" + "---|---|" * len(refs)]
+    lines = ["", title + title_suffix, "", head, "|---|" + "---|---|" * len(refs)]
     for p, r in results.items():
-        if p in refs and len(refs) == 1:
+        mine = (references_of or {}).get(p, {name: name for name in refs})
+        if len(refs) == 1 and mine.get(refs[0]) == p:
             continue
         row = []
         for name in refs:
-            if p == name:
+            against = mine.get(name)
+            if against is None or against == p or against not in results:
                 row += ["—", "—"]
                 continue
             for key, sign in (("psnr", 1), ("ciede2000", -1)):
                 curve = {n: sign * r[n][key] for n in photons}
-                ref = {n: sign * results[name][n][key] for n in photons}
+                ref = {n: sign * results[against][n][key] for n in photons}
                 row.append(_fmt_crossover(crossover(curve, ref), curve, ref))
         lines.append(f"| {p} | " + " | ".join(row) + " |")
     return lines
+
+
+def network_references(networks: dict[str, str], refs: Sequence[str]) -> dict[str, dict[str, str]]:
+    """``{label: {ref: label of the network it is compared with}}`` for the networks of an
+    exposure study (``networks``: ``{label: pattern name}``): a network is compared with the
+    network of the reference pattern made the same way (the label with the pattern's name
+    replaced by the reference's, as a model for any pattern names them:
+    ``net-universal-photon-A`` against ``net-universal-photon-rgbw``), else with the one
+    network of that pattern; none if the reference has no network or several.
+
+    >>> refs = network_references({"net-u-A": "A", "net-u-rgbw": "rgbw", "net-B": "B"}, ["rgbw"])
+    >>> refs["net-u-A"], refs["net-B"]
+    ({'rgbw': 'net-u-rgbw'}, {'rgbw': 'net-u-rgbw'})
+    """
+    out: dict[str, dict[str, str]] = {}
+    for label, pattern in networks.items():
+        mine = {}
+        for ref in refs:
+            same_way = label.removesuffix(pattern) + ref if label.endswith(pattern) else None
+            of_ref = [lab for lab, p in networks.items() if p == ref]
+            if same_way in networks:
+                mine[ref] = same_way
+            elif len(of_ref) == 1:
+                mine[ref] = of_ref[0]
+        out[label] = mine
+    return out
 
 
 def raw_snr_check(
@@ -247,12 +285,17 @@ def write_study(
     note: str = "",
     domain: str = "linear",
     references: Sequence[str] = ("bayer",),
+    networks: dict[str, str] | None = None,
 ) -> Path:
     """``exposure.md`` (tables, crossovers, raw SNR check), ``exposure.json`` and
     ``exposure.png`` (PSNR and CIEDE2000 against exposure) in ``out``; ``domain``: the light
     domain the results are of, stated in both files. ``references``: the patterns every other
     is compared with in the crossover table (those among ``results``; default the Bayer
-    filter), two columns (PSNR, CIEDE2000) each."""
+    filter), two columns (PSNR, CIEDE2000) each. ``networks``: ``{label: pattern name}`` of the
+    results that are networks' (the others are the LMMSE's, labelled by pattern); they get a
+    crossover table of their own, each network against the reference's network
+    (:func:`network_references`), the best reconstruction of each sensor against the best of
+    the reference."""
     domain = check_domain(domain)
     from ..viz.charts import exposure_chart
 
@@ -281,7 +324,9 @@ def write_study(
         "",
         domain_line([domain]),
         "",
-        "Closed-form LMMSE of every pattern under the photon model (shot noise, read noise, "
+        "Closed-form LMMSE of every pattern"
+        + (", and the networks (rows `net-...`)," if networks else "")
+        + " under the photon model (shot noise, read noise, "
         "the same photon flux for every pattern); `N`: photo-electrons a lossless, "
         "filterless pixel collects from a white scene.",
         "",
@@ -295,9 +340,22 @@ def write_study(
     lines += ["", "## CIEDE2000 (lower is better)", "", head, rule]
     for p, r in results.items():
         lines.append(f"| {p} | " + " | ".join(f"{r[n]['ciede2000']:.3f}" for n in photons) + " |")
-    refs = [r for r in references if r in results]
+    networks = networks or {}
+    lmmse = {k: v for k, v in results.items() if k not in networks}
+    refs = [r for r in references if r in lmmse]
     if refs:
-        lines += _crossover_table(results, photons, refs)
+        suffix = " (closed-form LMMSE)" if networks else ""
+        lines += _crossover_table(lmmse, photons, refs, title_suffix=suffix)
+    net_refs = [r for r in references if r in networks.values()]
+    if net_refs:
+        nets = {k: v for k, v in results.items() if k in networks}
+        lines += _crossover_table(
+            nets,
+            photons,
+            net_refs,
+            network_references(networks, net_refs),
+            title_suffix=" (networks, each against the reference's network)",
+        )
     if snr:
         lines += [
             "",
