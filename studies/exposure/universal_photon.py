@@ -2,10 +2,11 @@
 against the closed-form linear LMMSE of each sensor.
 
     python studies/exposure/universal_photon.py NETWORK [--images 6] [--photons 10 30 100 300 1000]
-        [--out FILE.md]
+        [--sensors bayer,rgbw,...] [--out FILE.md]
 
 NETWORK is a run folder or a model file trained with ``data.domain = "linear"`` and the photon
-model (``experiments/exposure/universal-photon.toml``). The photos are the last ``--images`` of
+model (``experiments/exposure/universal-photon.toml``), or one trained on a single sensor
+(``experiments/exposure/A-photon.toml``: name it with ``--sensors A``). The photos are the last ``--images`` of
 ``../shared/data/train`` (sorted by name; no run trains or selects on the last 24), whole
 (481x321: odd sides). Read noise 2 e⁻, no ADC; PSNR (dB) of the 8-bit sRGB encoding.
 """
@@ -32,6 +33,7 @@ def main() -> int:
     parser.add_argument("network")
     parser.add_argument("--images", type=int, default=6)
     parser.add_argument("--photons", type=float, nargs="+", default=[10, 30, 100, 300, 1000])
+    parser.add_argument("--sensors", default=",".join(SENSORS), help="comma-separated")
     parser.add_argument("--out")
     args = parser.parse_args()
     torch.set_num_threads(1)
@@ -49,7 +51,7 @@ def main() -> int:
         "|---|" + "---|" * len(levels),
     ]
     print("\n".join(lines), flush=True)
-    for sensor in SENSORS:
+    for sensor in args.sensors.split(","):
         net = build_method(args.network, pattern=sensor, domain="linear")
         lmmse = build_method("lmmse", pattern=sensor, domain="linear")
         ours = mean_psnr(net, images, levels, domain="linear")

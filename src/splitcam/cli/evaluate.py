@@ -138,10 +138,11 @@ def run(args: argparse.Namespace) -> int:
     chosen = args.checkpoint or args.method or args.model
     options = {"tile": args.tile, "precision": args.precision, "domain": args.domain}
     # Built-in defaults (the main job): every shipped network, and the training-free baselines,
-    # on centre crops of the built-in photos (within 3 minutes on a 2-core CPU); in a light
-    # domain other than srgb, the shipped networks of that domain.
+    # on centre crops of the built-in photos (within 3 minutes on a 2-core CPU): the shipped
+    # networks of the evaluation's light domain (srgb by default; linear: those trained on
+    # photons in linear light).
     models = args.model if chosen else model_names()
-    if not chosen and args.domain != "srgb":
+    if not chosen:
         other = [m for m in models if model_domain(m) != args.domain]
         models = [m for m in models if m not in other]
         if other:
