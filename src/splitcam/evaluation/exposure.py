@@ -313,7 +313,7 @@ def write_study(
         )
         + "\n",
     )
-    chart = exposure_chart(results, out / "exposure.png")
+    chart = exposure_chart(results, out / "exposure.png", networks=networks)
     photons = sorted(next(iter(results.values())))
     head = "| pattern | " + " | ".join(f"N={n:.3g}" for n in photons) + " |"
     rule = "|---|" + "---|" * len(photons)

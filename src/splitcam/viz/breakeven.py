@@ -92,9 +92,10 @@ def breakeven_chart(
                     color="red", fontweight="bold")  # fmt: skip
     bar = fig.colorbar(image, ax=ax)
     bar.set_label(f"log10 break-even exposure N (range {10**lo:g} to {10**hi:g})")
+    method = result.get("method", "closed-form LMMSE").replace("closed-form LMMSE", "LMMSE")
     ax.set_title(
         title
-        or f"router(η, χ) against {result['reference']}, {result['metric'].upper()}, LMMSE, "
+        or f"router(η, χ) against {result['reference']}, {result['metric'].upper()}, {method}, "
         f"read noise {result['read_noise']:g} e⁻\n<N: router better below N; >N: above; a–b: "
         "between; all / none: at every / no exposure; hatched: η + χ > 1",
         fontsize=9,

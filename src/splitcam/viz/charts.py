@@ -105,21 +105,30 @@ def exposure_chart(
     results: Mapping[str, Mapping[float, Mapping[str, float]]],
     path: str | os.PathLike,
     *,
-    title: str = "LMMSE at equal exposure (photon model)",
+    title: str | None = None,
+    networks: Mapping[str, str] | None = None,
 ) -> Path:
-    """PSNR and CIEDE2000 against exposure (log axis) for every pattern; the Bayer filter
-    dashed black."""
+    """PSNR and CIEDE2000 against exposure (log axis) for every pattern's LMMSE (thin, dashed),
+    and for the networks (``networks``: ``{label: pattern name}``; thick, solid, in their
+    pattern's colour); the Bayer filter in black."""
     import matplotlib
     from matplotlib.figure import Figure
 
-    fig = Figure(figsize=(12, 4.6))
+    networks = dict(networks or {})
+    fig = Figure(figsize=(12, 4.8))
     ax1, ax2 = fig.subplots(1, 2)
-    colours = matplotlib.rcParams["axes.prop_cycle"].by_key()["color"]
-    for i, (label, per) in enumerate(results.items()):
+    cycle = matplotlib.rcParams["axes.prop_cycle"].by_key()["color"]
+    order = list(dict.fromkeys(networks.get(label, label) for label in results))
+    colour = {p: cycle[i % len(cycle)] for i, p in enumerate(order)}
+    for label, per in results.items():
+        pattern = networks.get(label, label)
+        bayer = pattern == "bayer" or pattern.startswith("bayer+")
+        style = {"color": "black" if bayer else colour[pattern], "marker": "o", "ms": 3}
+        if label in networks:
+            style.update(ls="-", lw=2.0)
+        else:
+            style.update(ls="--" if networks or bayer else "-", lw=1.0 if networks else 1.5)
         xs = sorted(per)
-        bayer = label == "bayer" or label.startswith("bayer+")
-        style = {"color": "black", "ls": "--"} if bayer else {"color": colours[i % len(colours)]}
-        style = {"marker": "o", "ms": 3, "ls": "-", **style}
         ax1.plot(xs, [per[x]["psnr"] for x in xs], label=label, **style)
         ax2.plot(xs, [per[x]["ciede2000"] for x in xs], label=label, **style)
     for ax, name in ((ax1, "PSNR (dB)"), (ax2, "CIEDE2000 (lower is better)")):
@@ -127,7 +136,10 @@ def exposure_chart(
         ax.set_xlabel("exposure N: photo-electrons of a lossless full-light pixel")
         ax.set_ylabel(name)
         ax.grid(alpha=0.3, which="both")
+    if title is None:
+        title = "LMMSE (dashed) and networks (solid)" if networks else "LMMSE"
+        title += " at equal exposure (photon model)"
     ax1.set_title(title, fontsize=10)
-    ax2.legend(fontsize=8, loc="upper right")
+    ax2.legend(fontsize=7 if len(results) > 8 else 8, loc="upper right")
     fig.tight_layout()
     return save_figure(fig, path, dpi=120)
