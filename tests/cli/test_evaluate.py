@@ -369,3 +369,34 @@ def test_a_tiny_image_in_an_evaluation_folder_is_named(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "img/tiny (6x6)" in err and "11x11" in err
     assert not (tmp_path / "e" / "per_image.csv").exists()  # refused before any work
+
+
+def test_evaluate_with_flips_scores_the_ensemble_beside_nothing_else(tmp_path, capsys) -> None:
+    """--flips: a network becomes its self-ensemble (labelled +flips); the baselines are
+    unchanged, and on the even-sided crop the ensemble's reconstruction is the mean of the
+    network's and its transposition's (Bayer's one symmetry there; computed here by hand)."""
+    from splitcam.data.testsets import load_datasets
+    from splitcam.evaluation.protocol import score, simulate_and_reconstruct
+    from splitcam.physics.sensor import SplitterSensor
+    from splitcam.recon.registry import build_method
+
+    args = ["evaluate", "--model", "bayer", "--method", "lmmse", "--patterns", "bayer"]
+    args += ["--max-images", "1", "--max-size", "33", "--sigmas", "0", "--quiet", "--flips"]
+    assert main([*args, "--out", str(tmp_path), "--precision", "fp32"]) == 0
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert set(summary) == {"net-bayer+flips", "lmmse-bayer"}
+    [(_, images)] = load_datasets("default", 1, 33)
+    name, rgb = images[0]
+    assert rgb.shape[-2:] == (32, 32)
+    net = build_method("bayer", precision="fp32")
+    sensor = SplitterSensor(net.pattern)
+    from splitcam.physics import simulate
+
+    raw = simulate(sensor, rgb[None], name, 0.0)
+    with torch.no_grad():
+        flipped = net.reconstruct(raw.transpose(-2, -1), 0.0).transpose(-2, -1)
+        mean = (net.reconstruct(raw, 0.0) + flipped) / 2
+    want = score(mean[0].clamp(0, 1), rgb)["psnr"]
+    assert summary["net-bayer+flips"]["all"]["0"]["psnr"] == pytest.approx(want, abs=1e-6)
+    plain = score(simulate_and_reconstruct(net, sensor, name, rgb, 0.0), rgb)["psnr"]
+    assert want != plain

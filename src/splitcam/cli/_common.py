@@ -70,6 +70,29 @@ def add_method_options(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--tile", type=int, default=512, help="tile size in pixels (default 512)")
     add_precision(p, "auto")
+    add_flips(p)
+
+
+def add_flips(p: argparse.ArgumentParser) -> None:
+    """``--flips``: networks averaged over the flips and transpositions their sensor is
+    symmetric under (:class:`~splitcam.recon.ensemble.SelfEnsemble`)."""
+    p.add_argument(
+        "--flips",
+        action="store_true",
+        help="average each network over the flips and transpositions of the image that its "
+        "pattern's sensor is exactly symmetric under at the image's size (1 to 8 of them; "
+        "the time grows with their number); labelled <method>+flips",
+    )
+
+
+def with_flips(methods: list, flips: bool) -> list:
+    """The networks among ``methods`` as self-ensembles when ``flips`` (others unchanged)."""
+    if not flips:
+        return methods
+    from ..recon.base import NetworkReconstructor
+    from ..recon.ensemble import SelfEnsemble
+
+    return [SelfEnsemble(m) if isinstance(m, NetworkReconstructor) else m for m in methods]
 
 
 def add_precision(p: argparse.ArgumentParser, default: str) -> None:

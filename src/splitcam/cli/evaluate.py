@@ -14,6 +14,7 @@ from ._common import (
     model_methods,
     sensor_flags_given,
     sensor_settings,
+    with_flips,
 )
 
 #: The main job (``splitcam evaluate`` with no method named) scores centre crops of this size of
@@ -167,6 +168,7 @@ def run(args: argparse.Namespace) -> int:
         progress=not args.quiet,
         domain=args.domain,
     )
+    methods = with_flips(methods, args.flips)
     from ..physics.noise import Exposure
 
     if not args.photons and sensor_flags_given(args):

@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 
 from ..io.domains import DOMAINS
-from ._common import add_method_options, check_distinct
+from ._common import add_method_options, check_distinct, with_flips
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -122,6 +122,7 @@ def run(args: argparse.Namespace) -> int:
             domain=domain,
         )
     )
+    method = with_flips([method], args.flips)[0]
     domain = method_domain(method)  # a network's own where none was asked for
     if pattern is not None and not patterns.get(pattern).equals(method.pattern):
         name = pattern.name if isinstance(pattern, patterns.Pattern) else pattern

@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 
 from ..io.paper import PAPER_PATTERNS, PAPER_SIGMAS
-from ._common import add_precision
+from ._common import add_flips, add_precision, with_flips
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -27,6 +27,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--tile", type=int, default=512)
     # float32 by default: the committed tables are float32, and a resumed run adds rows to them.
     add_precision(p, "fp32")
+    add_flips(p)
     p.add_argument("--quiet", action="store_true")
     p.set_defaults(handler=run)
 
@@ -46,6 +47,8 @@ def run(args: argparse.Namespace) -> int:
     if not rows:
         raise ValueError("no shipped models to reproduce the paper with")
     methods = [build_model(m, tile=args.tile, precision=args.precision) for m in rows.values()]
+    methods = with_flips(methods, args.flips)
+    networks = {r: m.name for r, m in zip(rows, methods, strict=True)}
     if not args.no_baselines:
         methods.append(build_method("malvar2004"))
         methods += [build_method("lmmse", pattern=p) for p in PAPER_PATTERNS]
@@ -71,12 +74,12 @@ def run(args: argparse.Namespace) -> int:
     budgets, learned = {}, {}
     for row, name in rows.items():
         meta = load_model(name).meta
-        budgets[row] = f"{training_budget(meta)}; evaluated in {inference}"
+        flips = ", averaged over its sensor's exact flips (--flips)" if args.flips else ""
+        budgets[row] = f"{training_budget(meta)}; evaluated in {inference}{flips}"
         if meta["pattern"].get("provenance") == "learned":
             from ..patterns import Pattern
 
             learned[row] = Pattern.from_dict(meta["pattern"])
-    label = {m.name: m.name for m in methods}
     zooms = (
         sorted(str(p.relative_to(out)) for p in (evaluation / "zoom").glob("*.png"))
         if (evaluation / "zoom").is_dir()
@@ -84,7 +87,7 @@ def run(args: argparse.Namespace) -> int:
     )
     report = paper_tables(
         summary,
-        {r: f"net-{m}" for r, m in rows.items() if f"net-{m}" in label},
+        networks,
         out,
         budgets=budgets,
         learned=learned,

@@ -1,0 +1,136 @@
+"""Test-time self-ensembles: a reconstruction averaged over the image's flips and transpositions
+that the sensor itself is symmetric under.
+
+A flip or a transposition ``g`` of the scene is a fair second look at a raw image only when the
+sensor commutes with it, ``sensor(g(x)) = g(sensor(x))``: then ``g(raw)`` is exactly the raw
+image a camera with the same pattern records of the scene ``g(x)``, and ``g⁻¹(method(g(raw)))``
+is a second estimate of ``x`` with the same noise statistics. Whether it commutes depends on the
+pattern's kernels and on where the image ends within the period (flipping a 2x2 Bayer image of
+even width turns RGGB into GRBG; of odd width it stays RGGB), so :func:`symmetries` tests each of
+the eight transforms on a small probe image of the same size modulo the period, by simulating
+both sides (no case analysis to get wrong). :class:`SelfEnsemble` averages the method over those
+transforms; with only the identity it is the method itself.
+
+The usual test-time augmentation of image restoration flips the input regardless; for a
+colour-routing sensor that would feed the network raw images no sensor of its pattern produces,
+so only the exact symmetries are used here.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from ..patterns import Pattern
+from ..physics.sensor import SplitterSensor
+from .base import Reconstructor, method_domain
+
+__all__ = ["TRANSFORMS", "SelfEnsemble", "Transform", "symmetries"]
+
+
+@dataclass(frozen=True)
+class Transform:
+    """Transpose (rows and columns swapped) first, then flips of the last two axes."""
+
+    transpose: bool = False
+    flip_rows: bool = False
+    flip_cols: bool = False
+
+    def apply(self, x: torch.Tensor) -> torch.Tensor:
+        """``g(x)`` on the last two axes of ``(..., H, W)``."""
+        if self.transpose:
+            x = x.transpose(-2, -1)
+        dims = [d for d, on in ((-2, self.flip_rows), (-1, self.flip_cols)) if on]
+        return x.flip(dims) if dims else x
+
+    def invert(self, x: torch.Tensor) -> torch.Tensor:
+        """``g⁻¹(x)``: the flips undone, then the transposition."""
+        dims = [d for d, on in ((-2, self.flip_rows), (-1, self.flip_cols)) if on]
+        if dims:
+            x = x.flip(dims)
+        return x.transpose(-2, -1) if self.transpose else x
+
+    @property
+    def label(self) -> str:
+        parts = [
+            n
+            for n, on in (("T", self.transpose), ("V", self.flip_rows), ("H", self.flip_cols))
+            if on
+        ]
+        return "".join(parts) or "id"
+
+
+#: The eight symmetries of a rectangle's pixel grid (the dihedral group of the square), the
+#: identity first.
+TRANSFORMS = tuple(
+    Transform(t, r, c) for t in (False, True) for r in (False, True) for c in (False, True)
+)
+
+
+def symmetries(pattern: Pattern, height: int, width: int) -> list[Transform]:
+    """The transforms ``g`` of :data:`TRANSFORMS` that the sensor of ``pattern`` commutes with on
+    images of ``height`` x ``width``: ``sensor(g(x)) = g(sensor(x))`` for every scene ``x``.
+
+    Tested by simulating both sides on a random probe image whose sides equal ``height`` and
+    ``width`` modulo the period (which is all that decides it: the phase of every pixel, and
+    the zero padding at the borders, which every flip and transposition preserves), large enough
+    that borders and interior are both there. The identity is always among them.
+
+    >>> from splitcam.patterns import get
+    >>> [g.label for g in symmetries(get("bayer"), 512, 768)]  # RGGB: only its diagonal
+    ['id', 'T']
+    >>> [g.label for g in symmetries(get("bayer"), 321, 481)]  # odd sides: flips keep RGGB
+    ['id', 'H', 'V', 'VH', 'T', 'TH', 'TV', 'TVH']
+    """
+    ph, pw = pattern.period
+    key = (pattern.period, tuple(pattern.kernel_size), height % ph, width % pw)
+    kernels = torch.tensor(np.array(pattern.kernels), dtype=torch.float64)
+    cached = _CACHE.get(key)
+    if cached is not None and torch.equal(cached[0], kernels):
+        return list(cached[1])
+    kh, kw = pattern.kernel_size
+    h = ph * (2 * kh + 4) + height % ph
+    w = pw * (2 * kw + 4) + width % pw
+    sensor = SplitterSensor(pattern).double()
+    x = torch.rand(1, 3, h, w, generator=torch.Generator().manual_seed(0), dtype=torch.float64)
+    found = []
+    with torch.no_grad():
+        base = sensor(x)
+        for g in TRANSFORMS:
+            lhs, rhs = sensor(g.apply(x)), g.apply(base)
+            if lhs.shape == rhs.shape and torch.allclose(lhs, rhs, rtol=0, atol=1e-12):
+                found.append(g)
+    _CACHE[key] = (kernels, tuple(found))
+    return found
+
+
+_CACHE: dict[tuple, tuple[torch.Tensor, tuple[Transform, ...]]] = {}
+
+
+class SelfEnsemble:
+    """``method`` averaged over the exact symmetries of its sensor (:func:`symmetries`) for the
+    size of each raw image: ``mean_g g⁻¹(method(g(raw)))``. Costs one reconstruction per
+    symmetry (1 to 8; 2 for Bayer, A and B on even sides); named ``<method>+flips``.
+
+    The noise of ``g(raw)`` is the same noise, moved: the estimates are not independent, and
+    the ensemble gains less than averaging independent looks would.
+    """
+
+    def __init__(self, method: Reconstructor) -> None:
+        self.method = method
+        self.name = f"{method.name}+flips"
+        self.pattern = method.pattern
+        self.domain = method_domain(method)
+        self.fingerprint = f"{getattr(method, 'fingerprint', '')}+flips"
+
+    def reconstruct(self, raw: torch.Tensor, sigma) -> torch.Tensor:
+        """The averaged estimate ``(N, 3, H, W)`` of a raw image ``(N, 1, H, W)``."""
+        transforms = symmetries(self.pattern, *raw.shape[-2:])
+        total = None
+        for g in transforms:
+            out = g.invert(self.method.reconstruct(g.apply(raw), sigma)).float()
+            total = out if total is None else total + out
+        assert total is not None  # the identity is always there
+        return total / len(transforms)
