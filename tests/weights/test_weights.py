@@ -11,12 +11,22 @@ import torch
 from splitcam.evaluation.protocol import mean_psnr
 from splitcam.io import weights as io_weights
 from splitcam.recon.loading import load_model, model_names, model_serves_any_pattern
-from splitcam.recon.registry import build_method
+from splitcam.recon.registry import build_method, model_domain
 
 
 def _one_pattern_models() -> list[str]:
-    """Shipped models of one pattern (a model for any pattern has a test of its own)."""
-    return [name for name in model_names() if not model_serves_any_pattern(name)]
+    """Shipped sRGB models of one pattern, the paper's protocol (a model for any pattern and
+    the models trained on photons in linear light have tests of their own)."""
+    return [
+        name
+        for name in model_names()
+        if not model_serves_any_pattern(name) and model_domain(name) == "srgb"
+    ]
+
+
+def _photon_models() -> list[str]:
+    """Shipped models trained on photons in linear light (SPEC 11, 13)."""
+    return [name for name in model_names() if model_domain(name) == "linear"]
 
 
 @pytest.mark.parametrize("name", _one_pattern_models())
@@ -140,3 +150,50 @@ def test_every_shipped_model_is_right_at_every_image_border(name, shared_data):
             inner.append(score(pred, rgb, crop=4)["psnr"])
         losses[sigma] = (sum(inner) - sum(whole)) / len(photos)
     assert max(losses.values()) <= BORDER_LOSS, f"{name}: border loss {losses} dB"
+
+
+#: The lead (dB) every shipped photon network must keep over the linear closed-form LMMSE of each
+#: sensor it was trained for, on the test's crops at 30 and 300 photo-electrons.
+PHOTON_LEAD = 1.0
+
+
+@pytest.mark.parametrize("name", _photon_models())
+def test_every_shipped_photon_network_loads_by_name_and_beats_the_linear_lmmse(name, shared_data):
+    """A network trained under the photon model in linear light loads by its name, says so
+    (linear domain, photon noise in its config), and on held-out crops with odd sides beats the
+    closed-form linear LMMSE of every sensor it was trained for by PHOTON_LEAD dB at N = 30 and
+    300 (read noise 2 e-); it is right at the border too (the PSNR with a 4-pixel border left
+    out exceeds the whole crop's by at most BORDER_LOSS dB)."""
+    from splitcam.data.imageio import read_image
+    from splitcam.data.patches import list_images
+    from splitcam.data.testsets import centre_crop
+    from splitcam.evaluation.protocol import score, score_images
+    from splitcam.physics.noise import Exposure
+    from splitcam.recon.closed_form import closed_form_lmmse
+
+    meta = load_model(name).meta
+    config = meta["config"]
+    assert config["data"]["domain"] == "linear" and config["noise"]["model"] == "photon"
+    assert (io_weights.MODELS_DIR / f"{name}.safetensors").stat().st_size <= 4 * 1024**2
+    crops = [
+        (p.name, centre_crop(torch.from_numpy(read_image(p)).permute(2, 0, 1), 127, multiple=1))
+        for p in list_images(shared_data / "train")[-4:]
+    ]
+    levels = [Exposure(30.0), Exposure(300.0)]
+    sensors = config["pattern"].get("mix") or [config["pattern"]["name"]]
+    for sensor in sensors:
+        method = build_method(name, pattern=sensor, precision="fp32")
+        assert method.domain == "linear"
+        whole: dict = {lv: [] for lv in levels}
+        inner: dict = {lv: [] for lv in levels}
+        for image, level, pred, _ in score_images(method, crops, levels, domain="linear"):
+            rgb = dict(crops)[image]
+            whole[level].append(score(pred, rgb)["psnr"])
+            inner[level].append(score(pred, rgb, crop=4)["psnr"])
+        lmmse = mean_psnr(
+            closed_form_lmmse(sensor, domain="linear"), crops, levels, domain="linear"
+        )
+        for lv in levels:
+            net = sum(whole[lv]) / len(crops)
+            assert net > lmmse[lv] + PHOTON_LEAD, (name, sensor, lv, net, lmmse[lv])
+            assert sum(inner[lv]) / len(crops) - net <= BORDER_LOSS, (name, sensor, lv)
