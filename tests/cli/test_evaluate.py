@@ -17,6 +17,7 @@ from splitcam import patterns
 from splitcam.cli import main
 from splitcam.evaluation.tables import read_rows
 from splitcam.io import weights as io_weights
+from splitcam.io.paper import PAPER_PATTERNS
 from splitcam.patterns.random import random_pattern
 from splitcam.training.models import export_model
 
@@ -254,7 +255,10 @@ def test_evaluate_main_job_in_linear_light_leaves_srgb_networks_out(tmp_path, ca
     assert "left out of this linear-domain evaluation" in out
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert {e["domain"] for e in summary.values()} == {"linear"}
-    assert "bayer+malvar2004 (linear)" in summary and not any(k.startswith("net-") for k in summary)
+    assert "bayer+malvar2004 (linear)" in summary
+    # the networks of linear light: the one trained on photons, for every pattern
+    nets = {k for k in summary if k.startswith("net-")}
+    assert nets == {f"net-universal-photon-{p} (linear)" for p in PAPER_PATTERNS}
 
 
 def test_the_main_job_scores_every_shipped_model_on_crops(trained_run, tmp_path, monkeypatch):
@@ -400,3 +404,20 @@ def test_evaluate_with_flips_scores_the_ensemble_beside_nothing_else(tmp_path, c
     assert summary["net-bayer+flips"]["all"]["0"]["psnr"] == pytest.approx(want, abs=1e-6)
     plain = score(simulate_and_reconstruct(net, sensor, name, rgb, 0.0), rgb)["psnr"]
     assert want != plain
+
+
+def test_the_srgb_main_job_leaves_the_photon_networks_out(tmp_path, capsys) -> None:
+    """The paper's protocol (srgb, Gaussian noise) scores the shipped sRGB networks; a network
+    trained on photons in linear light is named as left out, not run on the wrong light."""
+    from splitcam.recon.loading import model_names
+    from splitcam.recon.registry import model_domain
+
+    linear = [m for m in model_names() if model_domain(m) == "linear"]
+    if not linear:
+        pytest.skip("no photon network shipped")
+    args = ["evaluate", "--max-images", "1", "--max-size", "32", "--sigmas", "0", "--quiet"]
+    assert main([*args, "--patterns", "D", "--out", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert f"left out of this srgb-domain evaluation: {', '.join(linear)}" in out
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert {e["domain"] for e in summary.values()} == {"srgb"} and "net-D" in summary

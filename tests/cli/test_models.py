@@ -19,7 +19,7 @@ def test_cli_models_export_list_and_evaluate(trained_run, tmp_path, monkeypatch,
     assert main(["models", "export", str(trained_run), "--name", "D", "--ship"]) == 0
     assert main(["models"]) == 0
     out = capsys.readouterr().out
-    assert re.search(r"\| D +\| D +\| physics \| 4 +\| 4 +\|", out), out
+    assert re.search(r"\| D +\| D +\| physics \| srgb, gaussian \| 4 +\| 4 +\|", out), out
     assert (
         main(
             [

@@ -162,8 +162,9 @@ def test_every_shipped_photon_network_loads_by_name_and_beats_the_linear_lmmse(n
     """A network trained under the photon model in linear light loads by its name, says so
     (linear domain, photon noise in its config), and on held-out crops with odd sides beats the
     closed-form linear LMMSE of every sensor it was trained for by PHOTON_LEAD dB at N = 30 and
-    300 (read noise 2 e-); it is right at the border too (the PSNR with a 4-pixel border left
-    out exceeds the whole crop's by at most BORDER_LOSS dB)."""
+    300 (read noise 2 e-); on two whole held-out photos (481x321: odd sides) it is right at the
+    border (the PSNR with a 4-pixel border left out exceeds the whole photo's by at most
+    BORDER_LOSS dB; measured at most 0.014 dB for bayer, router-zou and A)."""
     from splitcam.data.imageio import read_image
     from splitcam.data.patches import list_images
     from splitcam.data.testsets import centre_crop
@@ -175,25 +176,24 @@ def test_every_shipped_photon_network_loads_by_name_and_beats_the_linear_lmmse(n
     config = meta["config"]
     assert config["data"]["domain"] == "linear" and config["noise"]["model"] == "photon"
     assert (io_weights.MODELS_DIR / f"{name}.safetensors").stat().st_size <= 4 * 1024**2
-    crops = [
-        (p.name, centre_crop(torch.from_numpy(read_image(p)).permute(2, 0, 1), 127, multiple=1))
-        for p in list_images(shared_data / "train")[-4:]
-    ]
+    paths = list_images(shared_data / "train")[-4:]
+    photos = [(p.name, torch.from_numpy(read_image(p)).permute(2, 0, 1)) for p in paths]
+    crops = [(n, centre_crop(rgb, 127, multiple=1)) for n, rgb in photos]
     levels = [Exposure(30.0), Exposure(300.0)]
     sensors = config["pattern"].get("mix") or [config["pattern"]["name"]]
     for sensor in sensors:
         method = build_method(name, pattern=sensor, precision="fp32")
         assert method.domain == "linear"
-        whole: dict = {lv: [] for lv in levels}
-        inner: dict = {lv: [] for lv in levels}
-        for image, level, pred, _ in score_images(method, crops, levels, domain="linear"):
-            rgb = dict(crops)[image]
-            whole[level].append(score(pred, rgb)["psnr"])
-            inner[level].append(score(pred, rgb, crop=4)["psnr"])
+        net = mean_psnr(method, crops, levels, domain="linear")
         lmmse = mean_psnr(
             closed_form_lmmse(sensor, domain="linear"), crops, levels, domain="linear"
         )
         for lv in levels:
-            net = sum(whole[lv]) / len(crops)
-            assert net > lmmse[lv] + PHOTON_LEAD, (name, sensor, lv, net, lmmse[lv])
-            assert sum(inner[lv]) / len(crops) - net <= BORDER_LOSS, (name, sensor, lv)
+            assert net[lv] > lmmse[lv] + PHOTON_LEAD, (name, sensor, lv, net[lv], lmmse[lv])
+        loss = [
+            score(pred, dict(photos)[image], crop=4)["psnr"] - scores["psnr"]
+            for image, _, pred, scores in score_images(
+                method, photos[:2], [Exposure(300.0)], domain="linear"
+            )
+        ]
+        assert sum(loss) / len(loss) <= BORDER_LOSS, (name, sensor, loss)

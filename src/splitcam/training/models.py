@@ -199,14 +199,20 @@ def training_budget(meta: dict[str, Any]) -> str:
 
 def model_summary(name: str, meta: dict[str, Any]) -> dict[str, str]:
     """A row of ``splitcam models``: the model, its pattern (``any`` for a network for any
-    pattern), network, steps, batch, training time and devices."""
+    pattern), network, the light and noise it was trained on (``srgb, gaussian``: the paper's;
+    ``linear, photon``: photo-electrons in linear light), steps, batch, training time and
+    devices."""
     prov = meta.get("provenance", {})
     segs = prov.get("segments", [])
-    trained_on = (meta.get("config") or {}).get("pattern", {}).get("name")
+    config = meta.get("config") or {}
+    trained_on = config.get("pattern", {}).get("name")
+    light = (config.get("data") or {}).get("domain") or "srgb"
+    noise = (config.get("noise") or {}).get("model") or "gaussian"
     return {
         "model": name,
         "pattern": "any" if trained_on == "random" else meta["pattern"]["name"],
         "network": meta["network"]["arch"],
+        "trained on": f"{light}, {noise}",
         "steps": str(prov.get("total_steps", "?")),
         "batch": str(segs[-1].get("batch_size") if segs else "?"),
         "train time": f"{prov.get('train_seconds', 0) / 60:.0f} min",
