@@ -196,23 +196,31 @@ def _crossover_table(
 def network_references(networks: dict[str, str], refs: Sequence[str]) -> dict[str, dict[str, str]]:
     """``{label: {ref: label of the network it is compared with}}`` for the networks of an
     exposure study (``networks``: ``{label: pattern name}``): a network is compared with the
-    network of the reference pattern made the same way (the label with the pattern's name
-    replaced by the reference's, as a model for any pattern names them:
-    ``net-universal-photon-A`` against ``net-universal-photon-rgbw``), else with the one
-    network of that pattern; none if the reference has no network or several.
+    network of the reference pattern made the same way, whose label is its own with the
+    pattern's name replaced by the reference's (a model for any pattern: ``net-universal-photon-A``
+    against ``net-universal-photon-rgbw``; a sensor's own model named after it: ``net-A-photon``
+    against ``net-rgbw-photon``), else with the one network of that pattern; none if the
+    reference has no network or several.
 
-    >>> refs = network_references({"net-u-A": "A", "net-u-rgbw": "rgbw", "net-B": "B"}, ["rgbw"])
-    >>> refs["net-u-A"], refs["net-B"]
-    ({'rgbw': 'net-u-rgbw'}, {'rgbw': 'net-u-rgbw'})
+    >>> nets = {"net-u-A": "A", "net-u-rgbw": "rgbw", "net-A-ph": "A", "net-rgbw-ph": "rgbw"}
+    >>> refs = network_references({**nets, "net-B": "B"}, ["rgbw"])
+    >>> refs["net-u-A"], refs["net-A-ph"], refs["net-B"]
+    ({'rgbw': 'net-u-rgbw'}, {'rgbw': 'net-rgbw-ph'}, {})
     """
     out: dict[str, dict[str, str]] = {}
     for label, pattern in networks.items():
         mine = {}
         for ref in refs:
-            same_way = label.removesuffix(pattern) + ref if label.endswith(pattern) else None
+            same_way = [
+                label.removesuffix(f"-{pattern}") + f"-{ref}"
+                if label.endswith(f"-{pattern}")
+                else "",
+                label.replace(f"-{pattern}-", f"-{ref}-", 1) if f"-{pattern}-" in label else "",
+            ]
+            made_so = [c for c in same_way if networks.get(c) == ref]
             of_ref = [lab for lab, p in networks.items() if p == ref]
-            if same_way in networks:
-                mine[ref] = same_way
+            if made_so:
+                mine[ref] = made_so[0]
             elif len(of_ref) == 1:
                 mine[ref] = of_ref[0]
         out[label] = mine
