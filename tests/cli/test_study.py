@@ -72,3 +72,34 @@ def test_study_exposure_states_crossovers_against_rgbw(tmp_path) -> None:
     args = ["study", "exposure", "--max-images", "1", "--crop", "32", "--photons", "3", "300"]
     assert main([*args, "--patterns", "A,bayer,rgbw", "--quiet", "--out", str(tmp_path)]) == 0
     assert "vs rgbw: PSNR" in (tmp_path / "exposure.md").read_text()
+
+
+def test_study_breakeven_with_a_network_for_any_pattern(tmp_path, capsys) -> None:
+    """--model: the map's sensors are all reconstructed by one network for any pattern (its
+    name on the map and in the JSON); a network of one pattern cannot draw a map."""
+    args = ["study", "breakeven", "--max-images", "1", "--crop", "32", "--photons", "10", "1000"]
+    args += ["--eta", "0.6", "0.8", "--chi", "0", "0.2", "--quiet"]
+    assert main([*args, "--model", "universal-photon", "--out", str(tmp_path)]) == 0
+    data = json_load(tmp_path / "breakeven.json")
+    assert data["method"] == "net-universal-photon"
+    assert all(c["difference"] is not None for c in data["cells"])
+    assert "Net-universal-photon of each sensor" in (tmp_path / "breakeven.md").read_text()
+    assert main([*args, "--model", "A-photon", "--out", str(tmp_path / "x")]) == 1
+    assert "a model for any pattern" in capsys.readouterr().err
+
+
+def test_study_exposure_with_networks_continues_and_compares_network_with_network(
+    tmp_path,
+) -> None:
+    """Networks beside the LMMSE: the sensors' own network against rgbw's; a second run with
+    the same --out reuses every score (its per_image.csv is unchanged)."""
+    args = ["study", "exposure", "--max-images", "1", "--crop", "32", "--photons", "10", "1000"]
+    args += ["--patterns", "A,bayer,rgbw", "--model", "universal-photon", "--quiet"]
+    assert main([*args, "--out", str(tmp_path)]) == 0
+    csv = (tmp_path / "evaluation" / "per_image.csv").read_text()
+    assert csv.count("net-universal-photon-A") == 2  # one image, two exposures
+    text = (tmp_path / "exposure.md").read_text()
+    nets = text.split("(networks, each against the reference's network)")[1]
+    assert "| net-universal-photon-A |" in nets
+    assert main([*args, "--out", str(tmp_path)]) == 0
+    assert (tmp_path / "evaluation" / "per_image.csv").read_text() == csv
