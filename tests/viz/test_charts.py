@@ -33,3 +33,30 @@ def test_two_networks_of_one_pattern_name_get_two_colours(tmp_path, monkeypatch)
     sigma_chart(curves, tmp_path / "c.png", patterns_of={**kinds, "lmmse-D": "D", "net-D": "D"})
     assert colours["net-D-opt"] != colours["net-D-opt-random"]
     assert colours["lmmse-D"] == colours["net-D"]  # one pattern, one colour
+
+
+def test_exposure_chart_gives_a_pattern_one_colour_and_each_kind_of_network_a_line_style(
+    tmp_path, monkeypatch
+):
+    from matplotlib.axes import Axes
+
+    from splitcam.viz.charts import exposure_chart
+
+    drawn = {}
+    plot = Axes.plot
+
+    def spy(self, *args, **kwargs):
+        drawn[kwargs.get("label")] = (str(kwargs.get("color")), str(kwargs.get("ls")))
+        return plot(self, *args, **kwargs)
+
+    monkeypatch.setattr(Axes, "plot", spy)
+    per = {10.0: {"psnr": 20.0, "ciede2000": 9.0}, 100.0: {"psnr": 25.0, "ciede2000": 6.0}}
+    labels = ["A", "bayer", "net-u-A", "net-u-bayer", "net-A-photon", "net-bayer-photon"]
+    networks = {"net-u-A": "A", "net-u-bayer": "bayer", "net-A-photon": "A"}
+    networks["net-bayer-photon"] = "bayer"
+    exposure_chart({k: per for k in labels}, tmp_path / "e.png", networks=networks)
+    assert (tmp_path / "e.png").stat().st_size > 0
+    assert drawn["A"][0] == drawn["net-u-A"][0] == drawn["net-A-photon"][0]
+    assert drawn["bayer"][0] == drawn["net-u-bayer"][0] == "black"
+    assert drawn["net-u-A"][1] == drawn["net-u-bayer"][1] != drawn["net-A-photon"][1]
+    assert drawn["A"][1] == "--" and drawn["net-A-photon"][1] == drawn["net-bayer-photon"][1]

@@ -109,8 +109,9 @@ def exposure_chart(
     networks: Mapping[str, str] | None = None,
 ) -> Path:
     """PSNR and CIEDE2000 against exposure (log axis) for every pattern's LMMSE (thin, dashed),
-    and for the networks (``networks``: ``{label: pattern name}``; thick, solid, in their
-    pattern's colour); the Bayer filter in black."""
+    and for the networks (``networks``: ``{label: pattern name}``; thick, in their pattern's
+    colour, one line style per way of making them: solid for the first, dash-dot for the
+    second, ...); the Bayer filter in black."""
     import matplotlib
     from matplotlib.figure import Figure
 
@@ -120,12 +121,17 @@ def exposure_chart(
     cycle = matplotlib.rcParams["axes.prop_cycle"].by_key()["color"]
     order = list(dict.fromkeys(networks.get(label, label) for label in results))
     colour = {p: cycle[i % len(cycle)] for i, p in enumerate(order)}
+    # networks made the same way (one model for any pattern, or each sensor's own) share a
+    # line style: the label without its pattern's name
+    family = {label: label.replace(p, "", 1) for label, p in networks.items()}
+    styles = ["-", "-.", ":", (0, (6, 2))]
+    line = {f: styles[i % len(styles)] for i, f in enumerate(dict.fromkeys(family.values()))}
     for label, per in results.items():
         pattern = networks.get(label, label)
         bayer = pattern == "bayer" or pattern.startswith("bayer+")
         style = {"color": "black" if bayer else colour[pattern], "marker": "o", "ms": 3}
         if label in networks:
-            style.update(ls="-", lw=2.0)
+            style.update(ls=line[family[label]], lw=2.0)
         else:
             style.update(ls="--" if networks or bayer else "-", lw=1.0 if networks else 1.5)
         xs = sorted(per)
@@ -137,7 +143,7 @@ def exposure_chart(
         ax.set_ylabel(name)
         ax.grid(alpha=0.3, which="both")
     if title is None:
-        title = "LMMSE (dashed) and networks (solid)" if networks else "LMMSE"
+        title = "LMMSE (thin dashed) and networks (thick)" if networks else "LMMSE"
         title += " at equal exposure (photon model)"
     ax1.set_title(title, fontsize=10)
     ax2.legend(fontsize=7 if len(results) > 8 else 8, loc="upper right")
