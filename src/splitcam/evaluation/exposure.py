@@ -195,17 +195,17 @@ def _crossover_table(
 
 def network_references(networks: dict[str, str], refs: Sequence[str]) -> dict[str, dict[str, str]]:
     """``{label: {ref: label of the network it is compared with}}`` for the networks of an
-    exposure study (``networks``: ``{label: pattern name}``): a network is compared with the
-    network of the reference pattern made the same way, whose label is its own with the
-    pattern's name replaced by the reference's (a model for any pattern: ``net-universal-photon-A``
-    against ``net-universal-photon-rgbw``; a sensor's own model named after it: ``net-A-photon``
-    against ``net-rgbw-photon``), else with the one network of that pattern; none if the
-    reference has no network or several.
+    exposure study (``networks``: ``{label: pattern name}``): a network is compared only with the
+    network of the reference pattern made the same way, whose label is its own with the pattern's
+    name replaced by the reference's (a model for any pattern: ``net-universal-photon-A`` against
+    ``net-universal-photon-rgbw``; a sensor's own model named after it: ``net-A-photon`` against
+    ``net-rgbw-photon``); none where there is no such network (a comparison with a network made
+    another way would measure the two trainings as much as the two sensors).
 
-    >>> nets = {"net-u-A": "A", "net-u-rgbw": "rgbw", "net-A-ph": "A", "net-rgbw-ph": "rgbw"}
-    >>> refs = network_references({**nets, "net-B": "B"}, ["rgbw"])
-    >>> refs["net-u-A"], refs["net-A-ph"], refs["net-B"]
-    ({'rgbw': 'net-u-rgbw'}, {'rgbw': 'net-rgbw-ph'}, {})
+    >>> nets = {"net-u-A": "A", "net-u-rgbw": "rgbw", "net-A-ph": "A", "net-bayer-ph": "bayer"}
+    >>> refs = network_references(nets, ["bayer", "rgbw"])
+    >>> refs["net-u-A"], refs["net-A-ph"]
+    ({'rgbw': 'net-u-rgbw'}, {'bayer': 'net-bayer-ph'})
     """
     out: dict[str, dict[str, str]] = {}
     for label, pattern in networks.items():
@@ -218,11 +218,8 @@ def network_references(networks: dict[str, str], refs: Sequence[str]) -> dict[st
                 label.replace(f"-{pattern}-", f"-{ref}-", 1) if f"-{pattern}-" in label else "",
             ]
             made_so = [c for c in same_way if networks.get(c) == ref]
-            of_ref = [lab for lab, p in networks.items() if p == ref]
             if made_so:
                 mine[ref] = made_so[0]
-            elif len(of_ref) == 1:
-                mine[ref] = of_ref[0]
         out[label] = mine
     return out
 
