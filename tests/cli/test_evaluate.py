@@ -19,6 +19,7 @@ from splitcam.evaluation.tables import read_rows
 from splitcam.io import weights as io_weights
 from splitcam.io.paper import PAPER_PATTERNS
 from splitcam.patterns.random import random_pattern
+from splitcam.recon.loading import load_model
 from splitcam.training.models import export_model
 
 
@@ -256,9 +257,17 @@ def test_evaluate_main_job_in_linear_light_leaves_srgb_networks_out(tmp_path, ca
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert {e["domain"] for e in summary.values()} == {"linear"}
     assert "bayer+malvar2004 (linear)" in summary
-    # the networks of linear light: the one trained on photons, for every pattern
-    nets = {k for k in summary if k.startswith("net-")}
-    assert nets == {f"net-universal-photon-{p} (linear)" for p in PAPER_PATTERNS}
+    # the networks of linear light: every shipped one trained on photons in it, and the one for
+    # any pattern for the patterns that no such network of their own serves
+    from splitcam.recon.loading import model_names, model_serves_any_pattern
+    from splitcam.recon.registry import model_domain
+
+    own = [m for m in model_names() if model_domain(m) == "linear"]
+    own = [m for m in own if not model_serves_any_pattern(m)]
+    served = {load_model(m).pattern.name for m in own}
+    nets = {k.removesuffix(" (linear)") for k in summary if k.startswith("net-")}
+    rest = {f"net-universal-photon-{p}" for p in PAPER_PATTERNS if p not in served}
+    assert nets == {f"net-{m}" for m in own} | rest and rest
 
 
 def test_the_main_job_scores_every_shipped_model_on_crops(trained_run, tmp_path, monkeypatch):
