@@ -4,11 +4,11 @@ against the closed-form linear LMMSE of each sensor.
     python studies/exposure/universal_photon.py NETWORK [--images 6] [--photons 10 30 100 300 1000]
         [--sensors bayer,rgbw,...] [--out FILE.md]
 
-NETWORK is a run folder or a model file trained with ``data.domain = "linear"`` and the photon
-model (``experiments/exposure/universal-photon.toml``), or one trained on a single sensor
-(``experiments/exposure/A-photon.toml``: name it with ``--sensors A``). The photos are the last ``--images`` of
-``../shared/data/train`` (sorted by name; no run trains or selects on the last 24), whole
-(481x321: odd sides). Read noise 2 e⁻, no ADC; PSNR (dB) of the 8-bit sRGB encoding.
+NETWORK is a shipped model, a run folder or a model file trained with ``data.domain = "linear"``
+and the photon model (``experiments/exposure/universal-photon.toml``), or one trained on a single
+sensor (``experiments/exposure/A-photon.toml``: name it with ``--sensors A``). The photos are the
+last ``--images`` of ``../shared/data/train`` (sorted by name; no run trains or selects on the
+last 24), whole (481x321: odd sides). Read noise 2 e⁻, no ADC; PSNR (dB) of the 8-bit sRGB encoding.
 """
 
 from __future__ import annotations

@@ -38,7 +38,8 @@ def main() -> int:
             rgb = rgb[:, : rgb.shape[1] // 2 * 2, : rgb.shape[2] // 2 * 2]
         images.append((path.name, rgb))
     shape = images[0][1].shape[-2:]
-    print(f"{len(images)} photos, {'whole' if args.odd else 'even sides'}; PSNR plain / flips / gain")
+    sides = "whole" if args.odd else "even sides"
+    print(f"{len(images)} photos, {sides}; PSNR plain / flips / gain")
     print("| model | symmetries | " + " | ".join(f"σ={s:g}" for s in args.sigmas) + " |")
     print("|---|---|" + "---|" * len(args.sigmas))
     for name in args.models:
