@@ -185,3 +185,23 @@ def test_training_draws_exposures_log_uniformly_and_resumes() -> None:
     assert torch.equal(a[0], b[0]) and a[1] == b[1]
     with pytest.raises(ValueError, match="lo <= hi"):
         PhotonNoise((100.0, 10.0))
+
+
+def test_linear_white_gives_n_photo_electrons_in_a_lossless_filterless_pixel() -> None:
+    """SPEC 11 and 13: an 8-bit white scene decodes to linear radiance 1 in every colour; a
+    pixel with no filter and no loss (all three colours' light lands on it) then collects N
+    photo-electrons at exposure N on average, with Poisson shot noise (variance N)."""
+    from splitcam.patterns import Pattern
+    from splitcam.physics.light import decode_scene
+
+    white = decode_scene(torch.full((1, 3, 48, 48), 255 / 255, dtype=torch.float64), "linear")
+    assert torch.equal(white, torch.ones_like(white))
+    bare = Pattern("bare", [[0]], np.ones((1, 3, 1, 1)))
+    raw = SplitterSensor(bare).double()(white)
+    exposure = Exposure(250.0, read_noise=0.0)
+    clean = exposure.electrons_per_unit * raw
+    assert torch.allclose(clean, torch.full_like(clean, 250.0))
+    electrons = exposure.apply(raw, torch.Generator().manual_seed(5)) * exposure.electrons_per_unit
+    assert float(electrons.mean()) == pytest.approx(250.0, rel=0.01)
+    assert float(electrons.var()) == pytest.approx(250.0, rel=0.1)
+    assert torch.allclose(electrons, electrons.round(), rtol=0, atol=1e-9)  # whole electrons
