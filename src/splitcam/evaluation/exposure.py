@@ -195,33 +195,30 @@ def _crossover_table(
 
 def network_references(networks: dict[str, str], refs: Sequence[str]) -> dict[str, dict[str, str]]:
     """``{label: {ref: label of the network it is compared with}}`` for the networks of an
-    exposure study (``networks``: ``{label: pattern name}``): a network is compared only with the
-    network of the reference pattern made the same way, whose label is its own with the pattern's
-    name replaced by the reference's (a model for any pattern: ``net-universal-photon-A`` against
-    ``net-universal-photon-rgbw``; a sensor's own model named after it: ``net-A-photon`` against
-    ``net-rgbw-photon``); none where there is no such network (a comparison with a network made
-    another way would measure the two trainings as much as the two sensors).
+    exposure study (``networks``: ``{label: pattern name}``): a network is compared only with
+    the network of the reference pattern of the same kind
+    (:func:`~splitcam.recon.registry.network_kind`: ``net-universal-photon-A`` against
+    ``net-universal-photon-rgbw``, ``net-A-photon`` against ``net-rgbw-photon``); none where
+    there is no such network (a comparison with a network made another way would measure the two
+    trainings as much as the two sensors).
 
     >>> nets = {"net-u-A": "A", "net-u-rgbw": "rgbw", "net-A-ph": "A", "net-bayer-ph": "bayer"}
     >>> refs = network_references(nets, ["bayer", "rgbw"])
     >>> refs["net-u-A"], refs["net-A-ph"]
     ({'rgbw': 'net-u-rgbw'}, {'bayer': 'net-bayer-ph'})
     """
-    out: dict[str, dict[str, str]] = {}
-    for label, pattern in networks.items():
-        mine = {}
-        for ref in refs:
-            same_way = [
-                label.removesuffix(f"-{pattern}") + f"-{ref}"
-                if label.endswith(f"-{pattern}")
-                else "",
-                label.replace(f"-{pattern}-", f"-{ref}-", 1) if f"-{pattern}-" in label else "",
-            ]
-            made_so = [c for c in same_way if networks.get(c) == ref]
-            if made_so:
-                mine[ref] = made_so[0]
-        out[label] = mine
-    return out
+    from ..recon.registry import network_kind
+
+    kind = {label: network_kind(label, pattern) for label, pattern in networks.items()}
+    return {
+        label: {
+            ref: other
+            for ref in refs
+            for other, theirs in networks.items()
+            if theirs == ref and kind[other] == kind[label]
+        }
+        for label in networks
+    }
 
 
 def raw_snr_check(

@@ -58,6 +58,7 @@ __all__ = [
     "build_model",
     "method_names",
     "model_domain",
+    "network_kind",
     "trained_domain",
 ]
 
@@ -174,6 +175,23 @@ def _network_method(
     layout = ",".join(str(v) for v in resolved.layout.reshape(-1))
     method.fingerprint = f":{name}:{resolved.kernels.shape}:{layout}:{values}"
     return method
+
+
+def network_kind(label: str, pattern: str) -> str:
+    """What a network method's name says of how the network was made, without the pattern it
+    reconstructs (``*`` in its place): a model for any pattern is labelled
+    ``net-<model>-<pattern>`` (:func:`build_model`), a sensor's own model is often named after
+    its pattern (``net-A-photon``). Networks of one kind are trained alike, so comparing two of
+    them compares their patterns, not their trainings.
+
+    >>> network_kind("net-universal-photon-rgbw", "rgbw"), network_kind("net-A-photon", "A")
+    ('net-universal-photon-*', 'net-*-photon')
+    >>> network_kind("net-D", "D-learned")  # the name does not say
+    'net-D'
+    """
+    if label.endswith(f"-{pattern}"):
+        return f"{label.removesuffix(pattern)}*"
+    return label.replace(f"-{pattern}-", "-*-", 1)
 
 
 def _is_path(spec: str | os.PathLike) -> bool:

@@ -121,9 +121,10 @@ def exposure_chart(
     cycle = matplotlib.rcParams["axes.prop_cycle"].by_key()["color"]
     order = list(dict.fromkeys(networks.get(label, label) for label in results))
     colour = {p: cycle[i % len(cycle)] for i, p in enumerate(order)}
-    # networks made the same way (one model for any pattern, or each sensor's own) share a
-    # line style: the label without its pattern's name
-    family = {label: label.replace(p, "", 1) for label, p in networks.items()}
+    from ..recon.registry import network_kind
+
+    # networks of one kind (one model for any pattern, or each sensor's own) share a line style
+    family = {label: network_kind(label, p) for label, p in networks.items()}
     styles = ["-", "-.", ":", (0, (6, 2))]
     line = {f: styles[i % len(styles)] for i, f in enumerate(dict.fromkeys(family.values()))}
     for label, per in results.items():
