@@ -21,6 +21,7 @@ import numpy as np
 from ..io import write_text
 from ..patterns import Pattern, get, router
 from ..recon.base import Reconstructor
+from ..recon.closed_form import closed_form_lmmse
 from .exposure import crossings, default_exposures, exposure_study
 from .protocol import Images
 
@@ -122,16 +123,16 @@ def break_even(
     make = candidate or (lambda e, x: router(e, x, name=_label(e, x)))
     study = {"photons": photons, "read_noise": read_noise, "domain": domain, "progress": False}
 
-    def curve_of(pattern: Pattern) -> dict[float, dict[str, float]]:
-        if method is None:
-            return exposure_study(images, patterns=[pattern], **study, **settings)[pattern.name]
-        rec = method(pattern)
+    reconstruct = method or (lambda p: closed_form_lmmse(p, domain=domain, name=f"lmmse-{p.name}"))
+
+    def curve_of(rec: Reconstructor) -> dict[float, dict[str, float]]:
         return exposure_study(images, patterns=[], methods=[rec], **study, **settings)[rec.name]
 
     ref = get(reference)
-    ref_curve = curve_of(ref)
+    ref_method = reconstruct(ref)
+    ref_curve = curve_of(ref_method)
     # the map's reconstruction, named as the reference's without the pattern: net-universal-photon
-    label = "closed-form LMMSE" if method is None else method(ref).name.removesuffix(f"-{ref.name}")
+    label = "closed-form LMMSE" if method is None else ref_method.name.removesuffix(f"-{ref.name}")
     ref_values = [ref_curve[n][metric] for n in photons]
     grid = [(float(e), float(x)) for e in etas for x in chis]
     bar = None
@@ -145,7 +146,7 @@ def break_even(
         if eta + chi > 1 + 1e-12:
             cell.update(verdict="infeasible", break_even=None, crossings=[], difference=None)
         else:
-            curve = curve_of(make(eta, chi))
+            curve = curve_of(reconstruct(make(eta, chi)))
             diff = [sign * (curve[n][metric] - r) for n, r in zip(photons, ref_values, strict=True)]
             cell.update(verdict(photons, diff, tol), difference=diff)
         cells.append(cell)
