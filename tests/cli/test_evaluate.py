@@ -123,95 +123,24 @@ def test_evaluate_cli_with_images_and_zoom(tmp_path, capsys):
     assert "| bayer+bilinear | bayer |" in printed and "| lmmse-D | D |" in printed
     assert (out / "images/lmmse-D/photos/img0_sigma10.png").is_file()
     assert (out / "zoom/photos_img0_sigma0.png").is_file()
-    assert (
-        main(
-            [
-                "evaluate",
-                "--method",
-                "bilinear",
-                "--datasets",
-                str(folder),
-                "--sigmas",
-                "0",
-                "--out",
-                str(tmp_path / "o2"),
-                "--save-images",
-                "--zoom",
-                "img1:4,6,20",
-                "--quiet",
-            ]
-        )
-        == 0
-    )
+
+    def bilinear(out: str, sigmas: list[str], *zooms: str) -> int:
+        """`evaluate --method bilinear --save-images` on the folder with these zooms."""
+        args = ["evaluate", "--method", "bilinear", "--datasets", str(folder), "--sigmas"]
+        args += [*sigmas, "--out", str(tmp_path / out), "--save-images", "--quiet"]
+        return main(args + [x for z in zooms for x in ("--zoom", z)])
+
+    assert bilinear("o2", ["0"], "img1:4,6,20") == 0
     assert (tmp_path / "o2/zoom/photos_img1_sigma0.png").is_file()
     assert not (tmp_path / "o2/zoom/photos_img0_sigma0.png").exists()
     # A zoom with its own noise level (the paper's kodim05 at sigma 10, kodim24 at sigma 5):
     # drawn at that level only, each image at its own.
-    assert (
-        main(
-            [
-                "evaluate",
-                "--method",
-                "bilinear",
-                "--datasets",
-                str(folder),
-                "--sigmas",
-                "0",
-                "5",
-                "10",
-                "--out",
-                str(tmp_path / "o4"),
-                "--save-images",
-                "--zoom",
-                "img0@10",
-                "--zoom",
-                "img1:4,6,20@5",
-                "--quiet",
-            ]
-        )
-        == 0
-    )
+    assert bilinear("o4", ["0", "5", "10"], "img0@10", "img1:4,6,20@5") == 0
     drawn = sorted(p.name for p in (tmp_path / "o4/zoom").glob("*.png"))
     assert drawn == ["photos_img0_sigma10.png", "photos_img1_sigma5.png"]
-    assert (
-        main(
-            [
-                "evaluate",
-                "--method",
-                "bilinear",
-                "--datasets",
-                str(folder),
-                "--sigmas",
-                "0",
-                "--out",
-                str(tmp_path / "o5"),
-                "--save-images",
-                "--zoom",
-                "img1@x",
-            ]
-        )
-        == 1
-    )
+    assert bilinear("o5", ["0"], "img1@x") == 1
     assert "expected a zoom as IMAGE[:TOP,LEFT,SIZE][@SIGMA]" in capsys.readouterr().err
-    assert (
-        main(
-            [
-                "evaluate",
-                "--method",
-                "bilinear",
-                "--datasets",
-                str(folder),
-                "--sigmas",
-                "0",
-                "--out",
-                str(tmp_path / "o3"),
-                "--save-images",
-                "--zoom",
-                "img1:4,x",
-            ]
-        )
-        == 1
-    )
+    assert bilinear("o3", ["0"], "img1:4,x") == 1
     assert "expected a zoom as IMAGE[:TOP,LEFT,SIZE][@SIGMA]" in capsys.readouterr().err
     assert main(["evaluate", "--method", "nonsense", "--datasets", str(folder)]) == 1
     assert "unknown method 'nonsense'" in capsys.readouterr().err

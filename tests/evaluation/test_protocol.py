@@ -180,26 +180,15 @@ def test_interrupted_evaluation_keeps_its_rows_and_resumes(tmp_path):
 def test_zoom_arguments_are_checked_before_any_work(tmp_path):
     images = _images(2)
     spy = Spy("a")
-    with pytest.raises(ValueError, match="not among the images evaluated"):
-        evaluate(
-            [spy],
-            [("set", images)],
-            [0],
-            tmp_path,
-            save_images=True,
-            zoom_images=["kodim05"],
-            progress=False,
-        )
-    with pytest.raises(ValueError, match="lies outside"):
-        evaluate(
-            [spy],
-            [("set", images)],
-            [0],
-            tmp_path,
-            save_images=True,
-            zoom_images=["img1:30,2,8"],
-            progress=False,
-        )
+    for match, zoom in (
+        ("not among the images evaluated", "kodim05"),
+        ("lies outside", "img1:30,2,8"),
+    ):
+        with pytest.raises(ValueError, match=match):
+            evaluate(
+                [spy], [("set", images)], [0], tmp_path, save_images=True, zoom_images=[zoom],
+                progress=False,
+            )  # fmt: skip
     with pytest.raises(ValueError, match="finite sigma"):
         evaluate([spy], [("set", images)], [0, float("nan")], tmp_path, progress=False)
     assert spy.seen == []
