@@ -79,6 +79,41 @@ TINY_SETTINGS = {
 }
 
 
+def random_images(n: int = 2, size: tuple[int, int] = (20, 24)) -> list:
+    """``[(f"img{i}", (3, H, W) uniform noise)]``, the same every call (seed 0)."""
+    import torch
+
+    gen = torch.Generator().manual_seed(0)
+    return [(f"img{i}", torch.rand(3, *size, generator=gen)) for i in range(n)]
+
+
+def write_photos(folder: Path, n: int = 2, size: tuple[int, int] = (40, 44)) -> Path:
+    """:func:`random_images` as 8-bit PNG files ``img<i>.png`` in a new ``folder``."""
+    import numpy as np
+    from PIL import Image
+
+    folder.mkdir()
+    for name, img in random_images(n, size=size):
+        array = (img.permute(1, 2, 0).numpy() * 255).astype(np.uint8)
+        Image.fromarray(array).save(folder / f"{name}.png")
+    return folder
+
+
+class Spy:
+    """A method that records the raw images it is given and returns a fixed guess."""
+
+    def __init__(self, name: str, pattern: str = "D") -> None:
+        from splitcam import patterns
+
+        self.name = name
+        self.pattern = patterns.get(pattern)
+        self.seen: list = []
+
+    def reconstruct(self, raw, sigma: float):
+        self.seen.append(raw.clone())
+        return raw.expand(-1, 3, -1, -1) / 4
+
+
 def blocky_images(folder: Path, count: int, seed: int = 0) -> Path:
     """``count`` smooth random 48x48 colour images (learnable in a few steps) in ``folder``."""
     import numpy as np

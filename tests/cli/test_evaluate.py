@@ -10,7 +10,7 @@ import shutil
 import numpy as np
 import pytest
 import torch
-from conftest import blocky_images
+from conftest import blocky_images, write_photos
 from PIL import Image
 
 from splitcam import patterns
@@ -83,18 +83,8 @@ def test_max_size_scores_the_centre_of_each_image(tmp_path):
         load_datasets("default", 1, 1)
 
 
-def _images(n=2, size=(20, 24)):
-    gen = torch.Generator().manual_seed(0)
-    return [(f"img{i}", torch.rand(3, *size, generator=gen)) for i in range(n)]
-
-
 def test_evaluate_cli_with_images_and_zoom(tmp_path, capsys):
-    folder = tmp_path / "photos"
-    folder.mkdir()
-    for name, img in _images(2, size=(40, 44)):
-        Image.fromarray((img.permute(1, 2, 0).numpy() * 255).astype(np.uint8)).save(
-            folder / f"{name}.png"
-        )
+    folder = write_photos(tmp_path / "photos")
     out = tmp_path / "out"
     assert (
         main(

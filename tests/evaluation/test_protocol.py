@@ -9,6 +9,7 @@ import json
 import numpy as np
 import pytest
 import torch
+from conftest import Spy, random_images
 from PIL import Image
 
 from splitcam import patterns
@@ -26,19 +27,6 @@ from splitcam.recon.registry import build_method
 from splitcam.training import TrainConfig, train
 
 
-class Spy:
-    """Records the raw image it is given and returns a fixed guess."""
-
-    def __init__(self, name: str, pattern: str = "D") -> None:
-        self.name = name
-        self.pattern = patterns.get(pattern)
-        self.seen: list[torch.Tensor] = []
-
-    def reconstruct(self, raw: torch.Tensor, sigma: float) -> torch.Tensor:
-        self.seen.append(raw.clone())
-        return raw.expand(-1, 3, -1, -1) / 4
-
-
 class Oracle:
     """Knows the answer: PSNR is infinite."""
 
@@ -51,13 +39,8 @@ class Oracle:
         return next(self._answers)
 
 
-def _images(n=2, size=(20, 24)):
-    gen = torch.Generator().manual_seed(0)
-    return [(f"img{i}", torch.rand(3, *size, generator=gen)) for i in range(n)]
-
-
 def test_every_method_sees_the_same_noise():
-    images = _images()
+    images = random_images()
     a, b, c = Spy("a"), Spy("b"), Spy("c", pattern="A")
     evaluate([a, b, c], [("set", images)], [0, 10], progress=False)
     assert len(a.seen) == 4
@@ -75,7 +58,7 @@ def test_every_method_sees_the_same_noise():
 
 
 def test_results_files_and_infinite_psnr(tmp_path):
-    images = _images()
+    images = random_images()
     rows = evaluate(
         [Oracle(images), Spy("spy")], [("set", images)], [0, 5], tmp_path, progress=False
     )
@@ -94,7 +77,7 @@ def test_results_files_and_infinite_psnr(tmp_path):
 
 
 def test_psnr_in_rows_is_the_metric_of_the_clamped_output():
-    images = _images(1)
+    images = random_images(1)
     spy = Spy("spy")
     rows = evaluate([spy], [("set", images)], [0], progress=False)
     guess = (spy.seen[0].expand(-1, 3, -1, -1) / 4)[0].clamp(0, 1)
@@ -124,7 +107,7 @@ def test_tiny_checkpoint_evaluates_reproducibly(tmp_path):
         }
     )
     train(cfg, progress=False)
-    images = _images(2, size=(16, 18))
+    images = random_images(2, size=(16, 18))
     first = evaluate(
         [build_method(tmp_path / "run")], [("s", images)], [0, 10], tmp_path / "e1", progress=False
     )
@@ -151,7 +134,7 @@ def _interrupting(name: str, stop_at: int) -> Spy:
 
 
 def test_interrupted_evaluation_keeps_its_rows_and_resumes(tmp_path):
-    images = _images(3)
+    images = random_images(3)
     whole = evaluate(
         [Spy("a"), Spy("b")], [("set", images)], [0, 10], tmp_path / "whole", progress=False
     )
@@ -178,7 +161,7 @@ def test_interrupted_evaluation_keeps_its_rows_and_resumes(tmp_path):
 
 
 def test_zoom_arguments_are_checked_before_any_work(tmp_path):
-    images = _images(2)
+    images = random_images(2)
     spy = Spy("a")
     for match, zoom in (
         ("not among the images evaluated", "kodim05"),

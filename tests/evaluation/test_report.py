@@ -6,28 +6,10 @@ from __future__ import annotations
 import json
 
 import torch
+from conftest import Spy, random_images
 
-from splitcam import patterns
 from splitcam.cli import main
 from splitcam.evaluation import evaluate
-
-
-class Spy:
-    """Records the raw image it is given and returns a fixed guess."""
-
-    def __init__(self, name: str, pattern: str = "D") -> None:
-        self.name = name
-        self.pattern = patterns.get(pattern)
-        self.seen: list[torch.Tensor] = []
-
-    def reconstruct(self, raw: torch.Tensor, sigma: float) -> torch.Tensor:
-        self.seen.append(raw.clone())
-        return raw.expand(-1, 3, -1, -1) / 4
-
-
-def _images(n=2, size=(20, 24)):
-    gen = torch.Generator().manual_seed(0)
-    return [(f"img{i}", torch.rand(3, *size, generator=gen)) for i in range(n)]
 
 
 def test_report_puts_results_beside_the_paper(tmp_path, capsys):
@@ -36,7 +18,7 @@ def test_report_puts_results_beside_the_paper(tmp_path, capsys):
 
     learned = Spy("learned")
     learned.pattern = LearnableSplitterSensor("A", init="random").to_pattern("A-opt")
-    images = _images(24)
+    images = random_images(24)
     evaluate(
         [Spy("plain-D"), learned, Spy("bayerish", pattern="bayer")],
         [("kodak24", images), ("mcmaster", images[:18])],  # the paper's test sets' sizes
@@ -199,8 +181,6 @@ def test_report_draws_two_learned_patterns_of_one_name_apart(tmp_path):
 
         def reconstruct(self, raw, sigma):
             return raw.expand(-1, 3, -1, -1) / 4
-
-    import torch
 
     gen = torch.Generator().manual_seed(0)
     images = [("a", torch.rand(3, 16, 16, generator=gen))]

@@ -9,7 +9,7 @@ import shutil
 import numpy as np
 import pytest
 import torch
-from PIL import Image
+from conftest import random_images, write_photos
 
 from splitcam import patterns
 from splitcam.cli import main
@@ -28,24 +28,11 @@ from splitcam.recon.closed_form import (
 from splitcam.recon.registry import build_method, build_model, model_domain, trained_domain
 
 
-def _images(n=2, size=(20, 24)):
-    gen = torch.Generator().manual_seed(0)
-    return [(f"img{i}", torch.rand(3, *size, generator=gen)) for i in range(n)]
-
-
-def _write_photos(folder, n=2, size=(40, 44)):
-    folder.mkdir()
-    for name, img in _images(n, size=size):
-        Image.fromarray((img.permute(1, 2, 0).numpy() * 255).astype(np.uint8)).save(
-            folder / f"{name}.png"
-        )
-
-
 def test_pattern_file_named_like_a_builtin_is_not_the_builtin(tmp_path, capsys):
     """`patterns export D` writes a file whose pattern is called D; edited, it is another
     pattern: the LMMSE must use its kernels and the label must say it is the file."""
     photos = tmp_path / "photos"
-    _write_photos(photos, size=(60, 64))
+    write_photos(photos, size=(60, 64))
     mine = tmp_path / "mine.toml"
     assert main(["patterns", "export", "D", "--out", str(mine)]) == 0
     same = build_method("lmmse", pattern=mine)
@@ -92,7 +79,7 @@ def test_pattern_file_named_like_a_builtin_is_not_the_builtin(tmp_path, capsys):
     assert np.array_equal(fitted.statistics.pattern.kernels, kernels)
     builtin = build_method("lmmse", pattern="D", lmmse_train=photos)
     assert builtin.name == "lmmse-D"
-    rows = evaluate([fitted, builtin], [("p", _images(1, (40, 44)))], [0], progress=False)
+    rows = evaluate([fitted, builtin], [("p", random_images(1, (40, 44)))], [0], progress=False)
     assert rows[0].psnr != pytest.approx(rows[1].psnr)
 
 

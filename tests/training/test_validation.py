@@ -8,33 +8,19 @@ import logging
 
 import numpy as np
 import pytest
-import torch
-from conftest import blocky_images, tiny_config
+from conftest import blocky_images, tiny_config, write_photos
 from PIL import Image
 
 from splitcam.cli import main
 from splitcam.training import TrainConfig, train
 
 
-def _images(n=2, size=(20, 24)):
-    gen = torch.Generator().manual_seed(0)
-    return [(f"img{i}", torch.rand(3, *size, generator=gen)) for i in range(n)]
-
-
-def _write_photos(folder, n=2, size=(40, 44)):
-    folder.mkdir()
-    for name, img in _images(n, size=size):
-        Image.fromarray((img.permute(1, 2, 0).numpy() * 255).astype(np.uint8)).save(
-            folder / f"{name}.png"
-        )
-
-
 def test_validation_psnr_equals_what_evaluate_reports(tmp_path):
     """Training validation and `splitcam evaluate` are one protocol: the PSNR a run logs for its
     checkpoint is the PSNR evaluate reports for that checkpoint on the same images and sigmas."""
     train_dir, val_dir = tmp_path / "train", tmp_path / "val"
-    _write_photos(train_dir, n=3, size=(32, 32))
-    _write_photos(val_dir, n=2, size=(36, 40))
+    write_photos(train_dir, n=3, size=(32, 32))
+    write_photos(val_dir, n=2, size=(36, 40))
     cfg = TrainConfig().override(
         {
             "data.train": str(train_dir),
