@@ -360,3 +360,28 @@ def test_resuming_a_finished_run_with_other_settings_records_nothing(tmp_path, c
     assert train(more, resume=True, progress=False).step == 4
     assert json.loads((run / "config.json").read_text())["optim"]["lr"] == 0.5
     assert (run / "changes.jsonl").exists()
+
+
+def test_every_loss_trains_and_logs_the_batch_mse(image_folder, tmp_path):
+    """Whatever the objective, the logged loss is the batch's MSE: the first step's (same
+    batch, same starting weights) is the same for every loss, and each objective moves the
+    weights differently. An unknown loss is refused naming the choices."""
+    from splitcam.training.config import LOSSES, ConfigError
+
+    base = {"optim.steps": 3, "run.log_every": 1, "run.val_every": 1000, "optim.warmup_steps": 0}
+    first, moved = {}, {}
+    for name in LOSSES:
+        train(
+            tiny_config(image_folder, tmp_path / name, **base, **{"optim.loss": name}),
+            progress=False,
+        )
+        first[name] = losses(tmp_path / name)[0]
+        moved[name] = _weights(tmp_path / name)
+    assert all(v == pytest.approx(first["mse"], rel=1e-6) for v in first.values())
+    keys = list(moved["mse"])
+    for a in LOSSES:
+        for b in LOSSES:
+            if a < b:
+                assert any(not torch.equal(moved[a][k], moved[b][k]) for k in keys), (a, b)
+    with pytest.raises(ConfigError, match="charbonnier"):
+        tiny_config(image_folder, tmp_path / "x", **{"optim.loss": "huber"}).validate()

@@ -24,6 +24,7 @@ from . import atomic_path, write_text
 
 __all__ = [
     "CHECKPOINT_NAME",
+    "EMA_PREFIX",
     "Checkpoint",
     "CheckpointError",
     "load",
@@ -37,6 +38,10 @@ __all__ = [
 FORMAT = "splitcam-checkpoint"
 VERSION = 1
 CHECKPOINT_NAME = "checkpoint.safetensors"
+#: The section of a checkpoint that holds the average of the network's weights, when the run
+#: keeps one (``optim.ema``, :mod:`splitcam.training.ema`): ``ema/network.<name>``. Readers that
+#: use a run's network for reconstruction prefer it to the trained ``model/`` weights.
+EMA_PREFIX = "ema"
 
 
 class CheckpointError(ValueError):

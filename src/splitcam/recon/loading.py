@@ -20,7 +20,7 @@ import torch
 from torch import nn
 
 from ..io import weights
-from ..io.checkpoints import CheckpointError, load, load_module, require
+from ..io.checkpoints import EMA_PREFIX, CheckpointError, load, load_module, require
 from ..io.tensorfiles import load_pair, paired_paths
 from ..patterns import Pattern
 from .networks import UniversalReconNet, build_network
@@ -71,7 +71,9 @@ def load_network(path: str | os.PathLike, device: str | torch.device = "cpu") ->
     except (ValueError, KeyError, TypeError) as exc:  # PatternError is a ValueError too
         what = f"its header lacks {exc}" if isinstance(exc, KeyError) else str(exc)
         raise CheckpointError(f"checkpoint {where!r}: {what}") from None
-    load_module(network, loaded, child="network")
+    # A run that keeps an average of its weights (optim.ema) is used by that average.
+    averaged = any(k.startswith(EMA_PREFIX + "/") for k in loaded.tensors)
+    load_module(network, loaded, prefix=EMA_PREFIX if averaged else "model", child="network")
     return LoadedNetwork(network.to(device).eval(), pattern, loaded.meta)
 
 

@@ -29,6 +29,9 @@ from ..io import write_text
 from ..io.domains import DEFAULT_DOMAIN, DOMAINS
 from ..io.paper import PAPER_PATTERNS
 
+#: Training losses (``optim.loss``); :func:`splitcam.training.trainer.training_loss` computes them.
+LOSSES = ("mse", "log_mse", "l1", "charbonnier")
+
 
 class ConfigError(ValueError):
     """A configuration file or override is invalid; the message names the key."""
@@ -170,9 +173,17 @@ class OptimConfig:
     betas: list[float] = _opt([0.9, 0.999], "Adam betas")
     loss: str = _opt(
         "mse",
-        "mse (the paper's) or log_mse: the logarithm of each batch's MSE, which weighs every "
+        "mse (the paper's); log_mse: the logarithm of each batch's MSE, which weighs every "
         "batch by its own error (a PSNR loss): over many patterns, hard ones do not drown the "
-        "rest",
+        "rest; l1 (mean absolute error) or charbonnier (sqrt(e^2 + 1e-6), a smooth l1), which "
+        "weigh small errors, that is fine detail, more than the MSE does",
+        choices=LOSSES,
+    )
+    ema: float | None = _opt(
+        None,
+        "decay of an exponential moving average of the network's weights, which validation, "
+        "checkpoints' readers and exports then use instead of the last step's (e.g. 0.999: "
+        "about the last 1000 steps; none: off; splitcam.training.ema)",
     )
     clip_grad: float | None = _opt(
         None, "clip the global gradient norm to this (none: no clipping)"
@@ -328,8 +339,12 @@ class TrainConfig:
             ),
             (self.optim.warmup_steps >= 0, "optim.warmup_steps must be >= 0"),
             (
-                self.optim.loss in ("mse", "log_mse"),
-                f"optim.loss must be mse or log_mse, got {self.optim.loss!r}",
+                self.optim.loss in LOSSES,
+                f"optim.loss must be one of {', '.join(LOSSES)}, got {self.optim.loss!r}",
+            ),
+            (
+                self.optim.ema is None or 0 < self.optim.ema < 1,
+                f"optim.ema must be in (0, 1) or none, got {self.optim.ema!r}",
             ),
             (
                 self.run.precision in ("auto", "fp32", "bf16"),

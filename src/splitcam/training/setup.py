@@ -30,6 +30,7 @@ from ..recon.networks import build_network
 from . import seeds
 from .config import ConfigError, TrainConfig
 from .distributed import DistInfo, init_distributed
+from .ema import WeightAverage
 from .guard import DivergenceGuard
 from .init_from import continue_point, start_from
 from .state import Run, TrainState, restore
@@ -76,6 +77,7 @@ def prepare(
         build_noise(config, start_step, dist.rank),
         step=start_step,
         start_step=start_step,
+        ema=WeightAverage(system.network, config.optim.ema) if config.optim.ema else None,
     )
     _validation(run, progress)
     if loaded is not None:

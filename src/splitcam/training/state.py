@@ -28,6 +28,7 @@ from . import seeds
 from .checkpoint import load_optimizer, optimizer_tensors
 from .config import TrainConfig
 from .distributed import DistInfo, gather
+from .ema import EMA_PREFIX, WeightAverage
 from .guard import DivergenceGuard
 
 
@@ -84,6 +85,8 @@ class TrainState:
     #: The latest logged values (the training window's and the latest validation's).
     last_metrics: dict[str, float] = field(default_factory=dict)
     timed_out: bool = False
+    #: The average of the network's weights (``optim.ema``), or None.
+    ema: WeightAverage | None = None
 
 
 def restore(state: TrainState, loaded: ckpt_io.Checkpoint, run: Run) -> None:
@@ -98,6 +101,11 @@ def restore(state: TrainState, loaded: ckpt_io.Checkpoint, run: Run) -> None:
     state.step = int(loaded.meta["step"])
     state.train_seconds = float(loaded.meta.get("train_seconds", 0.0))
     restore_rng(loaded, state.sampler, state.noise, run.dist)
+    saved = {k[len("network.") :]: v for k, v in loaded.section(EMA_PREFIX).items()}
+    if state.ema is not None and saved:
+        state.ema.load(saved, int(loaded.meta.get("ema_updates", 0)))
+    elif state.ema is not None:
+        state.ema.reset()  # an average switched on at a resume starts from the weights
     for group, peak in zip(state.optimizer.param_groups, peaks, strict=True):
         group["peak_lr"] = peak
         group["betas"] = tuple(run.config.optim.betas)
@@ -113,6 +121,8 @@ def save_checkpoint(state: TrainState, run: Run) -> None:
     opt_tensors, opt_meta = optimizer_tensors(state.optimizer)
     tensors = {f"model/{k}": v for k, v in state.system.state_dict().items()}
     tensors.update(opt_tensors)
+    if state.ema is not None:
+        tensors.update({f"{EMA_PREFIX}/network.{k}": v for k, v in state.ema.shadow.items()})
     tensors.update(rng)
     ckpt_io.save(run.checkpoint_path, _meta(state, run, opt_meta, replicas), tensors)
     _export_pattern(state.system, run)
@@ -134,6 +144,7 @@ def _meta(
         "world_size": run.dist.world_size,
         "train_seconds": state.train_seconds,
         "lr_scale": state.guard.lr_scale,
+        "ema_updates": state.ema.updates if state.ema is not None else None,
         "device": run.device_label,
         "precision": "bf16" if run.fast else "fp32",
         "train_images": run.train_images,

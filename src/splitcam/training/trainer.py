@@ -52,7 +52,7 @@ from .setup import prepare
 from .state import Run, TrainState, save_checkpoint
 from .validation import validate
 
-__all__ = ["TrainResult", "train"]
+__all__ = ["TrainResult", "train", "training_loss"]
 
 logger = logging.getLogger(__name__)
 
@@ -241,6 +241,8 @@ def _step(state: TrainState, run: Run, model: torch.nn.Module, window: _Window) 
     else:
         state.optimizer.step()
         state.guard.applied(loss, state.system, state.optimizer)
+        if state.ema is not None:
+            state.ema.update()
     state.step += 1
     _count_time(state, run, t0)
     window.add(loss, grad_norm)
@@ -289,7 +291,7 @@ def _forward_backward(
     with autocast:
         pred = model(batch, state.noise)
     loss = F.mse_loss(pred.float(), batch)
-    objective = loss.clamp_min(1e-12).log() if run.config.optim.loss == "log_mse" else loss
+    objective = training_loss(run.config.optim.loss, pred.float(), batch, mse=loss)
     state.optimizer.zero_grad(set_to_none=True)
     objective.backward()
     trainable = [p for group in state.optimizer.param_groups for p in group["params"]]
@@ -298,10 +300,39 @@ def _forward_backward(
     return value, float(torch.nn.utils.clip_grad_norm_(trainable, clip, foreach=True))
 
 
+#: Charbonnier's epsilon: below an error of 1e-3 (a quarter of an 8-bit level) it is quadratic.
+CHARBONNIER_EPS = 1e-3
+
+
+def training_loss(
+    name: str, pred: torch.Tensor, target: torch.Tensor, *, mse: torch.Tensor | None = None
+) -> torch.Tensor:
+    """The objective ``optim.loss`` names (:data:`~splitcam.training.config.LOSSES`).
+
+    Whatever the objective, the logged loss, the training PSNR and the divergence guard use
+    the batch's MSE, so runs with different objectives read on one scale.
+
+    >>> import torch
+    >>> p, t = torch.zeros(1, 3, 2, 2), torch.full((1, 3, 2, 2), 0.5)
+    >>> [round(training_loss(n, p, t).item(), 4) for n in ("mse", "l1", "charbonnier")]
+    [0.25, 0.5, 0.5]
+    """
+    if name in ("mse", "log_mse"):
+        mse = F.mse_loss(pred, target) if mse is None else mse
+        return mse.clamp_min(1e-12).log() if name == "log_mse" else mse
+    if name == "l1":
+        return F.l1_loss(pred, target)
+    if name == "charbonnier":
+        return ((pred - target).square() + CHARBONNIER_EPS**2).sqrt().mean()
+    raise ValueError(f"unknown training loss {name!r}")
+
+
 def _roll_back(state: TrainState, run: Run, loss: float, window: _Window) -> None:
     """A diverged step is not applied: back to weights from before the instability, at a lower
     learning rate."""
     state.guard.roll_back(state.system, state.optimizer)
+    if state.ema is not None:
+        state.ema.reset()
     window.rollbacks += 1
     if run.dist.is_main:
         logger.warning(
@@ -344,13 +375,16 @@ def _log(state: TrainState, run: Run, window: _Window, log: RunLog | None, bar: 
 
 
 def _validate(state: TrainState, run: Run) -> dict[str, float]:
-    return validate(
-        state.system,
-        run.val_images,
-        run.val_levels,
-        run.val_patterns,
-        domain=run.config.data.domain,
-    )
+    """The validation scores, of the averaged weights when the run keeps an average."""
+    averaged = state.ema.applied() if state.ema is not None else contextlib.nullcontext()
+    with averaged:
+        return validate(
+            state.system,
+            run.val_images,
+            run.val_levels,
+            run.val_patterns,
+            domain=run.config.data.domain,
+        )
 
 
 def _show(bar: Any, row: dict[str, float]) -> None:
