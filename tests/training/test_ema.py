@@ -140,3 +140,18 @@ def test_a_roll_back_restarts_the_average(image_folder, tmp_path):
     train(tiny_config(image_folder, tmp_path / "g", **config), progress=False)
     # Steps 1-20 applied, 21 rolled back (not applied, average restarted), 22-25 applied.
     assert ckpt_io.load(tmp_path / "g").meta["ema_updates"] == 4
+
+
+def test_an_exported_model_is_the_average_and_says_so(image_folder, tmp_path):
+    from splitcam.recon.loading import load_model
+    from splitcam.training.models import export_model
+
+    config = {**BASE, "optim.ema": 0.5, "optim.steps": 3, "optim.loss": "l1"}
+    train(tiny_config(image_folder, tmp_path / "r", **config), progress=False)
+    path = export_model(tmp_path / "r", tmp_path / "m", storage="float32")
+    model = load_model(path)
+    saved = _section(tmp_path / "r", "ema")
+    for k, v in model.network.state_dict().items():
+        torch.testing.assert_close(v.float(), saved[f"network.{k}"].float())
+    recipe = json.loads(path.read_text())["provenance"]["segments"][-1]["recipe"]
+    assert (recipe["ema"], recipe["loss"]) == (0.5, "l1")

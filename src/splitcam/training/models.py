@@ -113,6 +113,9 @@ def provenance_of(loaded: ckpt_io.Checkpoint, run_dir: Path | None = None) -> di
             "design_steps": config.get("pattern", {}).get("design_steps"),
             "time_limit_min": run.get("time_limit"),
             "divergence_factor": optim.get("divergence_factor"),
+            "loss": optim.get("loss", "mse"),
+            # the decay of the weight average the model is (None: the last step's weights)
+            "ema": optim.get("ema"),
         },
         # the divergence guard's learning-rate scale at the end (1: it never rolled back)
         "lr_scale": meta.get("lr_scale", 1.0),
