@@ -204,3 +204,15 @@ def test_random_pattern_needs_the_universal_network(tmp_path) -> None:
     config = tiny_config(tmp_path, tmp_path / "run", **{"pattern.name": "random"})
     with pytest.raises(ConfigError, match="--arch universal"):
         config.validate()
+
+
+@pytest.mark.parametrize("name", ["A", "D", "A-opt", "D-opt"])
+def test_the_noise_range_fine_tunings_change_only_the_range_and_budget(name):
+    """experiments/sigma20/X.toml is the border fine-tuning of X (experiments/edges/X.toml)
+    on σ 0-20 for 5000 steps with the weight average on, nothing else."""
+    edges = TrainConfig.from_file(EXPERIMENTS / "edges" / f"{name}.toml")
+    tuned = TrainConfig.from_file(EXPERIMENTS / "sigma20" / f"{name}.toml")
+    changes = {"optim.sigma_max": 20.0, "optim.steps": 5000, "optim.ema": 0.999}
+    assert tuned == edges.override(changes)
+    assert tuned.run.init_from == name
+    tuned.validate()
