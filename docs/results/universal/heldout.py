@@ -26,15 +26,18 @@ from splitcam.data.patches import list_images
 from splitcam.evaluation.protocol import mean_psnr
 from splitcam.recon.loading import load_model, model_names
 from splitcam.recon.networks import serves_any_pattern
-from splitcam.recon.registry import build_method
+from splitcam.recon.registry import build_method, model_domain
 
 SIGMAS = [0.0, 15.0]
 DATA = Path(__file__).resolve().parents[4] / "shared" / "data" / "train"
 
 
 def shipped_for(pattern: patterns.Pattern) -> str | None:
-    """The shipped single-pattern model whose pattern is this one, if any."""
+    """The shipped single-pattern model of sRGB light (these photos' domain) whose pattern is
+    this one, if any (``router-zou-photon`` serves router-zou in linear light only)."""
     for name in model_names():
+        if model_domain(name) != "srgb":
+            continue
         system = load_model(name)
         if not serves_any_pattern(system.network) and system.pattern.equals(pattern):
             return name
