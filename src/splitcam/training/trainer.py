@@ -314,8 +314,8 @@ def training_loss(
 
     >>> import torch
     >>> p, t = torch.zeros(1, 3, 2, 2), torch.full((1, 3, 2, 2), 0.5)
-    >>> [round(training_loss(n, p, t).item(), 4) for n in ("mse", "l1", "charbonnier")]
-    [0.25, 0.5, 0.5]
+    >>> tuple(round(training_loss(n, p, t).item(), 4) for n in ("mse", "l1", "charbonnier"))
+    (0.25, 0.5, 0.5)
     """
     if name in ("mse", "log_mse"):
         mse = F.mse_loss(pred, target) if mse is None else mse
