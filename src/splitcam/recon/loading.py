@@ -72,8 +72,8 @@ def load_network(path: str | os.PathLike, device: str | torch.device = "cpu") ->
         what = f"its header lacks {exc}" if isinstance(exc, KeyError) else str(exc)
         raise CheckpointError(f"checkpoint {where!r}: {what}") from None
     # A run that keeps an average of its weights (optim.ema) is used by that average.
-    averaged = any(k.startswith(EMA_PREFIX + "/") for k in loaded.tensors)
-    load_module(network, loaded, prefix=EMA_PREFIX if averaged else "model", child="network")
+    prefix = EMA_PREFIX if loaded.section(EMA_PREFIX) else "model"
+    load_module(network, loaded, prefix=prefix, child="network")
     return LoadedNetwork(network.to(device).eval(), pattern, loaded.meta)
 
 

@@ -48,6 +48,8 @@ class WeightAverage:
         self.module = module
         self.decay = float(decay)
         self.updates = int(updates)
+        #: The names averaged (the rest of the state, buffers, is copied).
+        self._averaged = {n for n, p in module.named_parameters() if p.is_floating_point()}
         self.shadow: dict[str, torch.Tensor] = {}
         self.reset()
 
@@ -67,9 +69,8 @@ class WeightAverage:
     def update(self) -> None:
         """Fold the module's current weights into the average."""
         d = self.rate()
-        params = {n for n, _ in self.module.named_parameters()}
         for k, v in self.module.state_dict().items():
-            if k in params and v.is_floating_point():
+            if k in self._averaged:
                 self.shadow[k].mul_(d).add_(v.detach().float(), alpha=1 - d)
             else:
                 self.shadow[k].copy_(v)

@@ -101,11 +101,12 @@ def restore(state: TrainState, loaded: ckpt_io.Checkpoint, run: Run) -> None:
     state.step = int(loaded.meta["step"])
     state.train_seconds = float(loaded.meta.get("train_seconds", 0.0))
     restore_rng(loaded, state.sampler, state.noise, run.dist)
-    saved = {k[len("network.") :]: v for k, v in loaded.section(EMA_PREFIX).items()}
-    if state.ema is not None and saved:
-        state.ema.load(saved, int(loaded.meta.get("ema_updates", 0)))
-    elif state.ema is not None:
-        state.ema.reset()  # an average switched on at a resume starts from the weights
+    if state.ema is not None:
+        saved = {k[len("network.") :]: v for k, v in loaded.section(EMA_PREFIX).items()}
+        if saved:
+            state.ema.load(saved, int(loaded.meta.get("ema_updates") or 0))
+        else:  # an average switched on at a resume starts from the restored weights
+            state.ema.reset()
     for group, peak in zip(state.optimizer.param_groups, peaks, strict=True):
         group["peak_lr"] = peak
         group["betas"] = tuple(run.config.optim.betas)

@@ -290,8 +290,9 @@ def _forward_backward(
     )
     with autocast:
         pred = model(batch, state.noise)
-    loss = F.mse_loss(pred.float(), batch)
-    objective = training_loss(run.config.optim.loss, pred.float(), batch, mse=loss)
+    pred = pred.float()
+    loss = F.mse_loss(pred, batch)
+    objective = training_loss(run.config.optim.loss, pred, batch, mse=loss)
     state.optimizer.zero_grad(set_to_none=True)
     objective.backward()
     trainable = [p for group in state.optimizer.param_groups for p in group["params"]]
