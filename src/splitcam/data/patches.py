@@ -27,6 +27,7 @@ __all__ = [
     "ImageCache",
     "PatchSampler",
     "dihedral",
+    "downscale",
     "list_images",
     "load_validation",
 ]
@@ -109,13 +110,16 @@ class ImageCache:
     Args:
         source: A folder (see :func:`list_images`) or a list of image files.
         min_size: Smallest accepted height and width, normally the patch size.
-        max_images: Keep at most this many usable images (the first ones in sorted order).
+        max_images: Keep at most this many usable files (the first ones in sorted order).
         progress: Show a tqdm progress bar while decoding (only for 32 images or more).
+        scales: Keep each image at each of these sizes (factors in ``(0, 1]``, see
+            :func:`downscale`), each copy one more image to draw patches from; a copy smaller
+            than ``min_size`` is left out silently. ``(1.0,)``: the images as they are.
 
     Attributes:
         arrays: The images, each a C-contiguous ``(3, H, W)`` uint8 or uint16 numpy array.
-        names: File name stems, parallel to ``arrays``.
-        paths: Source files, parallel to ``arrays``.
+        names: File name stems, parallel to ``arrays`` (``stem@0.5`` for a copy at half size).
+        paths: Source files, parallel to ``arrays`` (a file once per scale it was kept at).
         skipped: ``(path, reason)`` for every file that was skipped.
         max_value: 255 for uint8 storage, 65535 for uint16.
 
@@ -131,23 +135,29 @@ class ImageCache:
         min_size: int = 64,
         max_images: int | None = None,
         progress: bool = True,
+        scales: Sequence[float] = (1.0,),
     ) -> None:
         if min_size < 1:
             raise ValueError(f"min_size must be positive, got {min_size}")
+        scales = tuple(float(f) for f in scales)
+        if not scales or not all(0 < f <= 1 for f in scales) or len(set(scales)) < len(scales):
+            raise ValueError(f"scales must be distinct factors in (0, 1], got {list(scales)}")
         if max_images is not None and max_images < 1:
             raise ValueError(f"max_images must be positive or None, got {max_images}")
         candidates = _resolve_paths(source)
         where = _describe(candidates, source)
         arrays: list[np.ndarray] = []
         paths: list[Path] = []
+        names: list[str] = []
         skipped: list[tuple[Path, str]] = []
+        kept = 0
         iterator: Iterable[Path] = candidates
         if progress and len(candidates) >= _PROGRESS_MIN_IMAGES:
             from tqdm.auto import tqdm
 
             iterator = tqdm(candidates, desc="decoding images", unit="img", leave=False)
         for path in iterator:
-            if max_images is not None and len(arrays) >= max_images:
+            if max_images is not None and kept >= max_images:
                 break
             try:
                 arr = decode_image(path)
@@ -159,11 +169,17 @@ class ImageCache:
                 skipped.append((path, f"{width}x{height} is smaller than {min_size}x{min_size}"))
                 continue
             # Channel-first right away, so only one image at a time exists in both layouts.
-            arrays.append(np.ascontiguousarray(arr.transpose(2, 0, 1)))
-            paths.append(path)
+            arr = np.ascontiguousarray(arr.transpose(2, 0, 1))
+            kept += 1
+            for factor in scales:
+                copy = downscale(arr, factor)
+                if min(copy.shape[1:]) >= min_size:
+                    arrays.append(copy)
+                    paths.append(path)
+                    names.append(path.stem if factor == 1 else f"{path.stem}@{factor:g}")
         if hasattr(iterator, "close"):
             iterator.close()
-        _warn_skipped(skipped, len(arrays) + len(skipped), where)
+        _warn_skipped(skipped, kept + len(skipped), where)
         if not arrays:
             raise ValueError(f"no usable images in {where}: all {len(skipped)} were skipped")
 
@@ -175,7 +191,7 @@ class ImageCache:
                     arrays[i] = arr.astype(np.uint16) * np.uint16(257)
         self.arrays: list[np.ndarray] = arrays
         self.paths: list[Path] = paths
-        self.names: list[str] = [p.stem for p in paths]
+        self.names: list[str] = names
         self.skipped: list[tuple[Path, str]] = skipped
         self.sizes = torch.tensor([a.shape[1:] for a in self.arrays], dtype=torch.int64)
         """``(N, 2)`` int64 tensor of (height, width) per image."""
@@ -201,6 +217,33 @@ class ImageCache:
         """
         values = np.divide(self.arrays[index], np.float32(self.max_value), dtype=np.float32)
         return torch.from_numpy(values)
+
+
+def downscale(image: np.ndarray, factor: float) -> np.ndarray:
+    """An integer image made smaller by ``factor``, antialiased, in its own dtype.
+
+    Resampled with torch's antialiased bicubic filter (Pillow's, for 8-bit images; Pillow itself
+    does not resample 16-bit colour), rounded and clipped back to the integer range, so 8- and
+    16-bit images take the same path. The values are resampled as stored (sRGB for the usual
+    8-bit photo), like a camera's own downscaled JPEG.
+
+    Args:
+        image: ``(3, H, W)`` uint8 or uint16.
+        factor: In ``(0, 1]``; each side becomes ``max(1, round(side * factor))``.
+
+    Returns:
+        ``(3, h, w)`` C-contiguous array of the same dtype (``image`` itself for factor 1).
+    """
+    if not 0 < factor <= 1:
+        raise ValueError(f"downscale factor must be in (0, 1], got {factor}")
+    if factor == 1:
+        return image
+    height, width = image.shape[1:]
+    size = (max(1, round(height * factor)), max(1, round(width * factor)))
+    x = torch.from_numpy(image.astype(np.float32))[None]
+    y = torch.nn.functional.interpolate(x, size=size, mode="bicubic", antialias=True)[0]
+    top = float(np.iinfo(image.dtype).max)
+    return np.ascontiguousarray(y.round().clamp(0, top).numpy().astype(image.dtype))
 
 
 def dihedral(patch: np.ndarray, code: int) -> np.ndarray:

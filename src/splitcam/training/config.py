@@ -140,6 +140,12 @@ class DataConfig:
         "docs/results/convergence/5min_lr.md)",
     )
     max_images: int | None = _opt(None, "use at most this many training images")
+    scales: list[float] = _opt(
+        [1.0],
+        "train on each image at each of these sizes (factors in (0, 1], antialiased; e.g. "
+        "1 0.5: the photos and copies at half size, which pack more detail into a patch; "
+        "splitcam.data.downscale)",
+    )
     domain: str = _opt(
         DEFAULT_DOMAIN,
         "light domain (SPEC section 13): srgb (the paper's: the 8-bit values / 255 are the "
@@ -360,6 +366,12 @@ class TrainConfig:
                 f"data.domain must be one of {', '.join(DOMAINS)}, got {self.data.domain!r}",
             ),
             (self.data.batch_size >= 1, "data.batch_size must be >= 1"),
+            (
+                bool(self.data.scales)
+                and all(0 < f <= 1 for f in self.data.scales)
+                and len(set(self.data.scales)) == len(self.data.scales),
+                f"data.scales must be distinct factors in (0, 1], got {self.data.scales}",
+            ),
             (
                 0 <= self.data.partial_periods <= 1,
                 f"data.partial_periods must be in [0, 1], got {self.data.partial_periods}",

@@ -295,6 +295,7 @@ def _patch_sampler(
         min_size=config.data.patch_size,
         max_images=config.data.max_images,
         progress=progress and run.dist.is_main,
+        scales=config.data.scales,
     )
     return PatchSampler(
         cache,
