@@ -12,7 +12,13 @@ from conftest import SHARED_DATA
 from PIL import Image
 
 from splitcam.data.images import read_image, write_image
-from splitcam.data.patches import ImageCache, PatchSampler, list_images, load_validation
+from splitcam.data.patches import (
+    ImageCache,
+    PatchSampler,
+    downscale,
+    list_images,
+    load_validation,
+)
 
 TRAIN = SHARED_DATA / "train"
 
@@ -127,6 +133,47 @@ def test_cache_nothing_usable(tmp_path: Path) -> None:
     (tmp_path / "bad.jpg").write_bytes(b"\x00" * 100)
     with pytest.raises(ValueError, match="no usable images"):
         _cache(tmp_path)
+
+
+def test_downscale_is_pillows_antialiased_bicubic() -> None:
+    # An independent resampler: Pillow's own bicubic (antialiased when reducing) on 8-bit RGB.
+    image = _rgb8(45, 61, 11)
+    smooth = np.asarray(Image.fromarray(image).resize((61, 45), Image.Resampling.BOX))
+    for arr in (image, smooth):
+        ours = downscale(np.ascontiguousarray(arr.transpose(2, 0, 1)), 0.5)
+        pillow = np.asarray(Image.fromarray(arr).resize((30, 22), Image.Resampling.BICUBIC))
+        assert ours.dtype == np.uint8 and ours.shape == (3, 22, 30) and ours.flags.c_contiguous
+        assert np.abs(ours.transpose(1, 2, 0).astype(int) - pillow).max() <= 1
+
+
+def test_downscale_keeps_flat_images_flat_and_16_bit_range() -> None:
+    flat = np.full((3, 33, 20), 65535, np.uint16)
+    small = downscale(flat, 0.3)
+    assert small.dtype == np.uint16 and small.shape == (3, 10, 6)
+    assert (small == 65535).all()  # no overshoot past the integer range
+    image = _rgb8(8, 8, 3).transpose(2, 0, 1)
+    assert downscale(image, 1.0) is image
+    for bad in (0.0, 1.5, -0.5):
+        with pytest.raises(ValueError, match="factor"):
+            downscale(image, bad)
+
+
+def test_cache_keeps_each_image_at_each_scale(tmp_path: Path) -> None:
+    _save8(tmp_path / "big.png", _rgb8(80, 100, 0))
+    _save8(tmp_path / "small.png", _rgb8(40, 60, 1))
+    cache = ImageCache(tmp_path, min_size=32, scales=(1.0, 0.5), progress=False)
+    # small.png at half size (20x30) is below min_size: left out without a warning.
+    assert cache.names == ["big", "big@0.5", "small"]
+    assert cache.sizes.tolist() == [[80, 100], [40, 50], [40, 60]]
+    assert cache.paths == [tmp_path / "big.png"] * 2 + [tmp_path / "small.png"]
+    expected = downscale(cache.arrays[0], 0.5)
+    assert np.array_equal(cache.arrays[1], expected)
+    # max_images counts files, not copies.
+    first = _cache(tmp_path, min_size=32, scales=(1.0, 0.5), max_images=1)
+    assert first.names == ["big", "big@0.5"]
+    for bad in ((), (1.0, 1.0), (0.0,), (2.0,)):
+        with pytest.raises(ValueError, match="scales"):
+            ImageCache(tmp_path, scales=bad)
 
 
 def _coordinate_image(height: int, width: int, offset: int) -> np.ndarray:

@@ -194,6 +194,9 @@ def test_config_files_and_overrides(tmp_path, image_folder):
             TrainConfig.from_file(toml)
     with pytest.raises(ConfigError, match="pattern.init must be support, exact or random"):
         TrainConfig().override({"pattern.init": "zeros"}).validate()
+    for scales in ([], [1.0, 1.0], [0.0], [1.5]):
+        with pytest.raises(ConfigError, match="data.scales must be distinct factors"):
+            TrainConfig().override({"data.scales": scales}).validate()
     with pytest.raises(ConfigError, match="no training data"):
         train(TrainConfig().override({"run.out": str(tmp_path / "x")}), progress=False)
 

@@ -18,7 +18,7 @@ from splitcam.physics.noise import Exposure
 from splitcam.recon.closed_form import (
     closed_form_lmmse,
 )
-from splitcam.training import TrainConfig, load_system, train
+from splitcam.training import TrainConfig, load_system, setup, train
 from splitcam.training.validation import val_images
 
 
@@ -90,6 +90,35 @@ def test_partial_period_batches_train_and_resume_exactly(image_folder, tmp_path,
     )
     train(tiny_config(image_folder, tmp_path / "split", **changes), resume=True, progress=False)
     assert losses(tmp_path / "split") == losses(tmp_path / "full")
+
+
+def test_smaller_copies_of_the_photos_train_and_resume_exactly(image_folder, tmp_path, monkeypatch):
+    """``data.scales`` adds each training photo at each smaller size to the patches' pool; the
+    run still counts photos, and a resumed run repeats the uninterrupted one."""
+    caches = []
+    original = setup.ImageCache
+
+    def spy(*args, **kwargs):
+        caches.append(original(*args, **kwargs))
+        return caches[-1]
+
+    monkeypatch.setattr(setup, "ImageCache", spy)
+    changes = {"optim.schedule": "constant", "data.scales": [1.0, 0.5]}
+    train(tiny_config(image_folder, tmp_path / "full", **changes), progress=False)
+    cache = caches[0]
+    photos = sorted(p.stem for p in image_folder.iterdir())[:-2]  # the last 2: validation
+    assert cache.names == [n for p in photos for n in (p, f"{p}@0.5")]
+    assert cache.sizes.tolist() == [[48, 48], [24, 24]] * len(photos)
+    assert ckpt_io.load(tmp_path / "full").meta["train_images"] == len(photos)
+    train(
+        tiny_config(image_folder, tmp_path / "split", **{**changes, "optim.steps": 3}),
+        progress=False,
+    )
+    train(tiny_config(image_folder, tmp_path / "split", **changes), resume=True, progress=False)
+    assert losses(tmp_path / "split") == losses(tmp_path / "full")
+    plain = tiny_config(image_folder, tmp_path / "plain", **{"optim.schedule": "constant"})
+    train(plain, progress=False)
+    assert losses(tmp_path / "plain") != losses(tmp_path / "full")
 
 
 def test_schedule_survives_a_resume(image_folder, tmp_path):

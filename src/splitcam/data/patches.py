@@ -95,6 +95,20 @@ def _describe(paths: Sequence[Path], source: Any) -> str:
     return f"'{parents.pop()}'" if len(parents) == 1 else "the given files"
 
 
+def _check_cache_args(
+    min_size: int, max_images: int | None, scales: Sequence[float]
+) -> tuple[float, ...]:
+    """:class:`ImageCache`'s arguments checked; its scales as a tuple of floats."""
+    if min_size < 1:
+        raise ValueError(f"min_size must be positive, got {min_size}")
+    if max_images is not None and max_images < 1:
+        raise ValueError(f"max_images must be positive or None, got {max_images}")
+    factors = tuple(float(f) for f in scales)
+    if not factors or not all(0 < f <= 1 for f in factors) or len(set(factors)) < len(factors):
+        raise ValueError(f"scales must be distinct factors in (0, 1], got {list(scales)}")
+    return factors
+
+
 class ImageCache:
     """Every usable image of a folder, decoded once and kept in memory as integers.
 
@@ -137,13 +151,7 @@ class ImageCache:
         progress: bool = True,
         scales: Sequence[float] = (1.0,),
     ) -> None:
-        if min_size < 1:
-            raise ValueError(f"min_size must be positive, got {min_size}")
-        scales = tuple(float(f) for f in scales)
-        if not scales or not all(0 < f <= 1 for f in scales) or len(set(scales)) < len(scales):
-            raise ValueError(f"scales must be distinct factors in (0, 1], got {list(scales)}")
-        if max_images is not None and max_images < 1:
-            raise ValueError(f"max_images must be positive or None, got {max_images}")
+        scales = _check_cache_args(min_size, max_images, scales)
         candidates = _resolve_paths(source)
         where = _describe(candidates, source)
         arrays: list[np.ndarray] = []
