@@ -219,3 +219,14 @@ def test_the_noise_range_fine_tunings_change_only_the_range_and_budget(name):
     assert tuned == edges.override(changes)
     assert tuned.run.init_from == name
     tuned.validate()
+
+
+@pytest.mark.parametrize("name", ["A", "D", "A-opt", "D-opt"])
+def test_the_half_size_fine_tunings_add_only_the_copies_and_a_budget(name):
+    """experiments/scales/X.toml is experiments/sigma20/X.toml with copies at half size, for
+    3000 steps, from the shipped X."""
+    sigma20 = TrainConfig.from_file(EXPERIMENTS / "sigma20" / f"{name}.toml")
+    tuned = TrainConfig.from_file(EXPERIMENTS / "scales" / f"{name}.toml")
+    assert tuned == sigma20.override({"data.scales": [1.0, 0.5], "optim.steps": 3000})
+    assert tuned.run.init_from == name
+    tuned.validate()
