@@ -19,6 +19,7 @@ from splitcam.recon.closed_form import (
     closed_form_lmmse,
 )
 from splitcam.training import TrainConfig, load_system, setup, train
+from splitcam.training.models import export_model
 from splitcam.training.validation import val_images
 
 
@@ -110,6 +111,9 @@ def test_smaller_copies_of_the_photos_train_and_resume_exactly(image_folder, tmp
     assert cache.names == [n for p in photos for n in (p, f"{p}@0.5")]
     assert cache.sizes.tolist() == [[48, 48], [24, 24]] * len(photos)
     assert ckpt_io.load(tmp_path / "full").meta["train_images"] == len(photos)
+    exported = export_model(tmp_path / "full", tmp_path / "m", storage="float32")
+    data = json.loads(exported.read_text())["provenance"]["segments"][-1]["data"]
+    assert (data["images"], data["scales"]) == (len(photos), [1.0, 0.5])
     train(
         tiny_config(image_folder, tmp_path / "split", **{**changes, "optim.steps": 3}),
         progress=False,

@@ -101,6 +101,8 @@ def provenance_of(loaded: ckpt_io.Checkpoint, run_dir: Path | None = None) -> di
         "data": {
             "train": Path(str(data.get("train", ""))).name,
             "images": meta.get("train_images"),
+            # the sizes each photo was trained at (1: as it is; splitcam.data.downscale)
+            "scales": data.get("scales", [1.0]),
         },
         "recipe": {
             "arch": config.get("network", {}).get("arch"),
