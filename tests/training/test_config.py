@@ -230,3 +230,19 @@ def test_the_half_size_fine_tunings_add_only_the_copies_and_a_budget(name):
     assert tuned == sigma20.override({"data.scales": [1.0, 0.5], "optim.steps": 3000})
     assert tuned.run.init_from == name
     tuned.validate()
+
+
+def test_the_random_start_half_size_fine_tuning_is_its_border_recipe_on_sigma_0_20():
+    """experiments/scales/D-opt-random.toml: the border fine-tuning of D-opt-random with σ 0-20,
+    the weight average and copies at half size, for 3000 steps, from the shipped model."""
+    edges = TrainConfig.from_file(EXPERIMENTS / "edges" / "D-opt-random.toml")
+    tuned = TrainConfig.from_file(EXPERIMENTS / "scales" / "D-opt-random.toml")
+    changes = {
+        "optim.sigma_max": 20.0,
+        "optim.ema": 0.999,
+        "optim.steps": 3000,
+        "data.scales": [1.0, 0.5],
+    }
+    assert tuned == edges.override(changes)
+    assert tuned.run.init_from == "D-opt-random"
+    tuned.validate()
