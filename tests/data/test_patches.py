@@ -171,6 +171,10 @@ def test_cache_keeps_each_image_at_each_scale(tmp_path: Path) -> None:
     # max_images counts files, not copies.
     first = _cache(tmp_path, min_size=32, scales=(1.0, 0.5), max_images=1)
     assert first.names == ["big", "big@0.5"]
+    # At half size only, small.png has no copy left: skipped, and said so.
+    with pytest.warns(UserWarning, match=r"small\.png \(smaller than 32x32 at every scale\)"):
+        halves = ImageCache(tmp_path, min_size=32, scales=(0.5,), progress=False)
+    assert halves.names == ["big@0.5"]
     for bad in ((), (1.0, 1.0), (0.0,), (2.0,)):
         with pytest.raises(ValueError, match="scales"):
             ImageCache(tmp_path, scales=bad)

@@ -109,6 +109,15 @@ def _check_cache_args(
     return factors
 
 
+def _copies(
+    image: np.ndarray, scales: tuple[float, ...], min_size: int
+) -> list[tuple[float, np.ndarray]]:
+    """``(factor, image at that size)`` for each of ``scales`` at which both sides are still at
+    least ``min_size``."""
+    copies = [(factor, downscale(image, factor)) for factor in scales]
+    return [(factor, copy) for factor, copy in copies if min(copy.shape[1:]) >= min_size]
+
+
 class ImageCache:
     """Every usable image of a folder, decoded once and kept in memory as integers.
 
@@ -128,7 +137,8 @@ class ImageCache:
         progress: Show a tqdm progress bar while decoding (only for 32 images or more).
         scales: Keep each image at each of these sizes (factors in ``(0, 1]``, see
             :func:`downscale`), each copy one more image to draw patches from; a copy smaller
-            than ``min_size`` is left out silently. ``(1.0,)``: the images as they are.
+            than ``min_size`` is left out silently, a file with no copy left is skipped.
+            ``(1.0,)``: the images as they are.
 
     Attributes:
         arrays: The images, each a C-contiguous ``(3, H, W)`` uint8 or uint16 numpy array.
@@ -177,14 +187,15 @@ class ImageCache:
                 skipped.append((path, f"{width}x{height} is smaller than {min_size}x{min_size}"))
                 continue
             # Channel-first right away, so only one image at a time exists in both layouts.
-            arr = np.ascontiguousarray(arr.transpose(2, 0, 1))
+            copies = _copies(np.ascontiguousarray(arr.transpose(2, 0, 1)), scales, min_size)
+            if not copies:
+                skipped.append((path, f"smaller than {min_size}x{min_size} at every scale"))
+                continue
             kept += 1
-            for factor in scales:
-                copy = downscale(arr, factor)
-                if min(copy.shape[1:]) >= min_size:
-                    arrays.append(copy)
-                    paths.append(path)
-                    names.append(path.stem if factor == 1 else f"{path.stem}@{factor:g}")
+            for factor, copy in copies:
+                arrays.append(copy)
+                paths.append(path)
+                names.append(path.stem if factor == 1 else f"{path.stem}@{factor:g}")
         if hasattr(iterator, "close"):
             iterator.close()
         _warn_skipped(skipped, kept + len(skipped), where)
