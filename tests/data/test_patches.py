@@ -151,6 +151,13 @@ def test_downscale_keeps_flat_images_flat_and_16_bit_range() -> None:
     small = downscale(flat, 0.3)
     assert small.dtype == np.uint16 and small.shape == (3, 10, 6)
     assert (small == 65535).all()  # no overshoot past the integer range
+    # A sharp step: bicubic overshoots past both ends of the range there, which must be clipped,
+    # not wrapped round by the integer cast (the columns would then stop rising).
+    step = np.zeros((3, 16, 40), np.uint16)
+    step[..., 20:] = 65535
+    rows = downscale(step, 0.5).astype(int)
+    assert rows.min() == 0 and rows.max() == 65535
+    assert (np.diff(rows, axis=-1) >= 0).all()
     image = _rgb8(8, 8, 3).transpose(2, 0, 1)
     assert downscale(image, 1.0) is image
     for bad in (0.0, 1.5, -0.5):
@@ -161,11 +168,14 @@ def test_downscale_keeps_flat_images_flat_and_16_bit_range() -> None:
 def test_cache_keeps_each_image_at_each_scale(tmp_path: Path) -> None:
     _save8(tmp_path / "big.png", _rgb8(80, 100, 0))
     _save8(tmp_path / "small.png", _rgb8(40, 60, 1))
-    cache = ImageCache(tmp_path, min_size=32, scales=(1.0, 0.5), progress=False)
     # small.png at half size (20x30) is below min_size: left out without a warning.
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        cache = ImageCache(tmp_path, min_size=32, scales=(1.0, 0.5), progress=False)
     assert cache.names == ["big", "big@0.5", "small"]
     assert cache.sizes.tolist() == [[80, 100], [40, 50], [40, 60]]
     assert cache.paths == [tmp_path / "big.png"] * 2 + [tmp_path / "small.png"]
+    assert (len(cache), cache.files) == (3, 2)
     expected = downscale(cache.arrays[0], 0.5)
     assert np.array_equal(cache.arrays[1], expected)
     # max_images counts files, not copies.

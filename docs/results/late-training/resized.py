@@ -1,5 +1,6 @@
-"""The 8 validation photos of every training run (the first 8 of the 32 held out by name) as
-PNG files at full size and at half size, for `splitcam evaluate --datasets`.
+"""The validation photos of a training run on the defaults (its held-out split, the first
+``data.val_max_images`` of it: 8 BSDS photos) as PNG files at full size and at half size, for
+`splitcam evaluate --datasets`.
 
     python docs/results/late-training/resized.py ../shared/data/train runs/val
     # writes runs/val/full/*.png and runs/val/half/*.png
@@ -13,21 +14,22 @@ from pathlib import Path
 import numpy as np
 from PIL import Image
 
-from splitcam.data.images import decode_image
-from splitcam.data.patches import downscale, list_images
+from splitcam.data.patches import ImageCache
+from splitcam.training import TrainConfig
+from splitcam.training.validation import held_out
 
 parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
 parser.add_argument("train", help="the training folder")
 parser.add_argument("out", help="folder for full/ and half/")
 args = parser.parse_args()
 
-
-photos = list_images(args.train)[-32:-24]
-for name, factor in (("full", 1.0), ("half", 0.5)):
-    folder = Path(args.out) / name
+config = TrainConfig().override({"data.train": args.train})
+photos = held_out(config)[: config.data.val_max_images]
+# The cache keeps each photo at each size, named stem and stem@0.5 (splitcam.data.downscale).
+cache = ImageCache(photos, min_size=1, scales=(1.0, 0.5), progress=False)
+for name, image in zip(cache.names, cache.arrays, strict=True):
+    stem, half = name.split("@")[0], "@" in name
+    folder = Path(args.out) / ("half" if half else "full")
     folder.mkdir(parents=True, exist_ok=True)
-    for path in photos:
-        image = np.ascontiguousarray(decode_image(path).transpose(2, 0, 1))
-        small = downscale(image, factor).transpose(1, 2, 0)
-        Image.fromarray(np.ascontiguousarray(small)).save(folder / f"{path.stem}.png")
-print(f"{len(photos)} photos at full and half size in {args.out}")
+    Image.fromarray(np.ascontiguousarray(image.transpose(1, 2, 0))).save(folder / f"{stem}.png")
+print(f"{cache.files} photos at full and half size in {args.out}")

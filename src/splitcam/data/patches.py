@@ -22,6 +22,7 @@ import numpy as np
 import torch
 
 from .images import IMAGE_SUFFIXES, ImageReadError, decode_image
+from .scales import valid_scales
 
 __all__ = [
     "ImageCache",
@@ -103,10 +104,9 @@ def _check_cache_args(
         raise ValueError(f"min_size must be positive, got {min_size}")
     if max_images is not None and max_images < 1:
         raise ValueError(f"max_images must be positive or None, got {max_images}")
-    factors = tuple(float(f) for f in scales)
-    if not factors or not all(0 < f <= 1 for f in factors) or len(set(factors)) < len(factors):
+    if not valid_scales(scales):
         raise ValueError(f"scales must be distinct factors in (0, 1], got {list(scales)}")
-    return factors
+    return tuple(float(f) for f in scales)
 
 
 def _copies(
@@ -211,6 +211,8 @@ class ImageCache:
         self.arrays: list[np.ndarray] = arrays
         self.paths: list[Path] = paths
         self.names: list[str] = names
+        self.files: int = kept
+        """Number of files the images came from (``len(self)`` counts each copy at each scale)."""
         self.skipped: list[tuple[Path, str]] = skipped
         self.sizes = torch.tensor([a.shape[1:] for a in self.arrays], dtype=torch.int64)
         """``(N, 2)`` int64 tensor of (height, width) per image."""

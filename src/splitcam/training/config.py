@@ -25,6 +25,7 @@ else:  # pragma: no cover
     import tomli as tomllib
 
 
+from ..data.scales import valid_scales
 from ..io import write_text
 from ..io.domains import DEFAULT_DOMAIN, DOMAINS
 from ..io.paper import PAPER_PATTERNS
@@ -367,9 +368,7 @@ class TrainConfig:
             ),
             (self.data.batch_size >= 1, "data.batch_size must be >= 1"),
             (
-                bool(self.data.scales)
-                and all(0 < f <= 1 for f in self.data.scales)
-                and len(set(self.data.scales)) == len(self.data.scales),
+                valid_scales(self.data.scales),
                 f"data.scales must be distinct factors in (0, 1], got {self.data.scales}",
             ),
             (

@@ -68,7 +68,7 @@ def prepare(
     optimizer = build_optimizer(config, system)
     run.init_from, start_step, lr_scale = _origin(config, system, loaded)
     sampler = _patch_sampler(run, source, start_step, system, progress)
-    run.train_images = len(set(sampler.cache.paths))  # files, not their copies at other scales
+    run.train_images = sampler.cache.files
     state = TrainState(
         system,
         optimizer,
