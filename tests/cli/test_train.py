@@ -208,6 +208,29 @@ def test_fine_tuning_from_a_universal_model(tiny_universal, tmp_path, capsys):
     assert fine_tuning("D", {}) == {}  # a network of one pattern implies nothing
 
 
+def test_a_config_file_keeps_its_budget_and_rate_when_it_starts_from_a_universal_model(
+    tiny_universal, tmp_path
+):
+    """The settings implied by `--init-from universal` give way to the --config file, as the
+    defaults do (experiments/gpu/universal.toml sets its own): they once overrode it with the
+    10-minute budget and the fine-tuning rate."""
+    from splitcam.cli import main
+
+    model, data = tiny_universal
+    config = tmp_path / "mine.toml"
+    config.write_text(
+        f'[pattern]\nname = "D"\n[optim]\nlr = 1e-3\n'
+        f"[run]\ntime_limit = 0.004\ninit_from = {json.dumps(str(model))}\n"
+    )
+    run = tmp_path / "ft"
+    tiny = ["--val-split", "2", "--val-images", "1", "--patch-size", "16", "--batch-size", "2"]
+    args = ["train", "--config", str(config), "--data", str(data), *tiny]
+    assert main([*args, "--out", str(run), "--quiet"]) == 0
+    saved = json.loads((run / "config.json").read_text())
+    assert saved["network"]["arch"] == "universal"  # still implied by the model
+    assert saved["run"]["time_limit"] == 0.004 and saved["optim"]["lr"] == 1e-3
+
+
 def test_a_run_that_diverges_says_so_and_fails(tmp_path, capsys):
     """`--lr 100` used to end at a loss of 1e19 and report "finished" with exit 0."""
 

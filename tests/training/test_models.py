@@ -74,10 +74,14 @@ def test_export_is_byte_for_byte_repeatable(trained_run, tmp_path):
 
 def test_provenance_records_each_thread_count_of_a_resumed_run(run_images, tmp_path):
     """A run trained on 1 thread, then resumed on 2: the exported provenance says both, from the
-    run's changes.jsonl (the checkpoint alone only knows the last count)."""
+    run's changes.jsonl (the checkpoint alone only knows the last count). Threads are a CPU's:
+    the runs are on the CPU also where a GPU is visible."""
+    cpu = {"run.device": "cpu"}
     out = tmp_path / "t"
-    train(small_config(run_images, out, **{"optim.steps": 2, "run.threads": 1}), progress=False)
-    config = small_config(run_images, out, **{"optim.steps": 4, "run.threads": 2})
+    train(
+        small_config(run_images, out, **{**cpu, "optim.steps": 2, "run.threads": 1}), progress=False
+    )
+    config = small_config(run_images, out, **{**cpu, "optim.steps": 4, "run.threads": 2})
     train(config, resume=True, progress=False)
     meta = json.loads(export_model(out, tmp_path / "m", name="m").with_suffix(".json").read_text())
     segment = meta["provenance"]["segments"][-1]
@@ -87,6 +91,9 @@ def test_provenance_records_each_thread_count_of_a_resumed_run(run_images, tmp_p
     assert meta["provenance"]["total_steps"] == 4
     # One thread count all along: said once, in the singular.
     once = tmp_path / "once"
-    train(small_config(run_images, once, **{"optim.steps": 2, "run.threads": 1}), progress=False)
+    train(
+        small_config(run_images, once, **{**cpu, "optim.steps": 2, "run.threads": 1}),
+        progress=False,
+    )
     meta = json.loads(export_model(once, tmp_path / "o").read_text())
     assert meta["provenance"]["segments"][-1]["device"].endswith("; 1 thread)")

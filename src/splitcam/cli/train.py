@@ -15,7 +15,10 @@ FINE_TUNE_LR = 3e-4
 def fine_tuning(init_from: str, overrides: dict) -> dict:
     """Settings implied by ``--init-from`` a network for any pattern (``universal``) when
     ``--arch`` is left out: its architecture, unless ``--steps`` or ``--time-limit`` is given a
-    budget of :data:`FINE_TUNE_MINUTES`, and unless ``--lr`` is given :data:`FINE_TUNE_LR`."""
+    budget of :data:`FINE_TUNE_MINUTES`, and unless ``--lr`` is given :data:`FINE_TUNE_LR`.
+
+    ``overrides`` holds the dotted keys set by flags and by the ``--config`` file: what either
+    sets is kept (experiments/gpu/universal.toml sets its own rate and time limit)."""
     from ..training.init_from import source_network
 
     network = source_network(init_from)
@@ -32,6 +35,17 @@ def fine_tuning(init_from: str, overrides: dict) -> dict:
     if "optim.lr" not in overrides:
         implied["optim.lr"] = FINE_TUNE_LR
     return implied
+
+
+def _dotted(data: dict, prefix: str = "") -> dict:
+    """A configuration file's sections as dotted keys (``{"optim": {"lr": 1}}`` -> ``optim.lr``)."""
+    out = {}
+    for key, value in data.items():
+        if isinstance(value, dict):
+            out.update(_dotted(value, f"{prefix}{key}."))
+        else:
+            out[f"{prefix}{key}"] = value
+    return out
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -63,7 +77,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from ..training import TrainConfig, train
-    from ..training.config import train_flags
+    from ..training.config import read_config_file, train_flags
     from ..training.rundir import resume_config
     from ..training.sweep import STOPPED
 
@@ -85,8 +99,9 @@ def run(args: argparse.Namespace) -> int:
         flags = ", ".join("--" + k.split(".", 1)[1].replace("_", "-") for k in photon_only)
         raise ValueError(f"{flags}: settings of the photon model; add --noise photon")
     init_from = overrides.get("run.init_from", config.run.init_from)
-    if not args.resume and init_from and "network.arch" not in overrides:
-        overrides.update(fine_tuning(init_from, overrides))
+    given = {**_dotted(read_config_file(args.config)), **overrides} if args.config else overrides
+    if not args.resume and init_from and "network.arch" not in given:
+        overrides.update(fine_tuning(init_from, given))
     config = config.override(overrides)
     # Under torchrun, train() also ends the process group, the same way on every rank.
     result = train(config, resume=args.resume, progress=not args.quiet)

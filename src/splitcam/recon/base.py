@@ -33,6 +33,7 @@ __all__ = [
     "check_sigma",
     "fast_precision",
     "method_domain",
+    "strict_float32",
 ]
 
 #: Network precision settings: ``auto`` (bfloat16 + channels-last where the hardware runs it
@@ -72,6 +73,15 @@ def fast_precision(precision: str, device: torch.device | str) -> bool:
     if device.type == "cuda":
         return bool(torch.cuda.is_available() and torch.cuda.is_bf16_supported())
     return device.type == "cpu" and _cpu_has_native_bf16()
+
+
+def strict_float32(device: torch.device | str) -> None:
+    """Make float32 on a CUDA ``device`` full float32: PyTorch lets cuDNN convolutions use
+    TensorFloat-32 (a 10-bit mantissa) by default, so a network asked to run in ``fp32`` there
+    would not be. Process-wide (the backends' own switches); nothing changes on a CPU."""
+    if torch.device(device).type == "cuda":
+        torch.backends.cudnn.allow_tf32 = False
+        torch.backends.cuda.matmul.allow_tf32 = False
 
 
 @runtime_checkable
@@ -160,6 +170,8 @@ class NetworkReconstructor:
 
         check_level(sigma)
         fast = fast_precision(self.precision, raw.device)
+        if not fast:
+            strict_float32(raw.device)
         return reconstruct(
             self.network,
             raw,

@@ -83,7 +83,9 @@ def _start_pattern(
         exact = LearnableSplitterSensor(source.pattern, init="exact")
         with torch.no_grad():
             own.logits.copy_(exact.logits)
-    elif not torch.allclose(own.pixel_kernels().detach().double(), kernels.double(), atol=1e-6):
+    elif not torch.allclose(
+        own.pixel_kernels().detach().cpu().double(), kernels.double(), atol=1e-6
+    ):
         # Another pattern of the same period: what the network learnt (denoising, detail,
         # colour) is mostly not specific to the pattern, so it is a head start (the network
         # config, period included, matched by the caller).

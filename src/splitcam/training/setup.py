@@ -24,7 +24,7 @@ from ..patterns.random import PatternMix
 from ..physics.noise import GaussianNoise, PhotonNoise
 from ..physics.sensor import LearnableSplitterSensor, SplitterSensor, SwitchingSensor
 from ..physics.system import ImagingSystem
-from ..recon.base import fast_precision
+from ..recon.base import fast_precision, strict_float32
 from ..recon.closed_form import shipped_image_statistics
 from ..recon.networks import build_network
 from . import seeds
@@ -62,6 +62,8 @@ def prepare(
         start_pattern=system.sensor._meta.to_dict(),
         mix=pattern_mix(config),
     )
+    if not run.fast:
+        strict_float32(device)
     if run.mix is not None:
         run.val_patterns = [patterns.get(p) for p in config.pattern.val_patterns]
     _speed_up(system, run)
