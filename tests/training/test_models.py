@@ -97,3 +97,25 @@ def test_provenance_records_each_thread_count_of_a_resumed_run(run_images, tmp_p
     )
     meta = json.loads(export_model(once, tmp_path / "o").read_text())
     assert meta["provenance"]["segments"][-1]["device"].endswith("; 1 thread)")
+
+
+def test_budgets_keep_cpu_and_gpu_minutes_apart():
+    """A model trained on CPUs, then on a GPU: the table says the minutes of each and every
+    batch size, since a GPU minute does far more steps than a CPU minute."""
+    from splitcam.training.models import model_summary, training_budget, training_minutes
+
+    def meta(*segments):
+        segs = [{"device": d, "train_seconds": s, "batch_size": b} for d, s, b in segments]
+        prov = {"segments": segs, "total_steps": 100, "train_seconds": sum(s[1] for s in segments)}
+        return {"provenance": prov, "pattern": {"name": "A"}, "network": {"arch": "physics"}}
+
+    cpu = ("cpu (AMD EPYC, AVX512; 1 thread)", 9720.0, 8)
+    gpu = ("cuda (NVIDIA H100 80GB HBM3)", 138.0, 64)
+    both = meta(cpu, gpu)
+    assert training_minutes(both) == "162 min CPU + 2.3 min GPU"
+    assert training_minutes(meta(cpu)) == "162 min"
+    assert training_minutes(meta(gpu)) == "2.3 min GPU"
+    assert training_minutes(meta(("cuda:1 (NVIDIA A100)", 1200.0, 64))) == "20 min GPU"
+    row = model_summary("A", both)
+    assert row["batch"] == "8/64" and row["train time"] == "162 min CPU + 2.3 min GPU"
+    assert training_budget(both).startswith("100 steps of batch 8/64, 162 min CPU + 2.3 min GPU")

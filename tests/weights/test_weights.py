@@ -59,8 +59,13 @@ def test_every_shipped_model_loads_matches_its_json_and_beats_its_lmmse(name, sh
     np.testing.assert_allclose(system.pattern.kernels, pattern.kernels, atol=1e-6)
     segments = meta["provenance"]["segments"]
     assert meta["provenance"]["total_steps"] == sum(s["steps"] for s in segments)
-    # a run continued on one schedule has several segments; a fine-tuning adds its own budget
-    assert meta["provenance"]["total_steps"] >= stored["config"]["optim"]["steps"]
+    # a run continued on one schedule has several segments; a fine-tuning adds its own budget,
+    # in steps or, where the last segment had a time limit, in minutes of training
+    limit = stored["config"]["run"].get("time_limit")
+    if limit:
+        assert segments[-1]["train_seconds"] >= 60 * limit * 0.99
+    else:
+        assert meta["provenance"]["total_steps"] >= stored["config"]["optim"]["steps"]
 
     # The last 32 training images by name are held out of every shipped run's training set.
     crops = [
