@@ -246,3 +246,48 @@ def test_the_random_start_half_size_fine_tuning_is_its_border_recipe_on_sigma_0_
     assert tuned == edges.override(changes)
     assert tuned.run.init_from == "D-opt-random"
     tuned.validate()
+
+
+@pytest.mark.parametrize(
+    ("name", "minutes"),
+    [("A", 2.3), ("D", 2.3), ("A-opt", 6.0), ("D-opt", 6.0), ("D-opt-random", 6.0)],
+)
+def test_the_gpu_fine_tunings_change_only_the_batch_rate_and_a_time_budget(name, minutes):
+    """experiments/gpu/X.toml is experiments/scales/X.toml at batch 64 and peak rate 5e-4 on a
+    CUDA device, ended by a time limit (the steps only a cap); nothing about the data or the
+    noise changes."""
+    scales = TrainConfig.from_file(EXPERIMENTS / "scales" / f"{name}.toml")
+    tuned = TrainConfig.from_file(EXPERIMENTS / "gpu" / f"{name}.toml")
+    changes = {
+        "data.batch_size": 64,
+        "optim.lr": 5e-4,
+        "optim.warmup_steps": 200,
+        "optim.steps": 1_000_000,
+        "run.device": "cuda",
+        "run.time_limit": minutes,
+        "run.val_every": 1000 if minutes == 6.0 else 1500,
+        "run.checkpoint_every": 1000,
+    }
+    assert tuned == scales.override(changes)
+    assert tuned.run.init_from == name
+
+
+def test_the_gpu_fine_tuning_of_b_brings_it_the_recipe_of_the_others():
+    """experiments/gpu/B.toml: B's border fine-tuning with what A, D, A-opt and D-opt had since
+    (σ 0-20, the weight average, copies at half size) and the GPU settings."""
+    edges = TrainConfig.from_file(EXPERIMENTS / "edges" / "B.toml")
+    tuned = TrainConfig.from_file(EXPERIMENTS / "gpu" / "B.toml")
+    changes = {
+        "data.batch_size": 64,
+        "data.scales": [1.0, 0.5],
+        "optim.lr": 5e-4,
+        "optim.warmup_steps": 200,
+        "optim.sigma_max": 20.0,
+        "optim.ema": 0.999,
+        "optim.steps": 1_000_000,
+        "run.device": "cuda",
+        "run.time_limit": 2.3,
+        "run.val_every": 1500,
+        "run.checkpoint_every": 1000,
+    }
+    assert tuned == edges.override(changes)

@@ -60,3 +60,35 @@ def test_exposure_chart_gives_a_pattern_one_colour_and_each_kind_of_network_a_li
     assert drawn["bayer"][0] == drawn["net-u-bayer"][0] == "black"
     assert drawn["net-u-A"][1] == drawn["net-u-bayer"][1] != drawn["net-A-photon"][1]
     assert drawn["A"][1] == "--" and drawn["net-A-photon"][1] == drawn["net-bayer-photon"][1]
+
+
+def test_the_papers_curves_are_drawn_where_the_title_says_so(tmp_path, monkeypatch):
+    """The title promises the paper's network grey dashed: each reference is drawn, at its own
+    points and labelled; without references neither the lines nor the promise."""
+    from matplotlib.axes import Axes
+
+    from splitcam.viz.charts import sigma_chart
+
+    drawn, titles = {}, []
+    plot, set_title = Axes.plot, Axes.set_title
+
+    def spy(self, *args, **kwargs):
+        if str(kwargs.get("gid", "")).startswith("reference:"):
+            drawn[kwargs["gid"]] = (list(args[0]), list(args[1]), kwargs.get("color"))
+        return plot(self, *args, **kwargs)
+
+    def title_spy(self, label, *args, **kwargs):
+        titles.append(label)
+        return set_title(self, label, *args, **kwargs)
+
+    monkeypatch.setattr(Axes, "plot", spy)
+    monkeypatch.setattr(Axes, "set_title", title_spy)
+    per = {"0": {"psnr": 30.0, "ciede2000": 2.0}, "10": {"psnr": 28.0, "ciede2000": 3.0}}
+    paper = {"D": [(10.0, 36.62), (0.0, 40.35)], "bayer": [(0.0, 39.0), (10.0, 33.0)]}
+    sigma_chart([("net-D", per)], tmp_path / "c.png", paper)
+    assert drawn["reference:D"] == ([0.0, 10.0], [40.35, 36.62], "grey")
+    assert drawn["reference:bayer"][:2] == ([0.0, 10.0], [39.0, 33.0])
+    assert "grey dashed" in titles[0]
+    drawn.clear(), titles.clear()
+    sigma_chart([("net-D", per)], tmp_path / "d.png")
+    assert drawn == {} and "grey dashed" not in titles[0]

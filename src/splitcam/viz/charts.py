@@ -84,6 +84,19 @@ def sigma_chart(
         measured.update(xs)
         ax1.plot(xs, [per_sigma[s]["psnr"] for s in sig], label=label, **style)
         ax2.plot(xs, [per_sigma[s]["ciede2000"] for s in sig], label=label, **style)
+    # The paper's network of each pattern, grey dashed and labelled at its right end.
+    for ref, points in (references or {}).items():
+        xs, ys = zip(*sorted(points), strict=True)
+        ax1.plot(xs, ys, "--", color="grey", alpha=0.7, lw=1, gid=f"reference:{ref}")
+        ax1.annotate(
+            f"paper {ref}",
+            (xs[-1], ys[-1]),
+            fontsize=7,
+            color="dimgrey",
+            xytext=(3, 0),
+            textcoords="offset points",
+            va="center",
+        )
     ax1.set_xlabel("noise σ (8-bit units)")
     ax1.set_ylabel("PSNR (dB)")
     ax1.set_title(
