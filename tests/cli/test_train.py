@@ -213,13 +213,13 @@ def test_a_config_file_keeps_its_budget_and_rate_when_it_starts_from_a_universal
 ):
     """The settings implied by `--init-from universal` give way to the --config file, as the
     defaults do (experiments/gpu/universal.toml sets its own): they once overrode it with the
-    10-minute budget and the fine-tuning rate."""
+    10-minute budget and the fine-tuning rate (the file's 2 steps end the run either way)."""
     from splitcam.cli import main
 
     model, data = tiny_universal
     config = tmp_path / "mine.toml"
     config.write_text(
-        f'[pattern]\nname = "D"\n[optim]\nlr = 1e-3\n'
+        f'[pattern]\nname = "D"\n[optim]\nlr = 1e-3\nsteps = 2\n'
         f"[run]\ntime_limit = 0.004\ninit_from = {json.dumps(str(model))}\n"
     )
     run = tmp_path / "ft"

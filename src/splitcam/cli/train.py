@@ -12,13 +12,13 @@ FINE_TUNE_MINUTES = 10.0
 FINE_TUNE_LR = 3e-4
 
 
-def fine_tuning(init_from: str, overrides: dict) -> dict:
+def fine_tuning(init_from: str, given: dict) -> dict:
     """Settings implied by ``--init-from`` a network for any pattern (``universal``) when
     ``--arch`` is left out: its architecture, unless ``--steps`` or ``--time-limit`` is given a
     budget of :data:`FINE_TUNE_MINUTES`, and unless ``--lr`` is given :data:`FINE_TUNE_LR`.
 
-    ``overrides`` holds the dotted keys set by flags and by the ``--config`` file: what either
-    sets is kept (experiments/gpu/universal.toml sets its own rate and time limit)."""
+    ``given`` holds the dotted keys set by flags and by the ``--config`` file: what either sets
+    is kept (experiments/gpu/universal.toml sets its own rate and time limit)."""
     from ..training.init_from import source_network
 
     network = source_network(init_from)
@@ -29,23 +29,12 @@ def fine_tuning(init_from: str, overrides: dict) -> dict:
         "network.features": network.get("features", 64),
         "network.blocks": network.get("blocks", 10),
     }
-    if "optim.steps" not in overrides and "run.time_limit" not in overrides:
+    if "optim.steps" not in given and "run.time_limit" not in given:
         implied["run.time_limit"] = FINE_TUNE_MINUTES
         print(f"fine-tuning {init_from} for {FINE_TUNE_MINUTES:g} minutes (--time-limit)")
-    if "optim.lr" not in overrides:
+    if "optim.lr" not in given:
         implied["optim.lr"] = FINE_TUNE_LR
     return implied
-
-
-def _dotted(data: dict, prefix: str = "") -> dict:
-    """A configuration file's sections as dotted keys (``{"optim": {"lr": 1}}`` -> ``optim.lr``)."""
-    out = {}
-    for key, value in data.items():
-        if isinstance(value, dict):
-            out.update(_dotted(value, f"{prefix}{key}."))
-        else:
-            out[f"{prefix}{key}"] = value
-    return out
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -77,7 +66,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from ..training import TrainConfig, train
-    from ..training.config import read_config_file, train_flags
+    from ..training.config import dotted, read_config_file, train_flags
     from ..training.rundir import resume_config
     from ..training.sweep import STOPPED
 
@@ -85,8 +74,11 @@ def run(args: argparse.Namespace) -> int:
         # Continue with the run's own settings (those of its checkpoint, or the config.json of a
         # run killed before its first one); flags given now override them.
         config = resume_config(args.out or TrainConfig().run.out)
+        from_file = {}
     else:
-        config = TrainConfig.from_file(args.config) if args.config else TrainConfig()
+        data = read_config_file(args.config) if args.config else {}
+        config = TrainConfig.from_dict(data, source=args.config or "the defaults")
+        from_file = dotted(data)  # the keys the file sets
     # Flags left out keep the config file's (or the default) value.
     overrides = {}
     for flag in train_flags():
@@ -99,7 +91,7 @@ def run(args: argparse.Namespace) -> int:
         flags = ", ".join("--" + k.split(".", 1)[1].replace("_", "-") for k in photon_only)
         raise ValueError(f"{flags}: settings of the photon model; add --noise photon")
     init_from = overrides.get("run.init_from", config.run.init_from)
-    given = {**_dotted(read_config_file(args.config)), **overrides} if args.config else overrides
+    given = {**from_file, **overrides}
     if not args.resume and init_from and "network.arch" not in given:
         overrides.update(fine_tuning(init_from, given))
     config = config.override(overrides)

@@ -440,6 +440,22 @@ class TrainConfig:
 EXTENDS = "extends"
 
 
+def dotted(sections: dict[str, Any]) -> dict[str, Any]:
+    """Settings by section (a config file's tables, :meth:`TrainConfig.to_dict`) as dotted keys,
+    the keys of :meth:`TrainConfig.override` and of the flags: ``{"optim": {"lr": 1e-3}}`` ->
+    ``{"optim.lr": 1e-3}``. Entries that are not sections are left out.
+
+    >>> dotted({"optim": {"lr": 1e-3, "steps": 10}, "run": {"seed": 1}})
+    {'optim.lr': 0.001, 'optim.steps': 10, 'run.seed': 1}
+    """
+    return {
+        f"{name}.{key}": value
+        for name, section in sections.items()
+        if isinstance(section, dict)
+        for key, value in section.items()
+    }
+
+
 def read_config_file(path: str | Path) -> dict[str, Any]:
     """Parse a TOML, YAML or JSON configuration file into a dict.
 

@@ -193,6 +193,10 @@ def _batches(segs: list[dict[str, Any]]) -> str:
     return "/".join(str(b) for b in dict.fromkeys(g.get("batch_size") for g in segs)) or "?"
 
 
+def _devices(segs: list[dict[str, Any]]) -> str:
+    return ", ".join(dict.fromkeys(str(g.get("device")) for g in segs))
+
+
 def training_minutes(meta: dict[str, Any]) -> str:
     """A model's training time from its provenance, CPU and GPU minutes apart (a GPU minute
     does far more steps): ``"104 min"`` on CPUs only, ``"162 min CPU + 2.3 min GPU"``. A
@@ -222,10 +226,9 @@ def training_budget(meta: dict[str, Any]) -> str:
     and devices (``"26000 steps of batch 8, 104 min of training on cpu (1 thread)"``)."""
     prov = meta.get("provenance", {})
     segs = prov.get("segments", [])
-    devices = ", ".join(dict.fromkeys(str(g.get("device")) for g in segs)) or "?"
     return (
         f"{prov.get('total_steps', '?')} steps of batch {_batches(segs)}, "
-        f"{training_minutes(meta)} of training on {devices}"
+        f"{training_minutes(meta)} of training on {_devices(segs) or '?'}"
     )
 
 
@@ -248,5 +251,5 @@ def model_summary(name: str, meta: dict[str, Any]) -> dict[str, str]:
         "steps": str(prov.get("total_steps", "?")),
         "batch": _batches(segs),
         "train time": training_minutes(meta),
-        "device": ", ".join(dict.fromkeys(str(g.get("device")) for g in segs)),
+        "device": _devices(segs),
     }

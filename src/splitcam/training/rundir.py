@@ -19,7 +19,7 @@ from typing import Any
 
 from ..io import appending, stale_temporaries, write_text
 from ..io import checkpoints as ckpt_io
-from .config import ConfigError, TrainConfig, read_config_file
+from .config import ConfigError, TrainConfig, dotted, read_config_file
 
 logger = logging.getLogger(__name__)
 
@@ -142,7 +142,7 @@ def open_run(config: TrainConfig, run_dir: Path, resume: bool) -> RunStart:
 
 
 def _flat(config: TrainConfig) -> dict[str, Any]:
-    return {f"{s}.{k}": v for s, sec in config.to_dict().items() for k, v in sec.items()}
+    return dotted(config.to_dict())
 
 
 def _check_resume_compatible(saved: TrainConfig, new: TrainConfig) -> None:
