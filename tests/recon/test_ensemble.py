@@ -2,12 +2,27 @@
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 import torch
 
 from splitcam import patterns
-from splitcam.physics.sensor import SplitterSensor
-from splitcam.recon.ensemble import TRANSFORMS, SelfEnsemble, symmetries
+from splitcam.patterns.random import random_pattern
+from splitcam.physics.sensor import SplitterSensor, pattern_pixel_kernels
+from splitcam.recon.base import NetworkReconstructor
+from splitcam.recon.ensemble import TRANSFORMS, SelfEnsemble, symmetries, transformed
+from splitcam.recon.networks import UniversalReconNet
+
+SIZES = [(24, 24), (23, 31), (26, 21), (25, 24)]
+
+
+def _patterns_to_test() -> list[patterns.Pattern]:
+    """The library (periods 1x3 to 4x4, kernels 1x1 to 3x3) and random draws (up to 4x4 and
+    5x5, filters, routers and scatterers)."""
+    rng = np.random.default_rng(11)
+    return [patterns.get(n) for n in ("A", "C", "D", "E", "rgbw")] + [
+        random_pattern(rng) for _ in range(6)
+    ]
 
 
 def test_every_transform_is_undone_by_its_inverse() -> None:
@@ -18,7 +33,7 @@ def test_every_transform_is_undone_by_its_inverse() -> None:
 
 
 @pytest.mark.parametrize("name", ["A", "B", "C", "D", "E", "bayer", "rgbw", "router-zou"])
-@pytest.mark.parametrize("size", [(24, 24), (23, 31), (26, 21), (25, 24)])
+@pytest.mark.parametrize("size", SIZES)
 def test_symmetries_are_exactly_those_the_sensor_commutes_with(name, size) -> None:
     """On a whole random image of the size itself (not the probe): the sensor commutes with
     every transform returned and with none of the others."""
@@ -68,3 +83,66 @@ def test_the_ensemble_averages_each_transformed_estimate_mapped_back() -> None:
     # D has no symmetry on even sides: the ensemble is the method itself
     Rows.pattern = patterns.get("D")
     assert torch.equal(SelfEnsemble(Rows()).reconstruct(torch.zeros(1, 1, 4, 6), 0.0)[0, 0], rows)
+
+
+@pytest.mark.parametrize("size", SIZES)
+def test_the_transformed_pattern_records_the_transformed_scene(size) -> None:
+    """sensor'(g(x)) = g(sensor(x)) on a whole random image, for every transform, pattern and
+    size (odd sides, sides ending part-way through the period): simulated on both sides."""
+    x = torch.rand(1, 3, *size, generator=torch.Generator().manual_seed(5), dtype=torch.float64)
+    for pattern in _patterns_to_test():
+        raw = SplitterSensor(pattern).double()(x)
+        for g in TRANSFORMS:
+            other = transformed(pattern, g, *size)
+            lhs = SplitterSensor(other).double()(g.apply(x))
+            assert torch.allclose(lhs, g.apply(raw), rtol=0, atol=1e-12), (pattern.name, g.label)
+
+
+@pytest.mark.parametrize("size", SIZES)
+def test_a_pattern_is_its_own_transform_exactly_under_its_symmetries(size) -> None:
+    for pattern in _patterns_to_test():
+        own = pattern_pixel_kernels(pattern)
+        for g in TRANSFORMS:
+            moved = pattern_pixel_kernels(transformed(pattern, g, *size))
+            same = moved.shape == own.shape and torch.allclose(moved, own, rtol=0, atol=1e-12)
+            assert same == (g in symmetries(pattern, *size)), (pattern.name, size, g.label)
+
+
+def _any_pattern_method(pattern: patterns.Pattern) -> NetworkReconstructor:
+    """A small network of any pattern with random weights (far from equivariant), as the
+    registry builds one for a pattern it is told."""
+    torch.manual_seed(0)
+    net = UniversalReconNet(features=8, blocks=1).eval()
+    with torch.no_grad():
+        for param in net.parameters():  # its last layer starts at zero: make every layer count
+            param.add_(0.05 * torch.randn_like(param))
+    method = NetworkReconstructor(net, pattern, "u", tile=None, precision="fp32")
+    method.any_pattern = True
+    return method
+
+
+@pytest.mark.parametrize("size", [(21, 26), (24, 24)])
+def test_a_network_of_any_pattern_gets_all_eight_looks_and_its_ensemble_is_equivariant(size):
+    """Each look is told its own pattern, so the average over the group is exactly
+    equivariant: the ensemble of g(raw) with the transformed pattern is g of the ensemble of
+    raw, which holds only if every transformed pattern (and their composition) is right."""
+    pattern = random_pattern(np.random.default_rng(3), max_period=4, max_kernel=5)
+    method = _any_pattern_method(pattern)
+    ensemble = SelfEnsemble(method)
+    assert [g.label for g, _ in ensemble.looks(*size)] == [g.label for g in TRANSFORMS]
+    x = torch.rand(1, 3, *size, generator=torch.Generator().manual_seed(2))
+    raw = SplitterSensor(pattern)(x)
+    out = ensemble.reconstruct(raw, 5.0)
+    plain = method.reconstruct(raw, 5.0)
+    assert (out - plain).abs().max() > 1e-3  # the looks differ: the network is not equivariant
+    for g in TRANSFORMS[1:]:
+        moved = SelfEnsemble(method.for_pattern(transformed(pattern, g, *size)))
+        assert torch.allclose(moved.reconstruct(g.apply(raw), 5.0), g.apply(out), atol=1e-5)
+
+
+def test_a_network_of_one_pattern_keeps_to_its_symmetries() -> None:
+    method = _any_pattern_method(patterns.get("bayer"))
+    method.any_pattern = False  # e.g. a universal network fine-tuned on bayer
+    assert [g.label for g, _ in SelfEnsemble(method).looks(512, 768)] == ["id", "T"]
+    with pytest.raises(ValueError, match="own pattern"):
+        method.for_pattern(patterns.get("D"))

@@ -1,7 +1,7 @@
 """Universal network against each shipped network and the LMMSE, on held-out whole photos.
 
     python docs/results/universal/heldout.py UNIVERSAL [--patterns A,B,C,D,E,bayer]
-        [--extra NAME=MODEL_OR_RUN ...] [--images 12] [--threads 2] [--out FILE.md]
+        [--extra NAME=MODEL_OR_RUN ...] [--images 12] [--threads 2] [--flips] [--out FILE.md]
 
 UNIVERSAL is a model name or file, or a run folder. The photos are the last ``--images`` of
 ``../shared/data/train`` (sorted by name): every run holds out the last 32 and validates on the
@@ -10,6 +10,8 @@ whole (481x321 or 321x481: odd sides, ending part-way through every period above
 evaluation protocol (:func:`splitcam.evaluation.protocol.mean_psnr`) at sigma 0 and 15. A pattern
 without a shipped network (a file) gets the universal network and the LMMSE only. ``--extra``
 adds columns, e.g. fine-tuned runs (``--extra ft=runs/ft-{pattern}``; ``{pattern}`` is replaced).
+``--flips`` averages every network over its looks (:class:`splitcam.recon.ensemble.SelfEnsemble`:
+a shipped network over its sensor's exact symmetries, the universal one over all eight).
 """
 
 from __future__ import annotations
@@ -24,6 +26,8 @@ from splitcam import patterns
 from splitcam.data.imageio import read_image
 from splitcam.data.patches import list_images
 from splitcam.evaluation.protocol import mean_psnr
+from splitcam.recon.base import NetworkReconstructor
+from splitcam.recon.ensemble import SelfEnsemble
 from splitcam.recon.loading import load_model, model_names
 from splitcam.recon.networks import serves_any_pattern
 from splitcam.recon.registry import build_method, model_domain
@@ -52,6 +56,7 @@ def main() -> int:
     parser.add_argument("--images", type=int, default=12)
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--precision", default="auto")
+    parser.add_argument("--flips", action="store_true")
     parser.add_argument("--out")
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
@@ -63,7 +68,8 @@ def main() -> int:
     head = ["pattern", "LMMSE", "shipped net", "universal", *(n for n, _ in extras)]
     lines = [
         f"{len(images)} held-out photos (whole, {images[0][1].shape[-1]}x{images[0][1].shape[-2]} "
-        f"and rotated), PSNR dB at sigma 0 / 15; universal: {args.universal}",
+        f"and rotated), PSNR dB at sigma 0 / 15; universal: {args.universal}"
+        + ("; every network averaged over its flips (--flips)" if args.flips else ""),
         "",
         "| " + " | ".join(head) + " | universal - LMMSE | universal - shipped |",
         "|" + "---|" * (len(head) + 2),
@@ -71,6 +77,8 @@ def main() -> int:
     print("\n".join(lines), flush=True)
 
     def score(method) -> dict[float, float]:
+        if args.flips and isinstance(method, NetworkReconstructor):
+            method = SelfEnsemble(method)
         return mean_psnr(method, images, SIGMAS)
 
     for spec in args.patterns.split(","):

@@ -80,8 +80,9 @@ def add_flips(p: argparse.ArgumentParser) -> None:
         "--flips",
         action="store_true",
         help="average each network over the flips and transpositions of the image that its "
-        "pattern's sensor is exactly symmetric under at the image's size (1 to 8 of them; "
-        "the time grows with their number); labelled <method>+flips",
+        "pattern's sensor is exactly symmetric under at the image's size (1 to 8 of them), or, "
+        "for a network of any pattern (universal), over all 8, each told the flipped pattern; "
+        "the time grows with their number; labelled <method>+flips",
     )
 
 

@@ -15,6 +15,7 @@ attribute is of ``srgb`` (:func:`method_domain`).
 
 from __future__ import annotations
 
+import copy
 from typing import Protocol, runtime_checkable
 
 import torch
@@ -163,7 +164,20 @@ class NetworkReconstructor:
         self.precision = precision
         #: Show a progress bar over the tiles (what the CLI turns on for large images).
         self.progress = False
+        #: Whether the network reconstructs whatever pattern it is told (a network of any
+        #: pattern, not one fine-tuned on one): then :meth:`for_pattern` gives it another.
+        self.any_pattern = False
         self._kernels = pattern_pixel_kernels(pattern)
+
+    def for_pattern(self, pattern: Pattern) -> NetworkReconstructor:
+        """The same network told another pattern (the flipped looks of
+        :class:`~splitcam.recon.ensemble.SelfEnsemble`); only where :attr:`any_pattern`."""
+        if not self.any_pattern:
+            raise ValueError(f"{self.name} reconstructs the raw images of its own pattern only")
+        other = copy.copy(self)
+        other.pattern = pattern
+        other._kernels = pattern_pixel_kernels(pattern)
+        return other
 
     def reconstruct(self, raw: torch.Tensor, sigma: float) -> torch.Tensor:
         from .tiling import reconstruct

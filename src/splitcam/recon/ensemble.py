@@ -1,5 +1,5 @@
 """Test-time self-ensembles: a reconstruction averaged over the image's flips and transpositions
-that the sensor itself is symmetric under.
+that the sensor itself is symmetric under, or, for a network of any pattern, over all eight.
 
 A flip or a transposition ``g`` of the scene is a fair second look at a raw image only when the
 sensor commutes with it, ``sensor(g(x)) = g(sensor(x))``: then ``g(raw)`` is exactly the raw
@@ -13,7 +13,10 @@ transforms; with only the identity it is the method itself.
 
 The usual test-time augmentation of image restoration flips the input regardless; for a
 colour-routing sensor that would feed the network raw images no sensor of its pattern produces,
-so only the exact symmetries are used here.
+so only the exact symmetries are used here. A network told each pixel's kernels (``universal``,
+SPEC section 16) is not bound to one pattern: ``g(raw)`` is exactly the raw image that the
+flipped pattern :func:`transformed` records of ``g(x)``, so it gets all eight looks, each told
+the pattern it sees.
 """
 
 from __future__ import annotations
@@ -27,7 +30,7 @@ from ..patterns import Pattern
 from ..physics.sensor import SplitterSensor
 from .base import Reconstructor, method_domain
 
-__all__ = ["TRANSFORMS", "SelfEnsemble", "Transform", "symmetries"]
+__all__ = ["TRANSFORMS", "SelfEnsemble", "Transform", "symmetries", "transformed"]
 
 
 @dataclass(frozen=True)
@@ -109,10 +112,47 @@ def symmetries(pattern: Pattern, height: int, width: int) -> list[Transform]:
 _CACHE: dict[tuple, tuple[torch.Tensor, tuple[Transform, ...]]] = {}
 
 
+def transformed(pattern: Pattern, g: Transform, height: int, width: int) -> Pattern:
+    """The pattern whose sensor records ``g(x)`` as ``g`` of what ``pattern``'s sensor records
+    of ``x``, on images of ``height`` x ``width``: ``sensor'(g(x)) = g(sensor(x))``.
+
+    Each step moves the layout and the kernel taps alike. A transposition swaps the layout's
+    axes and each kernel's; a flip of the rows reverses each kernel's rows and maps period row
+    ``r`` to ``(H - 1 - r) mod Ph``, which depends on where the image ends within the period
+    (``H`` the height at that step); the columns likewise. ``g`` is the identity exactly when the
+    sensor commutes with it (:func:`symmetries`) for a pattern equal to its own transform.
+    """
+    layout = np.array(pattern.layout)
+    kernels = np.array(pattern.kernels)
+    h, w = height, width
+    if g.transpose:
+        layout, kernels, h, w = layout.T, kernels.transpose(0, 1, 3, 2), w, h
+    ph, pw = layout.shape
+    if g.flip_rows:
+        layout, kernels = layout[(h - 1 - np.arange(ph)) % ph], kernels[:, :, ::-1]
+    if g.flip_cols:
+        layout, kernels = layout[:, (w - 1 - np.arange(pw)) % pw], kernels[:, :, :, ::-1]
+    if g == TRANSFORMS[0]:
+        return pattern
+    return Pattern(
+        name=f"{pattern.name}@{g.label}",
+        layout=np.ascontiguousarray(layout),
+        kernels=np.ascontiguousarray(kernels),
+        provenance=pattern.provenance,
+        description=f"{pattern.name} under the transform {g.label} of a {height}x{width} image",
+        reference=pattern.reference,
+    )
+
+
 class SelfEnsemble:
     """``method`` averaged over the exact symmetries of its sensor (:func:`symmetries`) for the
     size of each raw image: ``mean_g g⁻¹(method(g(raw)))``. Costs one reconstruction per
     symmetry (1 to 8; 2 for Bayer, A and B on even sides); named ``<method>+flips``.
+
+    A method that reconstructs any pattern it is told (``any_pattern`` and ``for_pattern``, as
+    a network of any pattern has) is averaged over all eight transforms, each look told its pattern:
+    ``mean_g g⁻¹(method_{P_g}(g(raw)))`` with ``P_g`` from :func:`transformed` (8
+    reconstructions).
 
     The noise of ``g(raw)`` is the same noise, moved: the estimates are not independent, and
     the ensemble gains less than averaging independent looks would.
@@ -125,12 +165,24 @@ class SelfEnsemble:
         self.domain = method_domain(method)
         self.fingerprint = f"{getattr(method, 'fingerprint', '')}+flips"
 
+    def looks(self, height: int, width: int) -> list[tuple[Transform, Reconstructor]]:
+        """Each transform of an image of ``height`` x ``width`` with the method that
+        reconstructs its raw image: the exact symmetries with the method itself, or, for a
+        method of any pattern, all eight with the method for the transformed pattern."""
+        if not getattr(self.method, "any_pattern", False):
+            return [(g, self.method) for g in symmetries(self.pattern, height, width)]
+        retarget = self.method.for_pattern  # type: ignore[attr-defined]
+        return [
+            (g, retarget(transformed(self.pattern, g, height, width)) if i else self.method)
+            for i, g in enumerate(TRANSFORMS)
+        ]
+
     def reconstruct(self, raw: torch.Tensor, sigma) -> torch.Tensor:
         """The averaged estimate ``(N, 3, H, W)`` of a raw image ``(N, 1, H, W)``."""
-        transforms = symmetries(self.pattern, *raw.shape[-2:])
+        looks = self.looks(*raw.shape[-2:])
         total = None
-        for g in transforms:
-            out = g.invert(self.method.reconstruct(g.apply(raw), sigma)).float()
+        for g, method in looks:
+            out = g.invert(method.reconstruct(g.apply(raw), sigma)).float()
             total = out if total is None else total + out
         assert total is not None  # the identity is always there
-        return total / len(transforms)
+        return total / len(looks)

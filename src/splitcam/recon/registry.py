@@ -171,6 +171,7 @@ def _network_method(
     method = NetworkReconstructor(
         loaded.network, resolved, f"{label}-{name}", tile=tile, precision=precision
     )
+    method.any_pattern = not own_pattern
     values = ",".join(f"{v:.9g}" for v in resolved.kernels.reshape(-1))
     layout = ",".join(str(v) for v in resolved.layout.reshape(-1))
     method.fingerprint = f":{name}:{resolved.kernels.shape}:{layout}:{values}"
