@@ -19,12 +19,14 @@ wait
 
 # 3. Fine-tuning for 10 minutes (the default budget) on a library pattern and on one it never
 #    saw; the curves are the runs' validation logs.
-for p in D rgbw; do
-    splitcam train --pattern $p --init-from universal --data $DATA --threads 1 \
-        --val-every 200 --out runs/ft-$p --quiet &
+for pair in "D rgbw" "quad router-zou"; do
+    for p in $pair; do
+        splitcam train --pattern $p --init-from universal --data $DATA --threads 1 \
+            --val-every 200 --out runs/ft-$p --quiet &
+    done
+    wait
 done
-wait
-python $RESULTS/heldout.py universal --threads 2 --patterns D,rgbw \
+python $RESULTS/heldout.py universal --threads 2 --patterns D,rgbw,quad,router-zou \
     --extra "fine-tuned 10 min=runs/ft-{pattern}" --out $RESULTS/fine-tuned.md
 
 # 4. Design: closed form against the network in the loop, from D's support, both scored by
