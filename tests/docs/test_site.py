@@ -41,3 +41,20 @@ def test_site_builds_strict_with_the_api_reference(tmp_path: Path) -> None:
     # The Sphinx roles of the docstrings read as plain code (docs/api/hooks.py).
     assert ":func:<code>" not in recon and ":class:<code>" not in recon
     assert (site / "index.html").is_file()
+
+
+def test_the_api_reference_has_every_public_module() -> None:
+    """Each module of a subpackage (not ``_private``) has its ``:::`` entry in
+    ``docs/api/<subpackage>.md``, so a new module cannot be left out of the reference."""
+    package = REPO / "src" / "splitcam"
+    missing = []
+    for page in sorted((REPO / "docs" / "api").glob("*.md")):
+        folder = package / page.stem
+        if not folder.is_dir():
+            continue
+        text = page.read_text(encoding="utf-8")
+        for module in sorted(folder.glob("*.py")):
+            name = f"splitcam.{page.stem}.{module.stem}"
+            if not module.stem.startswith("_") and f"::: {name}\n" not in text + "\n":
+                missing.append(name)
+    assert not missing, f"not in docs/api: {missing}"

@@ -92,7 +92,8 @@ def break_even(
 
     Args:
         images: Test images ``[(name, (3, H, W))]``.
-        etas, chis: The grid: band efficiency and crosstalk, the same for R, G and B.
+        etas: The grid's band efficiencies, the same for R, G and B.
+        chis: The grid's crosstalk fractions, the same for R, G and B.
         photons: Exposures ``N`` (default: 9 log-spaced from 1 to 10^4).
         reference: The pattern to tie (name or :class:`~splitcam.patterns.Pattern`).
         metric: ``psnr`` or ``ssim`` (higher is better) or ``ciede2000`` (lower is better; the
@@ -102,8 +103,10 @@ def break_even(
         method: ``pattern -> Reconstructor``, how every sensor of the map (the reference too)
             is reconstructed, e.g. a network for any pattern trained under the photon model
             (default: each pattern's closed-form LMMSE).
-        read_noise, domain, settings: The photon model and light domain, as in
+        read_noise: The photon model's read noise (electrons), as in
             :func:`~splitcam.evaluation.exposure.exposure_study`.
+        domain: The light domain, as there.
+        settings: The photon model's other settings, as there.
         tol: Differences within ``tol`` of 0 (in the metric's unit) count as ties
             (:func:`verdict`).
 

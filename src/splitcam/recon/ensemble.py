@@ -82,10 +82,10 @@ def symmetries(pattern: Pattern, height: int, width: int) -> list[Transform]:
     that borders and interior are both there. The identity is always among them.
 
     >>> from splitcam.patterns import get
-    >>> [g.label for g in symmetries(get("bayer"), 512, 768)]  # RGGB: only its diagonal
-    ['id', 'T']
-    >>> [g.label for g in symmetries(get("bayer"), 321, 481)]  # odd sides: flips keep RGGB
-    ['id', 'H', 'V', 'VH', 'T', 'TH', 'TV', 'TVH']
+    >>> " ".join(g.label for g in symmetries(get("bayer"), 512, 768))  # RGGB: its diagonal
+    'id T'
+    >>> " ".join(g.label for g in symmetries(get("bayer"), 321, 481))  # odd sides: all
+    'id H V VH T TH TV TVH'
     """
     ph, pw = pattern.period
     key = (pattern.period, tuple(pattern.kernel_size), height % ph, width % pw)
