@@ -335,9 +335,10 @@ def test_evaluate_with_flips_scores_the_ensemble_beside_nothing_else(tmp_path, c
 
 
 def test_evaluate_with_flips_gives_a_network_of_any_pattern_all_eight_looks(tmp_path) -> None:
-    """--flips with the universal model on D (no symmetry on even sides): all eight looks,
+    """--flips all with the universal model on D (no symmetry on even sides): all eight looks,
     each told the flipped pattern; the score is that of their mean, computed here look by look
-    with a method built for each transformed pattern."""
+    with a method built for each transformed pattern. Plain --flips keeps to the exact
+    symmetries: on D, the identity alone."""
     from splitcam import patterns
     from splitcam.data.testsets import load_datasets
     from splitcam.evaluation.protocol import score
@@ -347,10 +348,10 @@ def test_evaluate_with_flips_gives_a_network_of_any_pattern_all_eight_looks(tmp_
     from splitcam.recon.registry import build_method
 
     args = ["evaluate", "--model", "universal", "--patterns", "D", "--max-images", "1"]
-    args += ["--max-size", "33", "--sigmas", "10", "--quiet", "--flips", "--precision", "fp32"]
-    assert main([*args, "--out", str(tmp_path)]) == 0
+    args += ["--max-size", "33", "--sigmas", "10", "--quiet", "--precision", "fp32"]
+    assert main([*args, "--flips", "all", "--out", str(tmp_path)]) == 0
     summary = json.loads((tmp_path / "summary.json").read_text())
-    assert set(summary) == {"net-universal-D+flips"}
+    assert set(summary) == {"net-universal-D+all-flips"}
     [(_, images)] = load_datasets("default", 1, 33)
     name, rgb = images[0]
     d = patterns.get("D")
@@ -361,9 +362,13 @@ def test_evaluate_with_flips_gives_a_network_of_any_pattern_all_eight_looks(tmp_
             method = build_method("universal", pattern=transformed(d, g, 32, 32), precision="fp32")
             looks.append(g.invert(method.reconstruct(g.apply(raw), 10.0)))
     want = score((sum(looks) / 8)[0].clamp(0, 1), rgb)["psnr"]
-    got = summary["net-universal-D+flips"]["all"]["10"]["psnr"]
+    got = summary["net-universal-D+all-flips"]["all"]["10"]["psnr"]
     assert got == pytest.approx(want, abs=1e-6)
-    assert score(looks[0][0].clamp(0, 1), rgb)["psnr"] != pytest.approx(want, abs=1e-3)
+    plain = score(looks[0][0].clamp(0, 1), rgb)["psnr"]
+    assert plain != pytest.approx(want, abs=1e-3)
+    assert main([*args, "--flips", "--out", str(tmp_path / "exact")]) == 0
+    exact = json.loads((tmp_path / "exact" / "summary.json").read_text())
+    assert exact["net-universal-D+flips"]["all"]["10"]["psnr"] == pytest.approx(plain, abs=1e-6)
 
 
 def test_the_srgb_main_job_leaves_the_photon_networks_out(tmp_path, capsys) -> None:

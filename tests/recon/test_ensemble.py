@@ -128,21 +128,26 @@ def test_a_network_of_any_pattern_gets_all_eight_looks_and_its_ensemble_is_equiv
     raw, which holds only if every transformed pattern (and their composition) is right."""
     pattern = random_pattern(np.random.default_rng(3), max_period=4, max_kernel=5)
     method = _any_pattern_method(pattern)
-    ensemble = SelfEnsemble(method)
+    ensemble = SelfEnsemble(method, every_look=True)
+    assert ensemble.name == "u+all-flips"
     assert [g.label for g, _ in ensemble.looks(*size)] == [g.label for g in TRANSFORMS]
+    exact = [g.label for g in symmetries(pattern, *size)]
+    assert [g.label for g, _ in SelfEnsemble(method).looks(*size)] == exact  # the default
     x = torch.rand(1, 3, *size, generator=torch.Generator().manual_seed(2))
     raw = SplitterSensor(pattern)(x)
     out = ensemble.reconstruct(raw, 5.0)
     plain = method.reconstruct(raw, 5.0)
     assert (out - plain).abs().max() > 1e-3  # the looks differ: the network is not equivariant
     for g in TRANSFORMS[1:]:
-        moved = SelfEnsemble(method.for_pattern(transformed(pattern, g, *size)))
+        moved = SelfEnsemble(method.for_pattern(transformed(pattern, g, *size)), every_look=True)
         assert torch.allclose(moved.reconstruct(g.apply(raw), 5.0), g.apply(out), atol=1e-5)
 
 
 def test_a_network_of_one_pattern_keeps_to_its_symmetries() -> None:
     method = _any_pattern_method(patterns.get("bayer"))
     method.any_pattern = False  # e.g. a universal network fine-tuned on bayer
-    assert [g.label for g, _ in SelfEnsemble(method).looks(512, 768)] == ["id", "T"]
+    ensemble = SelfEnsemble(method, every_look=True)
+    assert [g.label for g, _ in ensemble.looks(512, 768)] == ["id", "T"]
+    assert ensemble.name == "u+flips"
     with pytest.raises(ValueError, match="own pattern"):
         method.for_pattern(patterns.get("D"))

@@ -1,7 +1,8 @@
 """Universal network against each shipped network and the LMMSE, on held-out whole photos.
 
     python docs/results/universal/heldout.py UNIVERSAL [--patterns A,B,C,D,E,bayer]
-        [--extra NAME=MODEL_OR_RUN ...] [--images 12] [--threads 2] [--flips] [--out FILE.md]
+        [--extra NAME=MODEL_OR_RUN ...] [--images 12] [--threads 2] [--flips exact|all]
+        [--out FILE.md]
 
 UNIVERSAL is a model name or file, or a run folder. The photos are the last ``--images`` of
 ``../shared/data/train`` (sorted by name): every run holds out the last 32 and validates on the
@@ -10,8 +11,9 @@ whole (481x321 or 321x481: odd sides, ending part-way through every period above
 evaluation protocol (:func:`splitcam.evaluation.protocol.mean_psnr`) at sigma 0 and 15. A pattern
 without a shipped network (a file) gets the universal network and the LMMSE only. ``--extra``
 adds columns, e.g. fine-tuned runs (``--extra ft=runs/ft-{pattern}``; ``{pattern}`` is replaced).
-``--flips`` averages every network over its looks (:class:`splitcam.recon.ensemble.SelfEnsemble`:
-a shipped network over its sensor's exact symmetries, the universal one over all eight).
+``--flips exact`` averages every network over its sensor's exact symmetries
+(:class:`splitcam.recon.ensemble.SelfEnsemble`); ``--flips all`` gives the universal network all
+eight looks, each told the flipped pattern.
 """
 
 from __future__ import annotations
@@ -56,7 +58,7 @@ def main() -> int:
     parser.add_argument("--images", type=int, default=12)
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--precision", default="auto")
-    parser.add_argument("--flips", action="store_true")
+    parser.add_argument("--flips", choices=["exact", "all"])
     parser.add_argument("--out")
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
@@ -69,7 +71,7 @@ def main() -> int:
     lines = [
         f"{len(images)} held-out photos (whole, {images[0][1].shape[-1]}x{images[0][1].shape[-2]} "
         f"and rotated), PSNR dB at sigma 0 / 15; universal: {args.universal}"
-        + ("; every network averaged over its flips (--flips)" if args.flips else ""),
+        + (f"; every network averaged over its flips (--flips {args.flips})" if args.flips else ""),
         "",
         "| " + " | ".join(head) + " | universal - LMMSE | universal - shipped |",
         "|" + "---|" * (len(head) + 2),
@@ -78,7 +80,7 @@ def main() -> int:
 
     def score(method) -> dict[float, float]:
         if args.flips and isinstance(method, NetworkReconstructor):
-            method = SelfEnsemble(method)
+            method = SelfEnsemble(method, every_look=args.flips == "all")
         return mean_psnr(method, images, SIGMAS)
 
     for spec in args.patterns.split(","):

@@ -74,26 +74,36 @@ def add_method_options(p: argparse.ArgumentParser) -> None:
 
 
 def add_flips(p: argparse.ArgumentParser) -> None:
-    """``--flips``: networks averaged over the flips and transpositions their sensor is
-    symmetric under (:class:`~splitcam.recon.ensemble.SelfEnsemble`)."""
+    """``--flips [exact|all]``: networks averaged over the flips and transpositions their
+    sensor is symmetric under, or, ``all``, a network of any pattern over all eight
+    (:class:`~splitcam.recon.ensemble.SelfEnsemble`)."""
     p.add_argument(
         "--flips",
-        action="store_true",
+        nargs="?",
+        const="exact",
+        choices=["exact", "all"],
         help="average each network over the flips and transpositions of the image that its "
-        "pattern's sensor is exactly symmetric under at the image's size (1 to 8 of them), or, "
-        "for a network of any pattern (universal), over all 8, each told the flipped pattern; "
-        "the time grows with their number; labelled <method>+flips",
+        "pattern's sensor is exactly symmetric under at the image's size (1 to 8 of them); "
+        "'--flips all': a network of any pattern (universal) over all 8, each look told the "
+        "flipped pattern (better only on patterns it was not trained on; "
+        "docs/results/flips/); the time grows with the looks; labelled <method>+flips "
+        "(+all-flips)",
     )
 
 
-def with_flips(methods: list, flips: bool) -> list:
-    """The networks among ``methods`` as self-ensembles when ``flips`` (others unchanged)."""
+def with_flips(methods: list, flips: str | None) -> list:
+    """The networks among ``methods`` as self-ensembles when ``flips`` (``exact`` or ``all``;
+    others unchanged)."""
     if not flips:
         return methods
     from ..recon.base import NetworkReconstructor
     from ..recon.ensemble import SelfEnsemble
 
-    return [SelfEnsemble(m) if isinstance(m, NetworkReconstructor) else m for m in methods]
+    every = flips == "all"
+    return [
+        SelfEnsemble(m, every_look=every) if isinstance(m, NetworkReconstructor) else m
+        for m in methods
+    ]
 
 
 def add_precision(p: argparse.ArgumentParser, default: str) -> None:

@@ -15,8 +15,9 @@ The usual test-time augmentation of image restoration flips the input regardless
 colour-routing sensor that would feed the network raw images no sensor of its pattern produces,
 so only the exact symmetries are used here. A network told each pixel's kernels (``universal``,
 SPEC section 16) is not bound to one pattern: ``g(raw)`` is exactly the raw image that the
-flipped pattern :func:`transformed` records of ``g(x)``, so it gets all eight looks, each told
-the pattern it sees.
+flipped pattern :func:`transformed` records of ``g(x)``, so it can take all eight looks, each
+told the pattern it sees (``every_look``; measured, it pays only where the network knows the
+flipped patterns as well as the pattern itself).
 """
 
 from __future__ import annotations
@@ -149,27 +150,32 @@ class SelfEnsemble:
     size of each raw image: ``mean_g g⁻¹(method(g(raw)))``. Costs one reconstruction per
     symmetry (1 to 8; 2 for Bayer, A and B on even sides); named ``<method>+flips``.
 
-    A method that reconstructs any pattern it is told (``any_pattern`` and ``for_pattern``, as
-    a network of any pattern has) is averaged over all eight transforms, each look told its pattern:
-    ``mean_g g⁻¹(method_{P_g}(g(raw)))`` with ``P_g`` from :func:`transformed` (8
-    reconstructions).
+    With ``every_look``, a method that reconstructs any pattern it is told (``any_pattern``
+    and ``for_pattern``, as a network of any pattern has) is averaged over all eight
+    transforms, each look told its pattern: ``mean_g g⁻¹(method_{P_g}(g(raw)))`` with ``P_g``
+    from :func:`transformed` (8 reconstructions). Off by default: a look is only as good as
+    the network is on its pattern, and a transposed or flipped pattern it was not trained on
+    costs more than the look gains (docs/results/flips/: the universal network on E loses
+    1.4 dB with all eight looks, and gains on A and Bayer only as much as their exact
+    symmetries give).
 
     The noise of ``g(raw)`` is the same noise, moved: the estimates are not independent, and
     the ensemble gains less than averaging independent looks would.
     """
 
-    def __init__(self, method: Reconstructor) -> None:
+    def __init__(self, method: Reconstructor, *, every_look: bool = False) -> None:
         self.method = method
-        self.name = f"{method.name}+flips"
+        self.every_look = bool(every_look) and bool(getattr(method, "any_pattern", False))
+        self.name = f"{method.name}+{'all-flips' if self.every_look else 'flips'}"
         self.pattern = method.pattern
         self.domain = method_domain(method)
-        self.fingerprint = f"{getattr(method, 'fingerprint', '')}+flips"
+        self.fingerprint = f"{getattr(method, 'fingerprint', '')}+{self.name.rsplit('+', 1)[1]}"
 
     def looks(self, height: int, width: int) -> list[tuple[Transform, Reconstructor]]:
         """Each transform of an image of ``height`` x ``width`` with the method that
-        reconstructs its raw image: the exact symmetries with the method itself, or, for a
-        method of any pattern, all eight with the method for the transformed pattern."""
-        if not getattr(self.method, "any_pattern", False):
+        reconstructs its raw image: the exact symmetries with the method itself, or, with
+        ``every_look``, all eight with the method for the transformed pattern."""
+        if not self.every_look:
             return [(g, self.method) for g in symmetries(self.pattern, height, width)]
         retarget = self.method.for_pattern  # type: ignore[attr-defined]
         return [
