@@ -120,9 +120,11 @@ def transformed(pattern: Pattern, g: Transform, height: int, width: int) -> Patt
     Each step moves the layout and the kernel taps alike. A transposition swaps the layout's
     axes and each kernel's; a flip of the rows reverses each kernel's rows and maps period row
     ``r`` to ``(H - 1 - r) mod Ph``, which depends on where the image ends within the period
-    (``H`` the height at that step); the columns likewise. ``g`` is the identity exactly when the
-    sensor commutes with it (:func:`symmetries`) for a pattern equal to its own transform.
+    (``H`` the height at that step); the columns likewise. The result records what ``pattern``
+    records (the same pixel kernels) exactly when ``g`` is among :func:`symmetries`.
     """
+    if g == TRANSFORMS[0]:
+        return pattern
     layout = np.array(pattern.layout)
     kernels = np.array(pattern.kernels)
     h, w = height, width
@@ -133,8 +135,6 @@ def transformed(pattern: Pattern, g: Transform, height: int, width: int) -> Patt
         layout, kernels = layout[(h - 1 - np.arange(ph)) % ph], kernels[:, :, ::-1]
     if g.flip_cols:
         layout, kernels = layout[:, (w - 1 - np.arange(pw)) % pw], kernels[:, :, :, ::-1]
-    if g == TRANSFORMS[0]:
-        return pattern
     return Pattern(
         name=f"{pattern.name}@{g.label}",
         layout=np.ascontiguousarray(layout),
