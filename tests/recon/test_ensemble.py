@@ -10,7 +10,13 @@ from splitcam import patterns
 from splitcam.patterns.random import random_pattern
 from splitcam.physics.sensor import SplitterSensor, pattern_pixel_kernels
 from splitcam.recon.base import NetworkReconstructor
-from splitcam.recon.ensemble import TRANSFORMS, SelfEnsemble, symmetries, transformed
+from splitcam.recon.ensemble import (
+    TRANSFORMS,
+    SelfEnsemble,
+    symmetries,
+    transformed,
+    with_flips,
+)
 from splitcam.recon.networks import UniversalReconNet
 
 SIZES = [(24, 24), (23, 31), (26, 21), (25, 24)]
@@ -151,3 +157,28 @@ def test_a_network_of_one_pattern_keeps_to_its_symmetries() -> None:
     assert ensemble.name == "u+flips"
     with pytest.raises(ValueError, match="own pattern"):
         method.for_pattern(patterns.get("D"))
+
+
+def test_the_looks_of_a_network_of_any_pattern_are_built_once_per_phase() -> None:
+    """The retargeted methods depend only on where the image ends within the period: two
+    sizes with the same remainders share them, another remainder gets its own."""
+    ensemble = SelfEnsemble(_any_pattern_method(patterns.get("E")), every_look=True)  # 1x3
+    first = ensemble.looks(21, 26)
+    assert ensemble.looks(24, 32) is first
+    assert ensemble.looks(21, 27) is not first
+    assert len(first) == len(ensemble.looks(21, 27)) == 8
+
+
+def test_with_flips_wraps_the_networks_only() -> None:
+    network = _any_pattern_method(patterns.get("D"))
+
+    class Lmmse:
+        name, pattern = "lmmse", patterns.get("D")
+
+    lmmse = Lmmse()
+    assert with_flips([network, lmmse], None) == [network, lmmse]
+    exact, kept = with_flips([network, lmmse], "exact")
+    assert (exact.name, exact.every_look, kept) == ("u+flips", False, lmmse)
+    assert with_flips([network], "all")[0].name == "u+all-flips"
+    with pytest.raises(ValueError, match="unknown flips"):
+        with_flips([network], "some")

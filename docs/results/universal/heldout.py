@@ -28,8 +28,7 @@ from splitcam import patterns
 from splitcam.data.imageio import read_image
 from splitcam.data.patches import list_images
 from splitcam.evaluation.protocol import mean_psnr
-from splitcam.recon.base import NetworkReconstructor
-from splitcam.recon.ensemble import SelfEnsemble
+from splitcam.recon.ensemble import with_flips
 from splitcam.recon.loading import load_model, model_names
 from splitcam.recon.networks import serves_any_pattern
 from splitcam.recon.registry import build_method, model_domain
@@ -79,9 +78,7 @@ def main() -> int:
     print("\n".join(lines), flush=True)
 
     def score(method) -> dict[float, float]:
-        if args.flips and isinstance(method, NetworkReconstructor):
-            method = SelfEnsemble(method, every_look=args.flips == "all")
-        return mean_psnr(method, images, SIGMAS)
+        return mean_psnr(with_flips([method], args.flips)[0], images, SIGMAS)
 
     for spec in args.patterns.split(","):
         pattern = patterns.get(spec)

@@ -92,18 +92,11 @@ def add_flips(p: argparse.ArgumentParser) -> None:
 
 
 def with_flips(methods: list, flips: str | None) -> list:
-    """The networks among ``methods`` as self-ensembles when ``flips`` (``exact`` or ``all``;
-    others unchanged)."""
-    if not flips:
-        return methods
-    from ..recon.base import NetworkReconstructor
-    from ..recon.ensemble import SelfEnsemble
+    """:func:`splitcam.recon.ensemble.with_flips`, imported when used (the CLI starts
+    without torch)."""
+    from ..recon.ensemble import with_flips as wrap
 
-    every = flips == "all"
-    return [
-        SelfEnsemble(m, every_look=every) if isinstance(m, NetworkReconstructor) else m
-        for m in methods
-    ]
+    return wrap(methods, flips)
 
 
 def add_precision(p: argparse.ArgumentParser, default: str) -> None:

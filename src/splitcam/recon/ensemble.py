@@ -29,9 +29,9 @@ import torch
 
 from ..patterns import Pattern
 from ..physics.sensor import SplitterSensor
-from .base import Reconstructor, method_domain
+from .base import NetworkReconstructor, Reconstructor, method_domain
 
-__all__ = ["TRANSFORMS", "SelfEnsemble", "Transform", "symmetries", "transformed"]
+__all__ = ["TRANSFORMS", "SelfEnsemble", "Transform", "symmetries", "transformed", "with_flips"]
 
 
 @dataclass(frozen=True)
@@ -166,10 +166,14 @@ class SelfEnsemble:
     def __init__(self, method: Reconstructor, *, every_look: bool = False) -> None:
         self.method = method
         self.every_look = bool(every_look) and bool(getattr(method, "any_pattern", False))
-        self.name = f"{method.name}+{'all-flips' if self.every_look else 'flips'}"
+        suffix = "all-flips" if self.every_look else "flips"
+        self.name = f"{method.name}+{suffix}"
         self.pattern = method.pattern
         self.domain = method_domain(method)
-        self.fingerprint = f"{getattr(method, 'fingerprint', '')}+{self.name.rsplit('+', 1)[1]}"
+        self.fingerprint = f"{getattr(method, 'fingerprint', '')}+{suffix}"
+        # The retargeted methods by where the image ends within the period (all that
+        # transformed() depends on): built once, not for every image of a test set.
+        self._retargeted: dict[tuple[int, int], list[tuple[Transform, Reconstructor]]] = {}
 
     def looks(self, height: int, width: int) -> list[tuple[Transform, Reconstructor]]:
         """Each transform of an image of ``height`` x ``width`` with the method that
@@ -177,11 +181,15 @@ class SelfEnsemble:
         ``every_look``, all eight with the method for the transformed pattern."""
         if not self.every_look:
             return [(g, self.method) for g in symmetries(self.pattern, height, width)]
-        retarget = self.method.for_pattern  # type: ignore[attr-defined]
-        return [
-            (g, retarget(transformed(self.pattern, g, height, width)) if i else self.method)
-            for i, g in enumerate(TRANSFORMS)
-        ]
+        ph, pw = self.pattern.period
+        key = (height % ph, width % pw)
+        if key not in self._retargeted:
+            retarget = self.method.for_pattern  # type: ignore[attr-defined]
+            self._retargeted[key] = [
+                (g, retarget(transformed(self.pattern, g, height, width)) if i else self.method)
+                for i, g in enumerate(TRANSFORMS)
+            ]
+        return self._retargeted[key]
 
     def reconstruct(self, raw: torch.Tensor, sigma) -> torch.Tensor:
         """The averaged estimate ``(N, 3, H, W)`` of a raw image ``(N, 1, H, W)``."""
@@ -192,3 +200,18 @@ class SelfEnsemble:
             total = out if total is None else total + out
         assert total is not None  # the identity is always there
         return total / len(looks)
+
+
+def with_flips(methods: list, flips: str | None) -> list:
+    """The networks among ``methods`` as :class:`SelfEnsemble` s when ``flips`` is ``exact``
+    (their sensors' exact symmetries) or ``all`` (every look for a network of any pattern);
+    other methods, and every method when ``flips`` is empty, unchanged."""
+    if not flips:
+        return methods
+    if flips not in ("exact", "all"):
+        raise ValueError(f"unknown flips {flips!r}; expected exact or all")
+    every = flips == "all"
+    return [
+        SelfEnsemble(m, every_look=every) if isinstance(m, NetworkReconstructor) else m
+        for m in methods
+    ]
