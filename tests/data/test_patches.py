@@ -367,3 +367,108 @@ def test_partial_periods_cut_batches_part_way_through_a_period(coordinate_cache)
         PatchSampler(cache, patch_size=16, partial=1.5)
     with pytest.raises(ValueError, match="period"):
         PatchSampler(cache, patch_size=16, period=(2, 16))
+
+
+# --- images held on the device: the same patches, built by one gather ---------------------------
+
+DEVICES = ["cpu"] + (["cuda"] if torch.cuda.is_available() else [])
+
+
+def _eight_bit_cache(tmp_path: Path) -> ImageCache:
+    """8-bit photos of odd sizes in both orientations, each also at half size."""
+    for i, (h, w) in enumerate([(37, 53), (53, 37), (40, 41)]):
+        _save8(tmp_path / f"p{i}.png", _rgb8(h, w, 20 + i))
+    return ImageCache(tmp_path, min_size=16, progress=False, scales=(1.0, 0.5))
+
+
+@pytest.mark.parametrize("device", DEVICES)
+@pytest.mark.parametrize("augment", [True, False])
+def test_device_images_give_the_host_patches(coordinate_cache, tmp_path, device, augment) -> None:
+    """One seed, the same patches whether the images sit on a device or not (the CPU stands in
+    for the device here): 16-bit and 8-bit images, half-size copies, every orientation, patches
+    ending part-way through a period."""
+    for cache in (coordinate_cache[0], _eight_bit_cache(tmp_path)):
+        settings = {"patch_size": 16, "seed": 13, "augment": augment, "partial": 0.5}
+        host = PatchSampler(cache, **settings, period=(2, 3))
+        held = PatchSampler(cache, **settings, period=(2, 3), device=device)
+        assert held.images.nbytes == cache.nbytes and host.images is None
+        assert held.device.type == device and host.device.type == "cpu"
+        for _ in range(30):
+            a, b = host.sample(24), held.sample(24)
+            assert b.device.type == device and b.dtype == torch.float32
+            assert a.shape == b.shape and torch.equal(a, b.cpu())
+        assert torch.equal(host.generator.get_state(), held.generator.get_state())
+
+
+def _orientation(patch: np.ndarray, images: dict[int, np.ndarray], size: int) -> tuple:
+    """(image id, top, left, dihedral transforms) of a coordinate patch, found by search: a cut
+    patch (part-way through a period) may have lost the window's first rows or columns."""
+    key = int(patch[2, 0, 0])
+    image = images[key].transpose(2, 0, 1)
+    h, w = patch.shape[1:]
+    lost = size - min(h, w)  # rows or columns, whichever way the window was turned
+    for top in range(max(0, int(patch[0].min()) - lost), int(patch[0].min()) + 1):
+        for left in range(max(0, int(patch[1].min()) - lost), int(patch[1].min()) + 1):
+            window = image[:, top : top + size, left : left + size]
+            if window.shape[1:] != (size, size):
+                continue
+            found = [
+                k
+                for k, t in enumerate(_all_orientations(window))
+                if np.array_equal(t[:, :h, :w], patch)
+            ]
+            if found:
+                return key, top, left, found
+    raise AssertionError("patch not found in its image")
+
+
+def test_device_sampling_rates(coordinate_cache) -> None:
+    """On the device path, position classes within a period, the 8 orientations and partial
+    periods occur at the rates the host path draws them with: classes in proportion to the
+    windows starting in them, orientations 1/8 each, a cut in rows (columns) half the time."""
+    cache, images = coordinate_cache
+    size, period, batches, per_batch = 16, (2, 3), 150, 20
+    sampler = PatchSampler(cache, patch_size=size, seed=21, partial=0.5, period=period, device="cpu")
+    classes: dict[tuple[int, int, int], int] = {}
+    orientations = np.zeros(8)
+    cut_rows = cut_cols = 0
+    for _ in range(batches):
+        batch = sampler.sample(per_batch)
+        h, w = batch.shape[-2:]
+        cut_rows += h < size
+        cut_cols += w < size - size % period[1]
+        levels = np.rint(batch.numpy() * 65535).astype(np.int64)
+        for patch in levels[:5]:  # the orientation search is slow; 5 per batch is enough
+            key, top, left, found = _orientation(patch, images, size)
+            orientations[found[0]] += 1 / len(found)
+            cls = (key, top % period[0], left % period[1])
+            classes[cls] = classes.get(cls, 0) + 1
+    n = batches * 5
+    # Orientations: chi-square against 1/8 each (7 degrees of freedom; 99.9 %: 24.3).
+    expected = n / 8
+    assert ((orientations - expected) ** 2 / expected).sum() < 24.3
+    # Position classes: each image is drawn half the time, and within it a class in proportion
+    # to the window positions in it.
+    chi = 0.0
+    for key, img in images.items():
+        rows, cols = img.shape[0] - size + 1, img.shape[1] - size + 1
+        for r in range(period[0]):
+            for c in range(period[1]):
+                share = len(range(r, rows, period[0])) * len(range(c, cols, period[1]))
+                expected = n * 0.5 * share / (rows * cols)
+                chi += (classes.get((key, r, c), 0) - expected) ** 2 / expected
+    assert chi < 32.9  # 11 degrees of freedom, 99.95 %
+    # Partial periods: a binomial(150, 0.5) each, within 4 standard deviations.
+    for hits in (cut_rows, cut_cols):
+        assert abs(hits - batches / 2) < 4 * (batches / 4) ** 0.5
+
+
+def test_device_images_of_16_bit_samples_above_32767(tmp_path: Path) -> None:
+    """16-bit samples travel as int16 bits: values above 32767 must come back unsigned."""
+    img = np.full((20, 20, 3), 65000, np.uint16)
+    img[..., 1] = 40000
+    write_image(tmp_path / "bright.png", img / 65535.0, bits=16)
+    cache = ImageCache(tmp_path, min_size=16, progress=False)
+    patch = PatchSampler(cache, patch_size=16, device="cpu").sample(2)
+    assert torch.allclose(patch[:, 0], torch.tensor(65000 / 65535))
+    assert torch.allclose(patch[:, 1], torch.tensor(40000 / 65535))

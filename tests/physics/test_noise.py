@@ -205,3 +205,66 @@ def test_linear_white_gives_n_photo_electrons_in_a_lossless_filterless_pixel() -
     assert float(electrons.mean()) == pytest.approx(250.0, rel=0.01)
     assert float(electrons.var()) == pytest.approx(250.0, rel=0.1)
     assert torch.allclose(electrons, electrons.round(), rtol=0, atol=1e-9)  # whole electrons
+
+
+# --- training noise drawn where the batch is ------------------------------------------------
+
+DEVICES = ["cpu"] + (["cuda"] if torch.cuda.is_available() else [])
+
+
+def test_gaussian_training_noise_on_the_cpu_is_the_one_stream() -> None:
+    """On the CPU the noise field comes from the sigma generator, after the sigma: the stream
+    CPU runs have always drawn (a naive re-draw in that order gives the same numbers)."""
+    raw = torch.zeros(3, 1, 8, 8)
+    noisy, sigma = GaussianNoise((0.0, 30.0), seed=7)(raw)
+    gen = torch.Generator().manual_seed(7)
+    expected_sigma = 30.0 * torch.rand(1, generator=gen, dtype=torch.float64)
+    field = torch.randn(raw.shape, generator=gen, dtype=torch.float32)
+    assert float(sigma[0]) == pytest.approx(float(expected_sigma))
+    torch.testing.assert_close(noisy, field * (expected_sigma.float() / 255))
+    assert GaussianNoise(seed=7).state_dict().keys() == {"generator"}
+
+
+@pytest.mark.parametrize("device", DEVICES)
+def test_batched_photon_noise_matches_the_exposure_model(device) -> None:
+    """The whole batch at once, one exposure per image, on the noise's device: per image the
+    mean and the variance a g + b of :meth:`Exposure.variance_coefficients`."""
+    noise = PhotonNoise((30.0, 3000.0), per_sample=True, seed=11, read_noise=3.0, device=device)
+    g = 0.4
+    raw = torch.full((6, 1, 96, 96), g, device=device)
+    out, exposures = noise(raw)
+    assert out.device.type == device and len({e.photons for e in exposures}) == 6
+    for image, exposure in zip(out.double().cpu(), exposures, strict=True):
+        a, b = exposure.variance_coefficients()
+        assert float(image.mean()) == pytest.approx(g, abs=4 * math.sqrt((a * g + b) / image.numel()))
+        assert float(image.var()) == pytest.approx(a * g + b, rel=0.06)
+
+
+def test_batched_photon_noise_saturates_and_quantises_like_one_exposure() -> None:
+    gen = torch.Generator().manual_seed(12)
+    settings = {"read_noise": 1.0, "full_well": 60.0, "gain": 2.0, "bits": 5}
+    from splitcam.physics.noise import photon_noise
+
+    exposures = [Exposure(300.0, **settings), Exposure(150.0, **settings)]
+    out = photon_noise(torch.full((2, 1, 40, 40), 1.0, dtype=torch.float64), exposures, gen)
+    for image, e in zip(out, exposures, strict=True):
+        dn = image * e.electrons_per_unit / 2.0
+        assert torch.allclose(dn, dn.round(), atol=1e-9)  # whole DN times the gain
+        assert float(dn.max()) <= 30 and float(dn.min()) >= 0  # full well 60 e- = 30 DN < 31
+    with pytest.raises(ValueError, match="same sensor settings"):
+        photon_noise(torch.ones(2, 1, 4, 4), [Exposure(10.0), Exposure(10.0, bits=8)], gen)
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA device")
+@pytest.mark.parametrize("kind", [GaussianNoise, PhotonNoise])
+def test_device_noise_resumes_exactly(kind) -> None:
+    """A second generator on the device draws the field; both states round-trip."""
+    raw = torch.rand(4, 1, 32, 32, device="cuda")
+    noise = kind(seed=5, device="cuda")
+    assert noise.device.type == "cuda" and set(noise.state_dict()) == {"generator", "field"}
+    state = noise.state_dict()
+    first, _ = noise(raw)
+    again = kind(seed=99, device="cuda")
+    again.load_state_dict(state)
+    second, _ = again(raw)
+    assert first.device.type == "cuda" and torch.equal(first, second)

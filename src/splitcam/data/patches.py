@@ -5,9 +5,13 @@ Training draws random square patches, each in one of the 8 orientations of the d
 training step needs ~80 patches, so :class:`ImageCache` decodes every image once and keeps the
 integer samples in memory; :class:`PatchSampler` then only copies strided views and converts.
 
-Randomness comes only from the sampler's own :class:`torch.Generator`: the same seed gives the same
-batches, and :meth:`PatchSampler.state_dict` lets a resumed run draw the batches an uninterrupted
-run would have drawn.
+On an accelerator the same images are copied once into device memory (:class:`DeviceImages`,
+still as integers) and a batch is cut out of them by one gather on the device, so training draws
+its data with no host copy and no loop over patches.
+
+Randomness comes only from the sampler's own :class:`torch.Generator` on the CPU: the same seed
+gives the same batches wherever the images are held, and :meth:`PatchSampler.state_dict` lets a
+resumed run draw the batches an uninterrupted run would have drawn.
 """
 
 from __future__ import annotations
@@ -25,6 +29,7 @@ from .images import IMAGE_SUFFIXES, ImageReadError, decode_image
 from .scales import valid_scales
 
 __all__ = [
+    "DeviceImages",
     "ImageCache",
     "PatchSampler",
     "dihedral",
@@ -286,6 +291,79 @@ def dihedral(patch: np.ndarray, code: int) -> np.ndarray:
     return patch
 
 
+class DeviceImages:
+    """An :class:`ImageCache`'s images copied once to a device, as integers, in one flat buffer.
+
+    Why our own rather than a padded ``(N, 3, H, W)`` tensor: the training photos come in both
+    orientations (481x321 and 321x481) and, with ``data.scales``, at several sizes, so padding to
+    the largest would take 1.5-2x the memory; a flat buffer with each image's offset and size
+    takes exactly the cache's bytes (the 432 BSDS500 photos: 200 MB) and is read by one gather.
+
+    16-bit images are stored as int16 with the same bits (torch gathers no uint16) and read back
+    with ``& 0xFFFF``.
+
+    Args:
+        cache: The decoded images.
+        device: Where to hold them.
+
+    Attributes:
+        flat: ``(total,)`` uint8 or int16 samples of every image, channel-first, one after another.
+        offsets: ``(N,)`` int64 index of each image's first sample in ``flat``.
+        heights, widths: ``(N,)`` int64 sizes.
+        max_value: 255 or 65535, as the cache's.
+    """
+
+    def __init__(self, cache: ImageCache, device: torch.device | str) -> None:
+        wide = cache.dtype == np.uint16
+        parts = [torch.from_numpy(a.view(np.int16) if wide else a).reshape(-1) for a in cache.arrays]
+        sizes = [part.numel() for part in parts]
+        self.device = torch.device(device)
+        self.flat = torch.cat(parts).to(self.device)
+        starts = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.int64)
+        self.offsets = torch.from_numpy(starts).to(self.device)
+        self.heights = cache.sizes[:, 0].to(self.device)
+        self.widths = cache.sizes[:, 1].to(self.device)
+        self.max_value = cache.max_value
+        self.wide = wide
+
+    @property
+    def nbytes(self) -> int:
+        """Device memory the samples take, in bytes."""
+        return self.flat.numel() * self.flat.element_size()
+
+    def patches(
+        self, index: torch.Tensor, corner: torch.Tensor, code: torch.Tensor, size: int
+    ) -> torch.Tensor:
+        """The patches :meth:`PatchSampler.draw` chose, cut out by one gather on the device.
+
+        The same values as :func:`dihedral` of each window (tested against it): for output pixel
+        ``(i, j)`` the window's row is ``j'`` and column ``i'`` when the axes are swapped (bit 4),
+        else ``(i', j')``, where ``i' = size - 1 - i`` if rows are reversed (bit 2) and
+        ``j' = size - 1 - j`` if columns are (bit 1).
+
+        Shape:
+            index, code: ``(B,)``; corner: ``(B, 2)``; output: ``(B, 3, size, size)`` float32
+            in [0, 1] on the device.
+        """
+        dev = self.device
+        index, corner, code = (t.to(dev, non_blocking=True) for t in (index, corner, code))
+        b = index.numel()
+        ar = torch.arange(size, device=dev)
+        i, j = ar.view(1, size, 1), ar.view(1, 1, size)
+        code = code.view(b, 1, 1)
+        ii = torch.where((code & 2).bool(), size - 1 - i, i)
+        jj = torch.where((code & 1).bool(), size - 1 - j, j)
+        swap = (code & 4).bool()
+        rows = torch.where(swap, jj, ii) + corner[:, 0].view(b, 1, 1)
+        cols = torch.where(swap, ii, jj) + corner[:, 1].view(b, 1, 1)
+        width = self.widths[index].view(b, 1, 1)
+        plane = (self.heights[index] * self.widths[index]).view(b, 1, 1, 1)
+        pixel = (self.offsets[index].view(b, 1, 1) + rows * width + cols).unsqueeze(1)
+        samples = self.flat[pixel + torch.arange(3, device=dev).view(1, 3, 1, 1) * plane]
+        values = (samples.int() & 0xFFFF) if self.wide else samples
+        return values.float() / float(self.max_value)
+
+
 class PatchSampler:
     """Random square patches in random dihedral orientations, drawn from an :class:`ImageCache`.
 
@@ -317,6 +395,10 @@ class PatchSampler:
             sequence is the same as without this option.
         period: The sensor's period (rows, columns): patches hold whole periods of it, and
             ``partial`` cuts into it.
+        device: Hold the images on this device (:class:`DeviceImages`) and build each batch
+            there by one gather; None: build batches on the host from the cache's arrays, which
+            on a CPU is faster (``benchmarks/bench_data.py``). Either way the random choices are
+            drawn on the CPU generator, so one seed gives the same patches.
 
     Raises:
         ValueError: Bad patch size, rank, world size, ``partial`` or ``period``.
@@ -333,6 +415,7 @@ class PatchSampler:
         augment: bool = True,
         partial: float = 0.0,
         period: tuple[int, int] = (1, 1),
+        device: torch.device | str | None = None,
     ) -> None:
         if patch_size < 1:
             raise ValueError(f"patch_size must be positive, got {patch_size}")
@@ -360,6 +443,13 @@ class PatchSampler:
         self.generator.manual_seed(seed + _RANK_STRIDE * rank)
         # Number of window positions along each axis, per image.
         self._positions = (cache.sizes - patch_size + 1).to(torch.float64)
+        #: The images on the device batches are built on, or None (built on the host).
+        self.images = DeviceImages(cache, device) if device is not None else None
+
+    @property
+    def device(self) -> torch.device:
+        """Where :meth:`sample` returns its batches."""
+        return self.images.device if self.images is not None else torch.device("cpu")
 
     def draw(self, batch_size: int) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """Draw the random choices of one batch without building it.
@@ -386,7 +476,7 @@ class PatchSampler:
             batch_size: Number of patches.
 
         Returns:
-            float32 patches in [0, 1] on the CPU: ``assemble(*draw(batch_size))``, cut to whole
+            float32 patches in [0, 1] on :attr:`device`: ``assemble(*draw(batch_size))``, cut to whole
             periods, then cut to end part-way through a period with probability ``partial``
             (see the class).
 
@@ -426,12 +516,15 @@ class PatchSampler:
 
         Returns:
             float32 patches in [0, 1], the same values :func:`~splitcam.data.images.read_image`
-            gives for those pixels.
+            gives for those pixels, on :attr:`device` (built there by
+            :meth:`DeviceImages.patches` when the images are held on a device).
 
         Shape:
             index: ``(B,)``; corner: ``(B, 2)``; code: ``(B,)``; output: ``(B, 3, P, P)``.
         """
         size = self.patch_size
+        if self.images is not None:
+            return self.images.patches(index, corner, code if self.augment else code * 0, size)
         arrays = self.cache.arrays
         codes = code.tolist() if self.augment else [0] * len(index)
         batch = np.empty((len(index), 3, size, size), dtype=self.cache.dtype)

@@ -2,14 +2,16 @@
 raw image's scale. The physical model at equal exposure (SPEC section 11): :class:`Exposure`
 (photo-electrons, shot and read noise, full well, ADC) and :class:`PhotonNoise` for training.
 
-Training noise comes from :class:`GaussianNoise`, which owns its seeded ``torch.Generator`` (so a
-resumed run draws the same noise as an uninterrupted one); evaluation noise comes from
+Training noise comes from :class:`GaussianNoise` and :class:`PhotonNoise`, which own seeded
+``torch.Generator``\ s (so a resumed run draws the same noise as an uninterrupted one): the noise
+levels on the CPU, the noise itself on the device of the raw images (:class:`_TrainingDraws`); evaluation noise comes from
 :func:`evaluation_noise`, seeded from the image's name and sigma, so that every pattern and every
 method is scored on identical noise. Nothing here touches Python's ``random`` or global RNGs.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import math
 from dataclasses import dataclass
@@ -28,6 +30,7 @@ __all__ = [
     "PhotonNoise",
     "add_exposure_noise",
     "add_evaluation_noise",
+    "photon_noise",
     "check_level",
     "check_sigma",
     "evaluation_noise",
@@ -49,16 +52,56 @@ def check_sigma(sigma: Any) -> float:
     return float(sigma)
 
 
-class GaussianNoise:
+class _TrainingDraws:
+    """The two generators of a training noise.
+
+    ``generator`` (always on the CPU) draws the noise level of each step: a few numbers, kept on
+    the host so that nothing downstream (the LMMSE solve, the noise-level input) waits on the
+    device for them. ``field`` draws the noise itself on ``device``: on an accelerator a batch's
+    noise is drawn where the batch is, with no host copy; on the CPU it is ``generator`` itself,
+    so CPU runs draw the same stream as before the device generator existed. A CPU and a CUDA
+    generator give different streams from one seed: a run is reproducible on one kind of device.
+    """
+
+    def _seed(self, seed: int, device: torch.device | str | None) -> None:
+        self.generator = torch.Generator().manual_seed(seed)
+        device = torch.device(device if device is not None else "cpu")
+        self.field = (
+            self.generator if device.type == "cpu" else torch.Generator(device).manual_seed(seed)
+        )
+
+    @property
+    def device(self) -> torch.device:
+        """Where the noise is drawn."""
+        return self.field.device
+
+    def state_dict(self) -> dict[str, torch.Tensor]:
+        state = {"generator": self.generator.get_state()}
+        if self.field is not self.generator:
+            state["field"] = self.field.get_state()
+        return state
+
+    def load_state_dict(self, state: dict[str, torch.Tensor]) -> None:
+        """Continue from a :meth:`state_dict`; the device generator only from one saved on the
+        same kind of device (otherwise it keeps its seed: the stream cannot continue across
+        kinds)."""
+        self.generator.set_state(state["generator"])
+        if self.field is not self.generator and "field" in state:
+            self.field.set_state(state["field"])
+
+
+class GaussianNoise(_TrainingDraws):
     """``raw + n`` with ``n ~ N(0, (sigma / 255)^2)``; sigma fixed or drawn from ``U[lo, hi]``.
 
     Args:
         sigma: A fixed sigma, or a ``(lo, hi)`` range to draw from (the paper: ``(0, 30)``).
         per_sample: Draw one sigma per sample instead of one per batch (the paper's choice).
-        seed: Seed of the generator that draws sigmas and noise.
+        seed: Seed of the generators that draw sigmas and noise.
+        device: Where the noise is drawn (see :class:`_TrainingDraws`; default the CPU).
 
     Shape:
-        - raw: ``(N, 1, H, W)``; returns the noisy raw image and the sigmas ``(N,)`` used.
+        - raw: ``(N, 1, H, W)``; returns the noisy raw image and the sigmas ``(N,)`` used (on
+          the CPU).
     """
 
     def __init__(
@@ -67,30 +110,26 @@ class GaussianNoise:
         *,
         per_sample: bool = False,
         seed: int = 0,
+        device: torch.device | str | None = None,
     ) -> None:
         lo, hi = (sigma, sigma) if isinstance(sigma, (int, float)) else tuple(sigma)
         if not 0 <= lo <= hi < float("inf"):
             raise ValueError(f"expected 0 <= sigma_lo <= sigma_hi, got {sigma!r}")
         self.range = (float(lo), float(hi))
         self.per_sample = per_sample
-        self.generator = torch.Generator().manual_seed(seed)
+        self._seed(seed, device)
 
     def __call__(self, raw: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         lo, hi = self.range
         n = raw.shape[0] if self.per_sample else 1
         sigma = lo + (hi - lo) * torch.rand(n, generator=self.generator, dtype=torch.float64)
         sigma = sigma.expand(raw.shape[0]) if n == 1 else sigma
-        # Drawn on the CPU generator then moved: the same stream on every device.
-        noise = torch.randn(raw.shape, generator=self.generator, dtype=torch.float32)
+        noise = torch.randn(
+            raw.shape, generator=self.field, dtype=torch.float32, device=self.field.device
+        )
         noise = noise.to(device=raw.device, dtype=raw.dtype)
         scale = (sigma / 255.0).to(device=raw.device, dtype=raw.dtype).view(-1, 1, 1, 1)
         return raw + scale * noise, sigma.float()
-
-    def state_dict(self) -> dict[str, torch.Tensor]:
-        return {"generator": self.generator.get_state()}
-
-    def load_state_dict(self, state: dict[str, torch.Tensor]) -> None:
-        self.generator.set_state(state["generator"])
 
 
 def check_level(level: Any) -> float | Exposure:
@@ -232,13 +271,17 @@ def add_exposure_noise(raw: torch.Tensor, image_name: str, exposure: Exposure) -
     return exposure.apply(raw, gen)
 
 
-class PhotonNoise:
+class PhotonNoise(_TrainingDraws):
     """Training noise of the photon model: exposure ``N`` drawn log-uniformly from a range.
+
+    The whole batch is made noisy at once on the generator's device (:func:`photon_noise`), one
+    exposure per image: no loop over images and no host copy.
 
     Args:
         photons: ``(lo, hi)`` full-light photo-electrons (or one value).
         per_sample: One exposure per sample instead of one per batch.
-        seed: Seed of the generator.
+        seed: Seed of the generators.
+        device: Where the noise is drawn (see :class:`_TrainingDraws`; default the CPU).
         **sensor: ``read_noise``, ``full_well``, ``gain``, ``bits``, ``shot`` of
             :class:`Exposure`.
 
@@ -252,6 +295,7 @@ class PhotonNoise:
         *,
         per_sample: bool = False,
         seed: int = 0,
+        device: torch.device | str | None = None,
         **sensor: Any,
     ) -> None:
         lo, hi = (photons, photons) if isinstance(photons, (int, float)) else tuple(photons)
@@ -262,9 +306,9 @@ class PhotonNoise:
         self.range = (float(lo), float(hi))
         self.sensor = sensor
         self.per_sample = per_sample
-        self.generator = torch.Generator().manual_seed(seed)
+        self._seed(seed, device)
 
-    def __call__(self, raw: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    def __call__(self, raw: torch.Tensor) -> tuple[torch.Tensor, list[Exposure]]:
         lo, hi = (math.log(v) for v in self.range)
         n = raw.shape[0] if self.per_sample else 1
         photons = torch.exp(
@@ -272,14 +316,43 @@ class PhotonNoise:
         )
         photons = photons.expand(raw.shape[0]) if n == 1 else photons
         exposures = [Exposure(float(p), **self.sensor) for p in photons]
-        out = torch.cat([e.apply(raw[i : i + 1], self.generator) for i, e in enumerate(exposures)])
-        return out, exposures
+        return photon_noise(raw, exposures, self.field), exposures
 
-    def state_dict(self) -> dict[str, torch.Tensor]:
-        return {"generator": self.generator.get_state()}
 
-    def load_state_dict(self, state: dict[str, torch.Tensor]) -> None:
-        self.generator.set_state(state["generator"])
+def photon_noise(
+    raw: torch.Tensor, exposures: list[Exposure], generator: torch.Generator
+) -> torch.Tensor:
+    """A batch made noisy by the photon model, one :class:`Exposure` per image, in one pass.
+
+    The same model as :meth:`Exposure.apply` (shot, read noise, full well, ADC, in that order),
+    applied to every image at once on ``generator``'s device in float64. The exposures must
+    share their sensor settings (read noise, full well, gain, bits, shot): only the photons may
+    differ, as in :class:`PhotonNoise`.
+
+    Shape:
+        raw: ``(N, 1, H, W)``, values >= 0 in the units of SPEC 1; ``len(exposures) == N``;
+        output: like ``raw``, on its device and in its dtype.
+    """
+    first = exposures[0]
+    if len(exposures) != raw.shape[0] or any(
+        dataclasses.replace(e, photons=first.photons) != first for e in exposures
+    ):
+        raise ValueError("expected one exposure per image, all with the same sensor settings")
+    device = generator.device
+    per_unit = torch.tensor(
+        [e.electrons_per_unit for e in exposures], dtype=torch.float64, device=device
+    ).view(-1, 1, 1, 1)
+    e = raw.detach().to(device=device, dtype=torch.float64).clamp_min(0) * per_unit
+    if first.shot:
+        e = torch.poisson(e, generator=generator)
+    if first.read_noise > 0:
+        noise = torch.randn(e.shape, generator=generator, dtype=torch.float64, device=device)
+        e = e + first.read_noise * noise
+    if first.full_well is not None:
+        e = e.clamp(0, first.full_well)
+    if first.gain is not None:
+        e = torch.round(e / first.gain).clamp(0, 2**first.bits - 1) * first.gain
+    return (e / per_unit).to(device=raw.device, dtype=raw.dtype)
 
 
 # The label of a noise level, the one convention of tables, metrics files and figures: "15" for

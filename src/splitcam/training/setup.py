@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import warnings
 from pathlib import Path
 from typing import Any
 
@@ -76,7 +77,7 @@ def prepare(
         optimizer,
         DivergenceGuard(config.optim.divergence_factor, lr_scale=lr_scale),
         sampler,
-        build_noise(config, start_step, dist.rank),
+        build_noise(config, start_step, dist.rank, device=sampler.device),
         step=start_step,
         start_step=start_step,
         ema=WeightAverage(system.network, config.optim.ema) if config.optim.ema else None,
@@ -299,31 +300,46 @@ def _patch_sampler(
         progress=progress and run.dist.is_main,
         scales=config.data.scales,
     )
-    return PatchSampler(
-        cache,
-        patch_size=config.data.patch_size,
-        seed=seeds.sampler_seed(config, start_step),
-        rank=run.dist.rank,
-        world_size=run.dist.world_size,
-        partial=config.data.partial_periods,
+    settings = {
+        "patch_size": config.data.patch_size,
+        "seed": seeds.sampler_seed(config, start_step),
+        "rank": run.dist.rank,
+        "world_size": run.dist.world_size,
+        "partial": config.data.partial_periods,
         # A new pattern every step: cut into periods of up to 4 (the largest drawn) instead.
-        period=(4, 4) if run.mix is not None else system.sensor.period,
-    )
+        "period": (4, 4) if run.mix is not None else system.sensor.period,
+    }
+    if run.device.type == "cpu":  # the host path is the faster one there (bench_data.py)
+        return PatchSampler(cache, **settings)
+    try:
+        return PatchSampler(cache, **settings, device=run.device)
+    except torch.OutOfMemoryError:
+        warnings.warn(
+            f"the {cache.nbytes / 2**20:.0f} MiB of training images do not fit on "
+            f"{run.device}: batches are built on the host and copied there",
+            stacklevel=2,
+        )
+        return PatchSampler(cache, **settings)
 
 
-def build_noise(config: TrainConfig, start_step: int, rank: int) -> GaussianNoise | PhotonNoise:
+def build_noise(
+    config: TrainConfig, start_step: int, rank: int, device: torch.device | None = None
+) -> GaussianNoise | PhotonNoise:
     """This rank's simulated sensor noise: Gaussian over ``optim.sigma_min..sigma_max``, or the
-    photon model at ``noise.photons``."""
+    photon model at ``noise.photons``, drawn on ``device`` (the batches' device; default the
+    CPU)."""
     seed = seeds.noise_seed(config, start_step, rank)
     if config.noise.model == "photon":
         return PhotonNoise(
             tuple(config.noise.photons),
             per_sample=config.optim.per_sample_sigma,
             seed=seed,
+            device=device,
             **config.noise.sensor(),
         )
     return GaussianNoise(
         (config.optim.sigma_min, config.optim.sigma_max),
         per_sample=config.optim.per_sample_sigma,
         seed=seed,
+        device=device,
     )

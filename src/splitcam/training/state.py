@@ -210,13 +210,16 @@ def replica_report(
 def gather_rng(
     sampler: PatchSampler, noise: GaussianNoise | PhotonNoise, info: DistInfo
 ) -> dict[str, torch.Tensor]:
-    """RNG states of every rank (collected on rank 0) so a resume draws the same batches."""
-    mine = torch.cat([sampler.generator.get_state(), noise.generator.get_state()])
-    n_sampler = sampler.generator.get_state().numel()
+    """RNG states of every rank (collected on rank 0) so a resume draws the same batches: the
+    patch sampler's, the noise's CPU generator's and, for noise drawn on an accelerator, its
+    device generator's (``rng/noise-field/<rank>``)."""
+    parts = {"sampler": sampler.generator.get_state(), **noise.state_dict()}
+    sizes = {name: state.numel() for name, state in parts.items()}
     out = {"rng/torch": torch.get_rng_state()}
-    for rank, state in enumerate(gather(mine, info)):
-        out[f"rng/sampler/{rank}"] = state[:n_sampler].clone()
-        out[f"rng/noise/{rank}"] = state[n_sampler:].clone()
+    keys = {"sampler": "sampler", "generator": "noise", "field": "noise-field"}
+    for rank, state in enumerate(gather(torch.cat(list(parts.values())), info)):
+        for name, chunk in zip(sizes, state.split(list(sizes.values())), strict=True):
+            out[f"rng/{keys[name]}/{rank}"] = chunk.clone()
     return out
 
 
@@ -227,14 +230,27 @@ def restore_rng(
     info: DistInfo,
 ) -> None:
     """Set this rank's generators (and torch's) to the checkpoint's; a rank it holds none for
-    (a run resumed with more processes than it had) is reseeded from the step."""
+    (a run resumed with more processes than it had) is reseeded from the step. A device
+    generator saved on another kind of device (or none saved) keeps its seed, said once."""
     key = f"rng/sampler/{info.rank}"
     if key in loaded.tensors:
         sampler.generator.set_state(loaded.tensors[key])
-        noise.generator.set_state(loaded.tensors[f"rng/noise/{info.rank}"])
+        state = {"generator": loaded.tensors[f"rng/noise/{info.rank}"]}
+        field = loaded.tensors.get(f"rng/noise-field/{info.rank}")
+        if "field" in noise.state_dict():
+            if field is not None and field.numel() == noise.field.get_state().numel():
+                state["field"] = field
+            else:
+                warnings.warn(
+                    f"the checkpoint holds no noise state for {noise.device.type}: the noise "
+                    "continues from a fresh stream",
+                    stacklevel=2,
+                )
+        noise.load_state_dict(state)
     else:
         warnings.warn(f"checkpoint has no RNG state for rank {info.rank}; reseeding", stacklevel=2)
         patches, sensor_noise = seeds.reseeded(sampler.seed, info.rank, int(loaded.meta["step"]))
         sampler.generator.manual_seed(patches)
         noise.generator.manual_seed(sensor_noise)
+        noise.field.manual_seed(sensor_noise)
     torch.set_rng_state(loaded.tensors["rng/torch"])
