@@ -3,10 +3,10 @@ raw image's scale. The physical model at equal exposure (SPEC section 11): :clas
 (photo-electrons, shot and read noise, full well, ADC) and :class:`PhotonNoise` for training.
 
 Training noise comes from :class:`GaussianNoise` and :class:`PhotonNoise`, which own seeded
-``torch.Generator``\ s (so a resumed run draws the same noise as an uninterrupted one): the noise
-levels on the CPU, the noise itself on the device of the raw images (:class:`_TrainingDraws`); evaluation noise comes from
-:func:`evaluation_noise`, seeded from the image's name and sigma, so that every pattern and every
-method is scored on identical noise. Nothing here touches Python's ``random`` or global RNGs.
+generators (so a resumed run draws the same noise as an uninterrupted one): the noise levels on
+the CPU, the noise itself on the device of the raw images (:class:`_TrainingDraws`). Evaluation
+noise comes from :func:`evaluation_noise`, seeded from the image's name and sigma, so that every
+pattern and every method is scored on identical noise. Nothing here touches Python's ``random`` or global RNGs.
 """
 
 from __future__ import annotations

@@ -259,6 +259,11 @@ class RunConfig:
     log_every: int = _opt(10, "log every N steps")
     val_every: int = _opt(500, "validate every N steps")
     checkpoint_every: int = _opt(200, "checkpoint every N steps")
+    checkpoint_minutes: float | None = _opt(
+        None,
+        "also checkpoint after every this many minutes of training (none: by steps only); "
+        "bounds what a stop that saves nothing (a machine taken back) can lose",
+    )
     time_limit: float | None = _opt(
         None,
         "stop (and save) after this many minutes of training in total (a resumed run "
@@ -367,6 +372,10 @@ class TrainConfig:
                 f"data.domain must be one of {', '.join(DOMAINS)}, got {self.data.domain!r}",
             ),
             (self.data.batch_size >= 1, "data.batch_size must be >= 1"),
+            (
+                self.run.checkpoint_minutes is None or self.run.checkpoint_minutes > 0,
+                f"run.checkpoint_minutes must be > 0 or none, got {self.run.checkpoint_minutes}",
+            ),
             (
                 valid_scales(self.data.scales),
                 f"data.scales must be distinct factors in (0, 1], got {self.data.scales}",

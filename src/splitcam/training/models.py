@@ -92,6 +92,10 @@ def provenance_of(loaded: ckpt_io.Checkpoint, run_dir: Path | None = None) -> di
         "init_from": previous.get("name"),
         "steps": int(meta.get("step", 0)) - int(meta.get("start_step", 0)),
         "batch_size": data.get("batch_size"),
+        # patches seen by this segment, all processes together
+        "patches": (int(meta.get("step", 0)) - int(meta.get("start_step", 0)))
+        * int(data.get("batch_size") or 0)
+        * int(meta.get("world_size", 1)),
         "patch_size": data.get("patch_size"),
         "train_seconds": round(float(meta.get("train_seconds", 0.0)), 1),
         "device": meta.get("device", "unknown"),

@@ -211,6 +211,7 @@ def _steps(
     state.timed_out = limit is not None and state.train_seconds >= limit
     if state.step == 0 and run.val_images and log is not None:
         log.write({"step": 0, **_validate(state, run), "time": time.time()}, scalars=False)
+    saved_at = state.train_seconds
     while state.step < run.config.optim.steps and not state.timed_out:
         if _step(state, run, model, window):
             return False  # the guard gave up
@@ -219,10 +220,22 @@ def _steps(
         _log(state, run, window, log, bar)
         if agree(stop.requested or state.timed_out, run.dist):
             return not state.timed_out
-        every = run.config.run.checkpoint_every
-        if state.step % every == 0 and state.step < run.config.optim.steps:
+        if _checkpoint_due(state, run, saved_at):
             save_checkpoint(state, run)
+            saved_at = state.train_seconds
     return False
+
+
+def _checkpoint_due(state: TrainState, run: Run, saved_at: float) -> bool:
+    """Whether to save now: every ``run.checkpoint_every`` steps, and every
+    ``run.checkpoint_minutes`` of training time (the same on every rank: the time is the
+    maximum over ranks). The last step saves anyway."""
+    settings = run.config.run
+    if state.step >= run.config.optim.steps:
+        return False
+    minutes = settings.checkpoint_minutes
+    due_by_time = minutes is not None and state.train_seconds - saved_at >= 60 * minutes
+    return state.step % settings.checkpoint_every == 0 or due_by_time
 
 
 def _step(state: TrainState, run: Run, model: torch.nn.Module, window: _Window) -> bool:

@@ -1,0 +1,118 @@
+"""The GPU relay (experiments/gpu/relay.py) end to end on the CPU, on tiny settings: a queue
+trained within its minutes, candidates exported with their provenance, the gate's decision
+applied as its table says, and bad input refused with one line and nothing changed."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PIL import Image
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+def _relay():
+    spec = importlib.util.spec_from_file_location("relay", REPO / "experiments/gpu/relay.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+@pytest.fixture(scope="module")
+def photos(tmp_path_factory) -> Path:
+    """14 smooth photos of odd sizes (so the held-out ones end part-way through periods)."""
+    folder = tmp_path_factory.mktemp("photos")
+    rng = np.random.default_rng(0)
+    for i in range(14):
+        h, w = (67, 81) if i % 2 else (81, 67)
+        y, x = np.mgrid[0:h, 0:w] / 40.0
+        base = np.stack([np.sin(x * (i + 1)), np.cos(y * 2), np.sin(x + y)], -1)
+        img = 127 + 100 * base + rng.normal(0, 5, (h, w, 3))
+        Image.fromarray(img.clip(0, 255).astype(np.uint8)).save(folder / f"p{i:02d}.png")
+    return folder
+
+
+@pytest.fixture(scope="module")
+def relayed(photos, tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("relay") / "out"
+    code = _relay().main(
+        ["--minutes", "0.35", "--out", str(out), "--data", str(photos), "--queue", "D",
+         "--batch", "2", "--device", "cpu", "--precision", "fp32"]
+    )
+    assert code == 0
+    return out
+
+
+def test_relay_trains_exports_and_tables_within_its_minutes(relayed) -> None:
+    candidate = json.loads((relayed / "candidates" / "D.json").read_text())
+    segment = candidate["provenance"]["segments"][-1]
+    assert segment["device"].startswith("cpu") and segment["batch_size"] == 2
+    assert segment["patches"] == 2 * segment["steps"] > 0
+    # The run had its slot of the 0.35 minutes, less the first network's assumed overhead.
+    assert 0 < segment["train_seconds"] <= 0.35 * 60
+    assert candidate["config"]["run"]["init_from"] == "D"
+    table = (relayed / "relay.md").read_text()
+    assert "| D |" in table and "→" in table
+    assert (relayed / "runs" / "D" / "checkpoint.safetensors").exists()
+
+
+def test_gate_ships_exactly_what_its_table_says(relayed, photos, tmp_path) -> None:
+    relay = _relay()
+    ship_to = tmp_path / "models"
+    ship_to.mkdir()
+    args = ["--gate", str(relayed), "--data", str(photos), "--ship-to", str(ship_to)]
+    assert relay.main([*args, "--dry-run"]) == 0
+    assert not (relayed / "gate.md").exists() and not any(ship_to.iterdir())
+    assert relay.main(args) == 0
+    row = next(line for line in (relayed / "gate.md").read_text().splitlines() if "| D |" in line)
+    cells = [c.strip() for c in row.strip("|").split("|")]
+    before, after = ([float(v) for v in cells[i].split(" / ")] for i in (3, 4))
+    ships = after[0] > before[0] and after[-1] >= before[-1] - 0.05
+    assert cells[-1] == ("yes" if ships else "no")
+    assert (ship_to / "D.json").exists() == ships
+    assert cells[1] == "14" or int(cells[1]) <= 14  # validation photos + the last 12, whole
+
+
+def test_bad_input_gets_one_line_and_changes_nothing(relayed, photos, tmp_path, capsys) -> None:
+    relay = _relay()
+    fresh = tmp_path / "fresh"
+    base = ["--data", str(photos), "--device", "cpu"]
+    cases = [
+        (["--minutes", "1", "--out", str(fresh), "--queue", "nosuch", *base], "unknown model"),
+        (["--minutes", "0", "--out", str(fresh), *base], "--minutes must be > 0"),
+        (["--minutes", "-2", "--out", str(fresh), *base], "--minutes must be > 0"),
+        (["--minutes", "1", "--out", str(relayed), "--queue", "D", *base], "another relay"),
+        (["--gate", str(fresh), "--data", str(photos)], "no relay candidates"),
+    ]
+    for argv, message in cases:
+        assert relay.main(argv) == 2
+        err = capsys.readouterr().err.strip()
+        assert message in err and len(err.splitlines()) == 1
+        assert not fresh.exists()
+    # A candidate whose pattern is not its shipped model's.
+    wrong = tmp_path / "wrong"
+    shutil.copytree(relayed, wrong)
+    for suffix in (".json", ".safetensors"):
+        (wrong / "candidates" / f"D{suffix}").rename(wrong / "candidates" / f"E{suffix}")
+    meta = json.loads((wrong / "candidates" / "E.json").read_text())
+    meta["tensors"] = "E.safetensors"
+    from splitcam.io.tensorfiles import meta_checksum
+
+    meta["meta_sha256"] = meta_checksum(meta)
+    (wrong / "candidates" / "E.json").write_text(json.dumps(meta))
+    assert relay.main(["--gate", str(wrong), "--data", str(photos), "--dry-run"]) == 2
+    assert "another pattern" in capsys.readouterr().err
+
+
+def test_minutes_rule() -> None:
+    relay = _relay()
+    queue = relay.QUEUE
+    # universal: 3 of the 10 shares of 9 minutes, less 30 s of set-up.
+    assert relay.slot_minutes(540, queue, 30) == pytest.approx((540 * 3 / 10 - 30) / 60)
+    assert relay.slot_minutes(60, ["A", "B"], 0) == pytest.approx(0.5)
+    assert relay.slot_minutes(10, ["A"], 30) == 0.0
