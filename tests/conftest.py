@@ -38,6 +38,17 @@ def _no_data_env(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.delenv(registry.MIRROR_ENV, raising=False)
 
 
+@pytest.fixture(scope="session", autouse=True)
+def _own_cache(tmp_path_factory: pytest.TempPathFactory) -> None:
+    """The precision choices the tests measure go to a folder of the session's, not the user's
+    cache (:mod:`splitcam.recon.precision`)."""
+    import os
+
+    from splitcam.recon.precision import CACHE_ENV
+
+    os.environ[CACHE_ENV] = str(tmp_path_factory.mktemp("cache"))
+
+
 @pytest.fixture
 def shared_data() -> Path:
     """``../shared/data`` beside the repository; tests using it skip where it is absent."""

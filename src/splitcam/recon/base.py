@@ -37,30 +37,19 @@ __all__ = [
     "strict_float32",
 ]
 
-#: Network precision settings: ``auto`` (bfloat16 + channels-last where the hardware runs it
-#: fast, float32 elsewhere), ``fp32`` (bit-exact float32) and ``bf16`` (bfloat16 + channels-last
+#: Network precision settings: ``auto`` (bfloat16 + channels-last where a measurement on this
+#: machine found it faster, float32 elsewhere), ``fp32`` (bit-exact float32) and ``bf16`` (bfloat16 + channels-last
 #: everywhere; slow on CPUs without native bfloat16).
 PRECISIONS = ("auto", "fp32", "bf16")
-
-
-def _cpu_has_native_bf16() -> bool:
-    try:
-        with open("/proc/cpuinfo", encoding="utf-8") as f:
-            for line in f:
-                if line.startswith("flags"):
-                    flags = set(line.split(":", 1)[1].split())
-                    return bool({"avx512_bf16", "amx_bf16"} & flags)
-    except OSError:
-        pass
-    return False
 
 
 def fast_precision(precision: str, device: torch.device | str) -> bool:
     """Whether a network runs in bfloat16 + channels-last for this ``precision`` on ``device``.
 
-    ``auto`` picks it where it pays: CUDA GPUs with bfloat16 support, and CPUs with native
-    bfloat16 dot products (AVX512-BF16 or AMX), where the README measures about 4x faster
-    training; elsewhere (e.g. AVX2-only CPUs, which emulate bfloat16) float32.
+    ``auto`` takes whichever a short measurement on this machine found faster, remembered per
+    device model and torch version (:func:`~splitcam.recon.precision.choose_precision`):
+    bfloat16 was 4x faster on an AMD EPYC with AVX512-BF16 and 1.4x slower on an Intel Xeon with
+    the same flag; CPUs without native bfloat16 take float32 without measuring.
 
     Raises:
         ValueError: An unknown ``precision``.
@@ -70,10 +59,9 @@ def fast_precision(precision: str, device: torch.device | str) -> bool:
         raise ValueError(f"unknown precision {precision!r}; expected one of {known}")
     if precision != "auto":
         return precision == "bf16"
-    device = torch.device(device)
-    if device.type == "cuda":
-        return bool(torch.cuda.is_available() and torch.cuda.is_bf16_supported())
-    return device.type == "cpu" and _cpu_has_native_bf16()
+    from .precision import choose_precision
+
+    return choose_precision(device).fast
 
 
 def strict_float32(device: torch.device | str) -> None:
