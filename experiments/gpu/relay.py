@@ -308,8 +308,8 @@ def run_gate(args: argparse.Namespace) -> int:
         check_candidate(path.stem, load_model(path), load_model(path.stem))
     torch.set_num_threads(args.threads)
     lines = [
-        "# Gate: the validation photos and the last 12, whole; ship when the cleanest level rises and "
-        f"the noisiest falls by no more than {GATE_FALL_DB} dB",
+        "# Gate: the validation photos and the last 12, whole; ship when the cleanest level "
+        f"rises and the noisiest falls by no more than {GATE_FALL_DB} dB",
         "",
         "| model | photos | levels | shipped | candidate | change | ships |",
         "|---|---|---|---|---|---|---|",
@@ -361,7 +361,9 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--gate", metavar="DIR", help="score a relay's candidates (on a CPU)")
     parser.add_argument("--dry-run", action="store_true", help="with --gate: change nothing")
     parser.add_argument("--threads", type=int, default=2, help="with --gate: CPU threads")
-    parser.add_argument("--ship-to", help="with --gate: ship into this folder (default: the package's)")
+    parser.add_argument(
+        "--ship-to", help="with --gate: ship into this folder (default: the package's)"
+    )
     args = parser.parse_args(argv)
     if args.gate is None and (args.minutes is None or args.out is None):
         parser.error("give --minutes and --out (a relay) or --gate DIR")

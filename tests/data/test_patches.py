@@ -428,7 +428,9 @@ def test_device_sampling_rates(coordinate_cache) -> None:
     windows starting in them, orientations 1/8 each, a cut in rows (columns) half the time."""
     cache, images = coordinate_cache
     size, period, batches, per_batch = 16, (2, 3), 150, 20
-    sampler = PatchSampler(cache, patch_size=size, seed=21, partial=0.5, period=period, device="cpu")
+    sampler = PatchSampler(
+        cache, patch_size=size, seed=21, partial=0.5, period=period, device="cpu"
+    )
     classes: dict[tuple[int, int, int], int] = {}
     orientations = np.zeros(8)
     cut_rows = cut_cols = 0

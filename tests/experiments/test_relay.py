@@ -41,8 +41,22 @@ def photos(tmp_path_factory) -> Path:
 def relayed(photos, tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("relay") / "out"
     code = _relay().main(
-        ["--minutes", "0.35", "--out", str(out), "--data", str(photos), "--queue", "D",
-         "--batch", "2", "--device", "cpu", "--precision", "fp32"]
+        [
+            "--minutes",
+            "0.35",
+            "--out",
+            str(out),
+            "--data",
+            str(photos),
+            "--queue",
+            "D",
+            "--batch",
+            "2",
+            "--device",
+            "cpu",
+            "--precision",
+            "fp32",
+        ]
     )
     assert code == 0
     return out

@@ -236,7 +236,9 @@ def test_batched_photon_noise_matches_the_exposure_model(device) -> None:
     assert out.device.type == device and len({e.photons for e in exposures}) == 6
     for image, exposure in zip(out.double().cpu(), exposures, strict=True):
         a, b = exposure.variance_coefficients()
-        assert float(image.mean()) == pytest.approx(g, abs=4 * math.sqrt((a * g + b) / image.numel()))
+        assert float(image.mean()) == pytest.approx(
+            g, abs=4 * math.sqrt((a * g + b) / image.numel())
+        )
         assert float(image.var()) == pytest.approx(a * g + b, rel=0.06)
 
 

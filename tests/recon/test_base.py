@@ -7,9 +7,7 @@ import pytest
 
 
 def test_precision_switch(monkeypatch: pytest.MonkeyPatch) -> None:
-    from splitcam.recon import base
-
-    from splitcam.recon import precision
+    from splitcam.recon import base, precision
 
     assert base.fast_precision("fp32", "cpu") is False
     assert base.fast_precision("bf16", "cpu") is True

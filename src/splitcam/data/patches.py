@@ -315,7 +315,9 @@ class DeviceImages:
 
     def __init__(self, cache: ImageCache, device: torch.device | str) -> None:
         wide = cache.dtype == np.uint16
-        parts = [torch.from_numpy(a.view(np.int16) if wide else a).reshape(-1) for a in cache.arrays]
+        parts = [
+            torch.from_numpy(a.view(np.int16) if wide else a).reshape(-1) for a in cache.arrays
+        ]
         sizes = [part.numel() for part in parts]
         self.device = torch.device(device)
         self.flat = torch.cat(parts).to(self.device)
@@ -476,9 +478,9 @@ class PatchSampler:
             batch_size: Number of patches.
 
         Returns:
-            float32 patches in [0, 1] on :attr:`device`: ``assemble(*draw(batch_size))``, cut to whole
-            periods, then cut to end part-way through a period with probability ``partial``
-            (see the class).
+            float32 patches in [0, 1] on :attr:`device`: ``assemble(*draw(batch_size))``, cut
+            to whole periods, then cut to end part-way through a period with probability
+            ``partial`` (see the class).
 
         Shape:
             Output: ``(B, 3, P - r, P - c)`` with ``B = batch_size``, ``P = patch_size`` and

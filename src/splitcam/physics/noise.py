@@ -6,7 +6,8 @@ Training noise comes from :class:`GaussianNoise` and :class:`PhotonNoise`, which
 generators (so a resumed run draws the same noise as an uninterrupted one): the noise levels on
 the CPU, the noise itself on the device of the raw images (:class:`_TrainingDraws`). Evaluation
 noise comes from :func:`evaluation_noise`, seeded from the image's name and sigma, so that every
-pattern and every method is scored on identical noise. Nothing here touches Python's ``random`` or global RNGs.
+pattern and every method is scored on identical noise. Nothing here touches Python's ``random``
+or global RNGs.
 """
 
 from __future__ import annotations

@@ -38,8 +38,8 @@ __all__ = [
 ]
 
 #: Network precision settings: ``auto`` (bfloat16 + channels-last where a measurement on this
-#: machine found it faster, float32 elsewhere), ``fp32`` (bit-exact float32) and ``bf16`` (bfloat16 + channels-last
-#: everywhere; slow on CPUs without native bfloat16).
+#: machine found it faster, float32 elsewhere), ``fp32`` (bit-exact float32) and ``bf16``
+#: (bfloat16 + channels-last everywhere; slow on CPUs without native bfloat16).
 PRECISIONS = ("auto", "fp32", "bf16")
 
 
