@@ -4,6 +4,7 @@ optimised settings, side by side in one run, plus achieved GFLOP/s and large-ima
     python benchmarks/bench_train.py [--steps 3] [--skip-large] [--accuracy-steps 0]
 
 Prints, for the paper's setting (batch 80 of 64x64, 10 blocks x 64 features, pattern D):
+what ``--precision auto`` measures on this CPU (float32 against bfloat16, the faster taken);
 training steps/s and patches/s (baseline, optimised, ratio) for the paper network and the packed
 one; the achieved GFLOP/s against the CPU's nominal peak; data time per batch; seconds per
 768x512 reconstruction (baseline, optimised, ratio); peak memory of a tiled 4000x3000
@@ -173,6 +174,10 @@ def main() -> None:
     print(machine())
     fp32_peak, bf16_peak, note = cpu_peak_gflops()
     print(f"nominal peak: {fp32_peak:.0f} GFLOP/s fp32, {bf16_peak:.0f} GFLOP/s bf16 ({note})")
+    from splitcam.recon.precision import measure
+
+    # What --precision auto measures, the same steps timed both ways now (not the cached choice).
+    print(f"precision auto here: {measure('cpu').reason}")
 
     cache = ImageCache(SHARED_DATA / "train", min_size=64, max_images=64, progress=False)
     sampler = PatchSampler(cache, patch_size=64, seed=0)
