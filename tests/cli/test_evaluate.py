@@ -236,6 +236,11 @@ def test_evaluate_photons_cli(tmp_path, capsys) -> None:
     summary = json_load(tmp_path / "summary.json")
     assert set(summary["bayer+malvar2004"]["all"]) == {"N20", "N2000"}
     assert json_load(tmp_path / "evaluation.json")["photon_sensor"]["read_noise"] == 1.5
+    # Photon levels get PSNR against exposure, not an empty chart against sigma.
+    assert "exposure_curves.png" in out and not (tmp_path / "sigma_curves.png").exists()
+    assert (tmp_path / "exposure_curves.png").stat().st_size > 0
+    pixels = np.asarray(Image.open(tmp_path / "exposure_curves.png").convert("L"))
+    assert (pixels < 250).mean() > 0.02  # lines and labels drawn, not a blank frame
     assert main([*args, "--photons", "-3"]) == 1
     assert "photons" in capsys.readouterr().err
 

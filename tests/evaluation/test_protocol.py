@@ -150,10 +150,12 @@ def test_interrupted_evaluation_keeps_its_rows_and_resumes(tmp_path):
     assert len(a2.seen) + len(b2.seen) == 12 - 7  # only the missing ones are computed
     assert sorted(rows, key=lambda r: r.key) == sorted(whole, key=lambda r: r.key)
     assert (out / "summary.json").read_text() == (tmp_path / "whole/summary.json").read_text()
-    # Another pattern under the same method name is a different method: recomputed.
+    # Another pattern under the same method name: refused, nothing computed or changed.
+    before = (out / "per_image.csv").read_text()
     c = Spy("a", pattern="A")
-    evaluate([c], [("set", images)], [0], out, progress=False)
-    assert len(c.seen) == 3
+    with pytest.raises(ValueError, match="under another name"):
+        evaluate([c], [("set", images)], [0], out, progress=False)
+    assert c.seen == [] and (out / "per_image.csv").read_text() == before
     # --restart recomputes everything.
     d = Spy("a", pattern="A")
     evaluate([d], [("set", images)], [0], out, progress=False, resume=False)
@@ -370,3 +372,66 @@ def test_evaluate_resumes_photon_rows_only_under_the_same_sensor(tmp_path) -> No
             tmp_path,
             progress=False,
         )
+
+
+def test_a_second_evaluation_into_the_folder_loses_nothing(tmp_path) -> None:
+    """Another sigma, another image set or crop, another method: each run adds its rows and
+    replaces only those it recomputes (the README's main job followed by its fifth command
+    used to take per_image.csv from 480 rows to 390)."""
+    images = random_images(3)
+    out = tmp_path / "out"
+    evaluate([Spy("a"), Spy("b")], [("set", images)], [0], out, progress=False)
+    evaluate([Spy("a")], [("set", images)], [10], out, progress=False)
+    crops = [(name, img[:, :16, :16]) for name, img in images]
+    evaluate([Spy("a")], [("set-16px", crops)], [0, 10], out, progress=False)
+    rows = read_rows(out / "per_image.csv")
+    keys = {(r.method, r.dataset, r.level) for r in rows}
+    assert len(rows) == 3 * 2 + 3 + 3 * 2 == len({r.key for r in rows})
+    assert keys == {
+        ("a", "set", "0"),
+        ("b", "set", "0"),
+        ("a", "set", "10"),
+        ("a", "set-16px", "0"),
+        ("a", "set-16px", "10"),
+    }
+    # The same command again computes nothing and keeps everything; a zoom recomputes the
+    # rows it draws, and replaces only those.
+    again = Spy("a")
+    evaluate([again], [("set", images)], [10], out, progress=False)
+    assert again.seen == [] and len(read_rows(out / "per_image.csv")) == 15
+    zoomed = Spy("a")
+    evaluate([zoomed], [("set", images)], [10], out, progress=False, zoom_only=True)
+    assert len(zoomed.seen) == 1  # the first image, drawn again
+    after = read_rows(out / "per_image.csv")
+    assert len(after) == 15 and {(r.method, r.dataset, r.level) for r in after} == keys
+
+
+def test_whole_photos_and_crops_never_rank_in_one_pool(tmp_path) -> None:
+    """A folder of whole photos and 16-px centre crops pools each apart (all-whole, all-16px):
+    no "all" that averages a crop with its whole photo, in the summary, table or report."""
+    from splitcam.evaluation.report import make_report
+
+    images = random_images(2)
+    out = tmp_path / "out"
+    evaluate([Spy("a")], [("set", images)], [0, 10], out, progress=False)
+    crops = [(name, img[:, :16, :16]) for name, img in images]
+    evaluate([Spy("a"), Spy("b")], [("set-16px", crops)], [0, 10], out, progress=False)
+    summary = json.loads((out / "summary.json").read_text())
+    assert "all" not in summary["a"] and {"all-whole", "all-16px"} <= set(summary["a"])
+    assert "all-whole" not in summary["b"] and summary["b"]["all-16px"]["0"]["n_images"] == 2
+    whole = [
+        r.psnr for r in read_rows(out / "per_image.csv") if r.dataset == "set" and r.level == "0"
+    ]
+    assert summary["a"]["all-whole"]["0"]["psnr"] == pytest.approx(float(np.mean(whole)))
+    assert "### all-16px" in (out / "table.md").read_text()
+    with pytest.raises(ValueError, match="cut differently"):
+        make_report([out], tmp_path / "report")
+
+
+def test_a_table_marks_cells_over_other_images() -> None:
+    from splitcam.evaluation.tables import EvalRow, markdown_tables
+
+    rows = [EvalRow("a", "D", "set", f"i{i}", 0.0, 30.0, 0.9, 2.0) for i in range(3)]
+    rows += [EvalRow("a", "D", "set", "i0", 10.0, 25.0, 0.8, 3.0)]
+    table = markdown_tables(summarise(rows))
+    assert "(n = 1)" in table and "do not rank" in table

@@ -128,6 +128,46 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(handler=run)
 
 
+def _draw_charts(out: Path, rows: list, summary: dict) -> list[Path]:
+    """PSNR against σ (Gaussian levels) and against exposure (photon levels) for each pooled
+    image set (``sigma_curves.png``; ``sigma_curves_all-256px.png`` ... in a folder of whole
+    photos and crops), where it has two levels or more to draw; charts that would not match
+    the table are removed. Returns what was written."""
+    from ..evaluation.tables import pooled_groups
+    from ..physics.noise import parse_level_label
+
+    for stale in [*out.glob("sigma_curves*.png"), *out.glob("exposure_curves*.png")]:
+        stale.unlink()
+    written = []
+    pools = pooled_groups(rows)
+    for pool in pools:
+        suffix = "" if pool == "all" else f"_{pool}"
+        curves = [(name, entry[pool]) for name, entry in summary.items() if pool in entry]
+        kinds = {parse_level_label(level)[0] for _, c in curves for level in c}
+        levels = {
+            k: {lv for _, c in curves for lv in c if parse_level_label(lv)[0] == k} for k in kinds
+        }
+        if len(levels.get("sigma", ())) > 1:
+            from ..viz.charts import sigma_chart
+
+            path = out / f"sigma_curves{suffix}.png"
+            sigma_chart(curves, path, patterns_of={n: e["pattern"] for n, e in summary.items()})
+            written.append(path)
+        photon = levels.get("photons", set())
+        if len(photon) > 1:
+            from ..viz.charts import exposure_chart
+
+            path = out / f"exposure_curves{suffix}.png"
+            results = {
+                name: {parse_level_label(lv)[1]: c[lv] for lv in c if lv in photon}
+                for name, c in curves
+            }
+            networks = {n: e["pattern"] for n, e in summary.items() if not n.startswith("lmmse")}
+            exposure_chart(results, path, title=f"{pool}: PSNR against exposure", networks=networks)
+            written.append(path)
+    return written
+
+
 def run(args: argparse.Namespace) -> int:
     from ..data.testsets import load_datasets
     from ..evaluation.protocol import evaluate, parse_zoom
@@ -212,15 +252,8 @@ def run(args: argparse.Namespace) -> int:
         others = sorted({r.method for r in kept} - {r.method for r in rows})
         print(f"(the table keeps the earlier results in {args.out} of: {', '.join(others)})")
     written = "per_image.csv, summary.json and table.md"
-    chart = Path(args.out) / "sigma_curves.png"
-    if len({r.level for r in kept}) > 1:
-        from ..viz.charts import sigma_chart
-
-        curves = [(name, entry["all"]) for name, entry in summary.items()]
-        sigma_chart(curves, chart, patterns_of={n: e["pattern"] for n, e in summary.items()})
-        written += ", sigma_curves.png"
-    else:
-        chart.unlink(missing_ok=True)  # an earlier chart would not match the table
+    for chart in _draw_charts(Path(args.out), kept, summary):
+        written += f", {chart.name}"
     zoom = Path(args.out) / "zoom"
     if (not chosen or args.save_images) and zoom.is_dir() and any(zoom.iterdir()):
         written += " and the zoomed crops in zoom/"

@@ -269,13 +269,17 @@ def evaluate(
     ``<method> (linear)``, so one folder keeps the results of both domains apart.
 
     With ``resume`` (default), results already in ``out/per_image.csv`` for the same method (same
-    pattern kernels), image, sigma, crop and domain are kept and not recomputed: an interrupted
-    evaluation continues where it stopped.
+    weights, pattern kernels and inference precision), image set and crop, image, level and
+    domain are kept and not recomputed: an interrupted evaluation continues where it stopped,
+    and a second evaluation into the same folder replaces only the rows it recomputes (a row is
+    keyed by method, dataset, which names its crop, ``NAME-256px``, image, level and domain).
 
     Raises:
         ValueError: No method, duplicate method names, a method of another light domain, a bad
-            sigma, crop or domain, exposures with different sensor settings, or a zoom that
-            names an unknown image or a region outside it; all checked before any work.
+            sigma, crop or domain, exposures with different sensor settings, a zoom that
+            names an unknown image or a region outside it, or a method whose weights or pattern
+            differ from those of the folder's results under its name; all checked before any
+            work.
     """
     domain, sigmas, sensor_settings = _check_settings(methods, sigmas, crop, domain)
     zoom = _zoom_plan(zoom_images, datasets)
@@ -314,7 +318,11 @@ def evaluate(
         if run.bar is not None:
             run.bar.close()
     if out_dir is not None:
-        write_summary([*others, *run.rows], out_dir)
+        # The folder keeps every result this evaluation did not recompute: other methods', and
+        # this one's at other images, crops, levels or domains.
+        made = {row.key for row in run.rows}
+        kept = [row for row in done.values() if row.key not in made]
+        write_summary([*others, *kept, *run.rows], out_dir)
     return run.rows
 
 
@@ -541,13 +549,15 @@ def _previous_rows(
     """What an earlier evaluation left in ``out_dir``: its rows that this one reuses (same
     method fingerprint, and for photon-model rows the same sensor settings), the rows of
     methods this one does not evaluate (kept, with their fingerprints), and those fingerprints.
-    Rows of a method evaluated again with other weights or pattern are superseded. Methods are
+    A method evaluated again with other weights, pattern or precision is refused. Methods are
     told apart by their result labels (``fingerprints``' keys, :func:`result_label`): a method's
     results of the other light domain are another method's here, and stay.
 
     Raises:
         ValueError: The folder's results were scored with another crop, or other photon sensor
-            settings, than this evaluation's: one table cannot hold both.
+            settings, than this evaluation's: one table cannot hold both; or they hold results
+            of a method of this evaluation's name made with other weights, pattern or
+            precision.
     """
     csv_path, settings_path = out_dir / CSV_NAME, out_dir / SETTINGS_NAME
     if not (csv_path.is_file() and settings_path.is_file()):
@@ -564,6 +574,18 @@ def _previous_rows(
             f"this evaluation crops {crop}: choose another --out, or --restart to discard them"
         )
     same_sensor = settings.get("photon_sensor") == sensor_settings
+    changed = sorted(
+        label
+        for label, now in fingerprints.items()
+        if before.get(label) not in (None, now) and any(row.label == label for row in rows)
+    )
+    if changed:
+        raise ValueError(
+            f"{out_dir} holds results of {', '.join(changed)} made with other weights, another "
+            f"pattern or another precision: evaluate this one under another name (a model file "
+            f"or run folder of another name) or into another --out, or --restart to discard "
+            f"the folder's results"
+        )
     others = [row for row in rows if row.label not in fingerprints]
     if not same_sensor and any(r.photons for r in others):
         raise ValueError(

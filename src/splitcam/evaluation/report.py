@@ -106,6 +106,11 @@ def _load(results: list[str | os.PathLike]) -> list[tuple[str, str, dict, patter
                 f"again to rewrite it"
             ) from None
         for method, entry in summary.items():
+            if "all" not in entry:
+                raise ValueError(
+                    f"{str(folder)!r} holds image sets cut differently (whole photos and "
+                    f"centre crops); give a folder of one evaluation's image sets"
+                )
             name = method_of_label(method, entry.get("domain", "srgb"))
             pattern_file = folder / "patterns" / f"{name}.json"
             pattern = (

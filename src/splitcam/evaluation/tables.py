@@ -13,6 +13,7 @@ import csv
 import json
 import math
 import os
+import re
 from collections.abc import Iterable, Sequence
 from dataclasses import astuple, dataclass, fields
 from pathlib import Path
@@ -29,6 +30,8 @@ __all__ = [
     "EvalRow",
     "append_rows",
     "domain_line",
+    "image_crop",
+    "pooled_groups",
     "markdown_tables",
     "method_of_label",
     "read_rows",
@@ -161,19 +164,49 @@ def write_summary(rows: Sequence[EvalRow], out_dir: str | os.PathLike) -> dict:
     return summary
 
 
+_CROPPED = re.compile(r"-(\d+)px$")
+
+
+def image_crop(dataset: str) -> str:
+    """How a dataset's images were cut before scoring: ``"256px"`` for the centre crops that
+    ``--max-size 256`` names ``NAME-256px``, ``"whole"`` otherwise."""
+    match = _CROPPED.search(dataset)
+    return f"{match.group(1)}px" if match else "whole"
+
+
+def pooled_groups(rows: Sequence[EvalRow]) -> dict[str, set[str]]:
+    """The pooled image sets of a summary and the datasets each pools: ``{"all": every
+    dataset}`` when every dataset's images were cut alike, else one ``"all-<crop>"`` per crop
+    (``all-whole``, ``all-256px``): a 256-px crop of a photo never ranks beside the whole
+    photo."""
+    crops: dict[str, set[str]] = {}
+    for row in rows:
+        crops.setdefault(image_crop(row.dataset), set()).add(row.dataset)
+    if len(crops) <= 1:
+        return {"all": {r.dataset for r in rows}}
+    return {f"all-{crop}": sets for crop, sets in crops.items()}
+
+
 def summarise(rows: Sequence[EvalRow]) -> dict:
-    """``{label: {"pattern": name, "domain": domain, dataset|"all": {level: {metric: mean,
+    """``{label: {"pattern": name, "domain": domain, dataset|pool: {level: {metric: mean,
     "n_images": n, "n_infinite": k}}}}``, ``label`` the method's name, ``"<name> (linear)"``
     for its results in the linear domain (:func:`result_label`), ``level`` as
-    :attr:`EvalRow.level` (``"15"`` or ``"N1000"``)."""
+    :attr:`EvalRow.level` (``"15"`` or ``"N1000"``), a pool as :func:`pooled_groups` names
+    it: ``"all"``, or ``"all-whole"`` and ``"all-256px"`` in a folder of both."""
     summary: dict = {}
     labels = list(dict.fromkeys(r.label for r in rows))
+    pools = pooled_groups(rows)
     for label in labels:
         mine = [r for r in rows if r.label == label]
         groups = list(dict.fromkeys(r.dataset for r in mine))
         entry: dict = {"pattern": mine[0].pattern, "domain": mine[0].domain}
-        for group in [*groups, "all"]:
-            chosen = mine if group == "all" else [r for r in mine if r.dataset == group]
+        mine_pools = [p for p, sets in pools.items() if sets & set(groups)]
+        for group in [*groups, *mine_pools]:
+            chosen = (
+                [r for r in mine if r.dataset in pools[group]]
+                if group in pools
+                else [r for r in mine if r.dataset == group]
+            )
             per_sigma = {}
             for level in sorted({r.level for r in chosen}, key=level_key):
                 at = [r for r in chosen if r.level == level]
@@ -219,7 +252,7 @@ def markdown_tables(summary: dict) -> str:
     CIEDE2000 likewise."""
     methods = list(summary)
     groups = list(dict.fromkeys(g for m in methods for g in summary[m] if g not in ENTRY_FIELDS))
-    if len(groups) == 2:  # one image set: "all" would repeat it
+    if len(groups) == 2 and groups[1] == "all":  # one image set: "all" would repeat it
         groups = groups[:1]
     sigmas = list(dict.fromkeys(s for m in methods for g in groups for s in summary[m].get(g, {})))
     lines: list[str] = [domain_line(summary[m].get("domain", "srgb") for m in methods), ""]
@@ -233,14 +266,22 @@ def markdown_tables(summary: dict) -> str:
             ),
             default=0,
         )
+        counts = {st["n_images"] for m in methods for st in summary[m].get(group, {}).values()}
         lines += [f"### {group} ({n} images): PSNR (dB) / SSIM", ""]
+        if len(counts) > 1:
+            lines += [
+                "Cells over fewer images are marked (n = ...): they are means over other "
+                "images and do not rank against the rest.",
+                "",
+            ]
         lines.append("| method | pattern | " + " | ".join(level_heading(s) for s in sigmas) + " |")
         lines.append("|---|---|" + "---|" * len(sigmas))
         for m in methods:
             cells = []
             for s in sigmas:
                 st = summary[m].get(group, {}).get(s)
-                cells.append("–" if st is None else f"{_db(st['psnr'])} / {st['ssim']:.4f}")
+                mark = f" (n = {st['n_images']})" if st and st["n_images"] != n else ""
+                cells.append("–" if st is None else f"{_db(st['psnr'])} / {st['ssim']:.4f}{mark}")
             lines.append(f"| {m} | {summary[m]['pattern']} | " + " | ".join(cells) + " |")
         lines += ["", f"### {group}: CIEDE2000 (lower is better)", ""]
         lines.append("| method | " + " | ".join(level_heading(s) for s in sigmas) + " |")
