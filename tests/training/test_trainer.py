@@ -418,3 +418,43 @@ def test_every_loss_trains_and_logs_the_batch_mse(image_folder, tmp_path):
                 assert any(not torch.equal(moved[a][k], moved[b][k]) for k in keys), (a, b)
     with pytest.raises(ConfigError, match="charbonnier"):
         tiny_config(image_folder, tmp_path / "x", **{"optim.loss": "huber"}).validate()
+
+
+def test_a_resume_that_goes_wrong_keeps_the_best_weights(image_folder, tmp_path, capsys):
+    """The best-by-validation weights stay in best.safetensors beside the latest checkpoint: a
+    resume at a rate that diverges overwrites the checkpoint, not them. Export of the run says
+    which checkpoint it uses, refuses the failed run without --force (and records the failure
+    with it), and exports the kept best weights."""
+    from splitcam.cli import main
+    from splitcam.recon.loading import load_model
+
+    run = tmp_path / "run"
+    settings = {"optim.steps": 24, "run.val_every": 8, "run.log_every": 4, "optim.lr": 3e-3}
+    train(tiny_config(image_folder, run, **settings), progress=False)
+    best_path = run / ckpt_io.BEST_NAME
+    best = ckpt_io.read_meta(best_path)
+    vals = [json.loads(line) for line in (run / "metrics.jsonl").read_text().splitlines()]
+    vals = [r["val_psnr"] for r in vals if "val_psnr" in r]
+    assert best["best_val"] == pytest.approx(max(vals))
+    before = best_path.read_bytes()
+    result = train(
+        tiny_config(image_folder, run, **{**settings, "optim.steps": 40, "optim.lr": 5.0}),
+        resume=True,
+        progress=False,
+    )
+    assert result.failure is not None
+    assert best_path.read_bytes() == before  # the good weights survive the bad resume
+    out = tmp_path / "models"
+    assert main(["models", "export", str(run), "--name", "m", "--out", str(out)]) == 1
+    err = capsys.readouterr().err
+    assert "ended in failure" in err and "best.safetensors" in err and not (out / "m.json").exists()
+    assert main(["models", "export", str(run), "--name", "m", "--out", str(out), "--force"]) == 0
+    said = capsys.readouterr().out
+    assert "using its latest checkpoint, step 40" in said and "best validation" in said
+    assert load_model(out / "m.json").meta["provenance"]["failure"] == result.failure
+    assert main(["models", "export", str(best_path), "--name", "b", "--out", str(out)]) == 0
+    kept = load_model(out / "b.json")
+    assert (
+        kept.meta["provenance"]["total_steps"] == best["step"]
+        and "failure" not in kept.meta["provenance"]
+    )

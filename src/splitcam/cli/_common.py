@@ -61,6 +61,28 @@ def check_distinct(inputs: dict[str, str | None], outputs: dict[str, str | None]
         seen.append((flag, path))
 
 
+def warn_failed_runs(specs) -> None:
+    """One line on stderr for each run folder or latest checkpoint among ``specs`` whose run
+    ended in failure (diverged, or far below where it began): its scores are of such weights."""
+    import sys
+    from pathlib import Path
+
+    from ..io import checkpoints as ckpt_io
+    from ..training.models import run_failure
+
+    for spec in specs:
+        path = Path(str(spec))
+        if not (path.is_dir() or path.name == ckpt_io.CHECKPOINT_NAME):
+            continue
+        latest = ckpt_io.resolve(path)
+        if latest.is_file() and (failure := run_failure(latest)):
+            best = latest.parent / ckpt_io.BEST_NAME
+            hint = f"; its best weights are in {best}" if best.is_file() else ""
+            print(f"warning: {path} ended in failure ({failure}){hint}", file=sys.stderr)
+        if (note := ckpt_io.which_checkpoint(path)) is not None:
+            print(note)
+
+
 def add_method_options(p: argparse.ArgumentParser) -> None:
     """Options of how methods are built and run, shared by `evaluate` and `reconstruct`."""
     p.add_argument(

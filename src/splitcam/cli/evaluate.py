@@ -14,6 +14,7 @@ from ._common import (
     model_methods,
     sensor_flags_given,
     sensor_settings,
+    warn_failed_runs,
     with_flips,
 )
 
@@ -198,6 +199,7 @@ def run(args: argparse.Namespace) -> int:
         *args.checkpoint,
         *(args.method or ([] if chosen else ["lmmse", "malvar2004"])),
     ]
+    warn_failed_runs([*args.checkpoint, *(args.method or [])])
     methods = model_methods(models, args.patterns, main_job=not chosen, options=options)
     methods += build_methods(
         specs,

@@ -25,7 +25,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--ship", action="store_true", help="export into the package's shipped models instead"
     )
-    p.add_argument("--force", action="store_true", help="replace an existing model of that name")
+    p.add_argument(
+        "--force",
+        action="store_true",
+        help="replace an existing model of that name; export a run that ended in failure "
+        "(recorded in its provenance)",
+    )
     p.add_argument("--storage", choices=["float16", "bfloat16", "float32"], default="float16")
     p.add_argument("--description", help="one line about the model")
     p.set_defaults(handler=run)
@@ -48,8 +53,17 @@ def run(args: argparse.Namespace) -> int:
         if existing and not args.force:
             what = f"the shipped model {args.name}" if args.ship else f"the model {existing[0]}"
             raise ValueError(f"{what} exists; --force replaces it")
+        from ..io.checkpoints import which_checkpoint
+
+        if (note := which_checkpoint(args.run)) is not None:
+            print(note)
         path = export_model(
-            args.run, out, name=args.name, storage=args.storage, description=args.description or ""
+            args.run,
+            out,
+            name=args.name,
+            storage=args.storage,
+            description=args.description or "",
+            force=args.force,
         )
         size = path.with_suffix(".safetensors").stat().st_size
         print(f"wrote {path} and {path.with_suffix('.safetensors').name} ({size / 2**20:.2f} MiB)")

@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 
 from ..io.domains import DOMAINS
-from ._common import add_method_options, check_distinct, with_flips
+from ._common import add_method_options, check_distinct, warn_failed_runs, with_flips
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -77,6 +77,7 @@ def run(args: argparse.Namespace) -> int:
             "or --checkpoint (a run folder)"
         )
     spec = given[0]
+    warn_failed_runs([spec])
     sigma, pattern, domain = args.sigma, args.pattern, args.domain
     recorded = None
     if args.raw:

@@ -23,6 +23,7 @@ import torch
 from . import atomic_path, write_text
 
 __all__ = [
+    "BEST_NAME",
     "CHECKPOINT_NAME",
     "EMA_PREFIX",
     "Checkpoint",
@@ -32,12 +33,19 @@ __all__ = [
     "read_meta",
     "require",
     "resolve",
+    "run_folder_of",
     "save",
+    "which_checkpoint",
 ]
 
 FORMAT = "splitcam-checkpoint"
 VERSION = 1
 CHECKPOINT_NAME = "checkpoint.safetensors"
+#: The run's weights at its best validation so far (weights and header only: what export and
+#: reconstruction need, not what a resume needs), kept beside the latest checkpoint, so a
+#: resume that goes wrong never takes the good weights with it. Give the file itself to use it
+#: (``models export RUN/best.safetensors``, ``--checkpoint RUN/best.safetensors``).
+BEST_NAME = "best.safetensors"
 #: The section of a checkpoint that holds the average of the network's weights, when the run
 #: keeps one (``optim.ema``, :mod:`splitcam.training.ema`): ``ema/network.<name>``. Readers that
 #: use a run's network for reconstruction prefer it to the trained ``model/`` weights.
@@ -64,9 +72,37 @@ class Checkpoint:
 
 
 def resolve(path: str | os.PathLike) -> Path:
-    """A run folder or a checkpoint file → the checkpoint file."""
+    """A run folder or a checkpoint file → the checkpoint file (of a folder, its latest)."""
     path = Path(path)
     return path / CHECKPOINT_NAME if path.is_dir() else path
+
+
+def run_folder_of(path: str | os.PathLike) -> Path | None:
+    """The run folder a checkpoint file belongs to (the latest or the best), or None for a
+    checkpoint file of another name."""
+    path = Path(path)
+    return path.parent if path.name in (CHECKPOINT_NAME, BEST_NAME) else None
+
+
+def which_checkpoint(path: str | os.PathLike) -> str | None:
+    """For a run folder: which checkpoint a reader of the folder uses (its latest), and, where
+    the run kept better weights at an earlier validation (:data:`BEST_NAME`), where they are;
+    None for a checkpoint file or a folder without a checkpoint."""
+    path = Path(path)
+    latest_path = path / CHECKPOINT_NAME
+    if not path.is_dir() or not latest_path.is_file():
+        return None
+    latest = read_meta(latest_path)
+    line = f"{path}: using its latest checkpoint, step {latest.get('step')}"
+    best_path = path / BEST_NAME
+    if best_path.is_file():
+        best = read_meta(best_path)
+        if best.get("step") != latest.get("step"):
+            line += (
+                f"; its best validation, {best.get('best_val', float('nan')):.2f} dB at step "
+                f"{best.get('step')}, is kept in {best_path} (give that file to use it)"
+            )
+    return line
 
 
 def save(path: str | os.PathLike, meta: dict[str, Any], tensors: dict[str, torch.Tensor]) -> Path:

@@ -56,8 +56,9 @@ class LoadedNetwork(NamedTuple):
 
 
 def load_network(path: str | os.PathLike, device: str | torch.device = "cpu") -> LoadedNetwork:
-    """The network of a run folder or checkpoint, with the pattern it had at that step (a
-    learned pattern as fixed kernels), in eval mode.
+    """The network of a run folder (its latest checkpoint) or checkpoint file (also a run's
+    ``best.safetensors``), with the pattern it had at that step (a learned pattern as fixed
+    kernels), in eval mode.
 
     Raises:
         CheckpointError: Missing or damaged checkpoint, or a header without pattern or network.

@@ -33,7 +33,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from .. import patterns
-from ..io.checkpoints import CHECKPOINT_NAME, read_meta, resolve
+from ..io.checkpoints import read_meta, resolve, run_folder_of
 from ..io.tensorfiles import meta_checksum
 from ..physics.light import check_domain
 from .base import NetworkReconstructor, Reconstructor
@@ -301,7 +301,8 @@ def build_method(
     if _is_path(spec):
         path = resolve(spec)
         config = read_meta(path).get("config")
-        label = path.parent.name if path.name == CHECKPOINT_NAME else path.stem
+        folder = run_folder_of(path)
+        label = folder.name if folder is not None else path.stem
         trained_in = _check_network_domain(label, config, domain)
         own = _trained_on_one_pattern(config)
         method = _network_method(load_network(path), label, pattern, tile, precision, own)

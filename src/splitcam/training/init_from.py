@@ -52,8 +52,10 @@ def _load_source(spec: str) -> tuple[LoadedNetwork, dict[str, Any]]:
     except ModelError as exc:
         raise ConfigError(str(exc)) from None
     path = Path(spec)
-    if path.is_dir() or path.name == ckpt_io.CHECKPOINT_NAME:
+    if path.is_dir() or ckpt_io.run_folder_of(path) is not None:
         checkpoint = ckpt_io.resolve(path)
+        if (note := ckpt_io.which_checkpoint(path)) is not None:
+            logger.info(note)
         if not checkpoint.is_file():
             raise ConfigError(f"--init-from {spec}: no checkpoint there")
         source = load_network(checkpoint)
@@ -129,7 +131,7 @@ def source_network(spec: str) -> dict[str, Any] | None:
     from ..recon.loading import resolve_model
 
     path = Path(spec)
-    if path.is_dir() or path.name == ckpt_io.CHECKPOINT_NAME:
+    if path.is_dir() or ckpt_io.run_folder_of(path) is not None:
         try:
             return ckpt_io.read_meta(ckpt_io.resolve(path)).get("network")
         except (OSError, ValueError):

@@ -29,9 +29,9 @@ import torch
 from ..io import checkpoints as ckpt_io
 from ..io.tensorfiles import paired_paths, save_pair
 from ..recon.loading import MODEL_FORMAT, MODEL_VERSION, ModelError, load_network
-from .rundir import changes_rows, metrics_rows
+from .rundir import METRICS_NAME, changes_rows, failure_of, last_metrics, metrics_rows
 
-__all__ = ["export_model", "model_summary", "provenance_of", "training_budget"]
+__all__ = ["export_model", "model_summary", "provenance_of", "run_failure", "training_budget"]
 
 STORAGE = {"float16": torch.float16, "bfloat16": torch.bfloat16, "float32": torch.float32}
 
@@ -153,18 +153,24 @@ def export_model(
     name: str | None = None,
     storage: str = "float16",
     description: str = "",
+    force: bool = False,
 ) -> Path:
     """Write the model of a run folder or checkpoint as ``out.safetensors`` + ``out.json``.
 
     Args:
-        run: Run folder or checkpoint file.
+        run: Run folder or checkpoint file (a run's latest, or its ``best.safetensors``).
         out: Target path (``NAME`` or ``NAME.json``).
         name: The model's name (default: the file name).
         storage: ``float16`` (default), ``bfloat16`` or ``float32`` for the trained weights.
         description: One line for tables and ``splitcam models``.
+        force: Export a run that ended in failure too (:func:`run_failure`); the failure is
+            recorded in the provenance.
 
     Returns:
         The JSON path.
+
+    Raises:
+        ModelError: A bad ``storage``, or a run that ended in failure without ``force``.
     """
     if storage not in STORAGE:
         raise ModelError(f"storage must be one of {', '.join(STORAGE)}, got {storage!r}")
@@ -178,7 +184,14 @@ def export_model(
     }
     _, meta_path = paired_paths(out)
     name = name or meta_path.stem
-    run_dir = path.parent if path.name == ckpt_io.CHECKPOINT_NAME else None
+    run_dir = ckpt_io.run_folder_of(path)
+    failure = run_failure(path) if path.name == ckpt_io.CHECKPOINT_NAME else None
+    if failure and not force:
+        raise ModelError(
+            f"{run_dir} ended in failure ({failure}); export an earlier good state "
+            f"({run_dir / ckpt_io.BEST_NAME} where it exists), or --force to export it anyway "
+            f"(the failure is recorded in its provenance)"
+        )
     meta = {
         "name": name,
         "description": description,
@@ -190,7 +203,21 @@ def export_model(
         "exported": time.strftime("%Y-%m-%dT%H:%M:%S"),
         "provenance": provenance_of(loaded, run_dir),
     }
+    if failure:
+        meta["provenance"]["failure"] = failure
     return save_pair(meta_path, tensors, MODEL_FORMAT, MODEL_VERSION, meta)
+
+
+def run_failure(checkpoint: str | os.PathLike) -> str | None:
+    """Why the run of a latest checkpoint ended in failure
+    (:func:`~splitcam.training.rundir.failure_of` over its log), or None: a run whose loss went
+    non-finite, whose divergence guard gave up, or whose validation fell far below its start."""
+    loaded_meta = ckpt_io.read_meta(checkpoint)
+    run_dir = ckpt_io.run_folder_of(checkpoint)
+    if run_dir is None or not (run_dir / METRICS_NAME).is_file():
+        return None
+    metrics = run_dir / METRICS_NAME
+    return failure_of(metrics, last_metrics(metrics), float(loaded_meta.get("lr_scale", 1.0)))
 
 
 def _batches(segs: list[dict[str, Any]]) -> str:

@@ -188,7 +188,8 @@ class RunLog:
         if resumed_at is not None:
             truncate_metrics(log.metrics_path, resumed_at)
         else:
-            stale = [n for n in (METRICS_NAME, CHANGES_NAME) if (run_dir / n).exists()]
+            names = (METRICS_NAME, CHANGES_NAME, ckpt_io.BEST_NAME)
+            stale = [n for n in names if (run_dir / n).exists()]
             for name in stale:
                 (run_dir / name).unlink()
             if restarted:

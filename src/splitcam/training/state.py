@@ -87,6 +87,8 @@ class TrainState:
     timed_out: bool = False
     #: The average of the network's weights (``optim.ema``), or None.
     ema: WeightAverage | None = None
+    #: The best validation PSNR (mean over levels) so far, whose weights are in ``best``.
+    best_val: float = float("-inf")
 
 
 def restore(state: TrainState, loaded: ckpt_io.Checkpoint, run: Run) -> None:
@@ -100,6 +102,8 @@ def restore(state: TrainState, loaded: ckpt_io.Checkpoint, run: Run) -> None:
     load_optimizer(state.optimizer, loaded)
     state.step = int(loaded.meta["step"])
     state.train_seconds = float(loaded.meta.get("train_seconds", 0.0))
+    best = loaded.meta.get("best_val")
+    state.best_val = float(best) if best is not None else float("-inf")
     restore_rng(loaded, state.sampler, state.noise, run.dist)
     if state.ema is not None:
         saved = {k[len("network.") :]: v for k, v in loaded.section(EMA_PREFIX).items()}
@@ -129,6 +133,19 @@ def save_checkpoint(state: TrainState, run: Run) -> None:
     _export_pattern(state.system, run)
 
 
+def save_best(state: TrainState, run: Run, val: float) -> None:
+    """Keep the weights that scored ``val``, the best validation so far, as ``best.safetensors``
+    beside the latest checkpoint (main process only: validation runs there; no optimiser or
+    generator state, so it needs no other rank). Export and reconstruction of a run folder use
+    it (:func:`~splitcam.io.checkpoints.resolve`)."""
+    state.best_val = val
+    tensors = {f"model/{k}": v for k, v in state.system.state_dict().items()}
+    if state.ema is not None:
+        tensors.update({f"{EMA_PREFIX}/network.{k}": v for k, v in state.ema.shadow.items()})
+    meta = _meta(state, run, {}, {})
+    ckpt_io.save(run.run_dir / ckpt_io.BEST_NAME, meta, tensors)
+
+
 def _meta(
     state: TrainState, run: Run, opt_meta: dict[str, Any], replicas: dict[str, Any]
 ) -> dict[str, Any]:
@@ -146,6 +163,7 @@ def _meta(
         "train_seconds": state.train_seconds,
         "lr_scale": state.guard.lr_scale,
         "ema_updates": state.ema.updates if state.ema is not None else None,
+        "best_val": state.best_val if state.best_val > float("-inf") else None,
         "device": run.device_label,
         "precision": "bf16" if run.fast else "fp32",
         "train_images": run.train_images,

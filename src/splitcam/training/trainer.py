@@ -49,7 +49,7 @@ from .rundir import (
 from .schedule import learning_rate
 from .schedule import progress as progress_of
 from .setup import prepare
-from .state import Run, TrainState, save_checkpoint
+from .state import Run, TrainState, save_best, save_checkpoint
 from .validation import validate
 
 __all__ = ["TrainResult", "train", "training_loss"]
@@ -210,7 +210,9 @@ def _steps(
     limit = run.time_limit_s
     state.timed_out = limit is not None and state.train_seconds >= limit
     if state.step == 0 and run.val_images and log is not None:
-        log.write({"step": 0, **_validate(state, run), "time": time.time()}, scalars=False)
+        scores = _validate(state, run)
+        log.write({"step": 0, **scores, "time": time.time()}, scalars=False)
+        _keep_best(state, run, scores)
     saved_at = state.train_seconds
     while state.step < run.config.optim.steps and not state.timed_out:
         if _step(state, run, model, window):
@@ -377,7 +379,9 @@ def _log(state: TrainState, run: Run, window: _Window, log: RunLog | None, bar: 
             state.last_metrics = window.row(state, run)
         if val_now:
             t_val = time.perf_counter()
-            state.last_metrics.update(_validate(state, run))
+            scores = _validate(state, run)
+            state.last_metrics.update(scores)
+            _keep_best(state, run, scores)
             state.last_metrics["step"] = state.step
             window.started += time.perf_counter() - t_val  # keep steps/s about training only
         if log_now or val_now:
@@ -399,6 +403,13 @@ def _validate(state: TrainState, run: Run) -> dict[str, float]:
             run.val_patterns,
             domain=run.config.data.domain,
         )
+
+
+def _keep_best(state: TrainState, run: Run, scores: dict[str, float]) -> None:
+    """Save the weights as the run's best when this validation beats every earlier one."""
+    val = scores.get("val_psnr")
+    if val is not None and math.isfinite(val) and val > state.best_val:
+        save_best(state, run, val)
 
 
 def _show(bar: Any, row: dict[str, float]) -> None:
