@@ -402,6 +402,7 @@ def _validate(state: TrainState, run: Run) -> dict[str, float]:
             run.val_levels,
             run.val_patterns,
             domain=run.config.data.domain,
+            precision="bf16" if run.fast else "fp32",
         )
 
 

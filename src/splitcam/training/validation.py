@@ -129,6 +129,7 @@ def validate(
     val_patterns: list[patterns.Pattern] | None = None,
     *,
     domain: str = "srgb",
+    precision: str = "fp32",
 ) -> dict[str, float]:
     """Mean PSNR per noise level (a sigma, or a photon-model exposure: ``val_psnr_N<photons>``)
     on the validation images, by the evaluation protocol itself
@@ -141,15 +142,29 @@ def validate(
     before it is scored against them, as ``evaluate --domain linear`` does.
 
     With ``val_patterns`` (a run over many patterns) each of them is scored
-    (``val_psnr_<pattern>_<level>``) and the plain keys hold the means over the patterns."""
+    (``val_psnr_<pattern>_<level>``) and the plain keys hold the means over the patterns.
+
+    ``precision`` is the run's own (``fp32``, or ``bf16`` for a run in bfloat16 + channels-last):
+    validation must leave the training state as it found it, and a network validated in
+    another precision would have its weights turned to channels-last in place, which changes
+    the float rounding of the steps after it (a resumed run would then differ from an
+    uninterrupted one). The global generator and the autocast weight cache are restored too.
+    """
     was_training = system.training
     system.eval()
     targets = val_patterns or [system.sensor.to_pattern()]
     per_pattern = {}
-    for pattern in targets:
-        method = NetworkReconstructor(system.network, pattern, "validation", domain=domain)
-        per_pattern[pattern.name] = mean_psnr(method, images, sigmas, domain=domain)
-    system.train(was_training)
+    rng = torch.get_rng_state()
+    try:
+        for pattern in targets:
+            method = NetworkReconstructor(
+                system.network, pattern, "validation", domain=domain, precision=precision
+            )
+            per_pattern[pattern.name] = mean_psnr(method, images, sigmas, domain=domain)
+    finally:
+        torch.set_rng_state(rng)
+        torch.clear_autocast_cache()
+        system.train(was_training)
 
     def key(s: float | Exposure) -> str:
         return f"N{s.photons:g}" if isinstance(s, Exposure) else f"{s:g}"
