@@ -72,3 +72,23 @@ def test_invalid_patterns_are_refused(change, message):
 def test_kernels_constructor_errors():
     with pytest.raises(PatternError, match="kernels must be numbers"):
         Pattern("x", [[0]], [[[["a"]]] * 3])
+
+
+def test_a_pixel_that_records_no_light_is_refused_by_name() -> None:
+    """Kernels under which some pixel of the period gets no light at all passed the validator,
+    then the LMMSE raised LinAlgError. The validator names the pixel; one that gets light only
+    from a neighbour's splitter is fine."""
+    import numpy as np
+
+    from splitcam.patterns.core import Pattern, PatternError
+
+    right = np.zeros((2, 3, 1, 3))
+    right[0, :, 0, 2] = 1.0  # splitter 0 sends everything one pixel to the right
+    right[1, :, 0, 1] = 1.0  # splitter 1 keeps its light
+    with pytest.raises(PatternError, match=r"pixel \(0, 0\) of the period records no light"):
+        Pattern("dark", np.array([[0, 1]]), right)
+    with pytest.raises(PatternError, match=r"pixel \(0, 0\)"):
+        Pattern("none", np.array([[0]]), np.zeros((1, 3, 1, 1)))
+    right[1, :, 0, 1] = 0.0
+    right[1, :, 0, 2] = 1.0  # both send right: each pixel gets its left neighbour's light
+    assert Pattern("shifted", np.array([[0, 1]]), right).period == (1, 2)

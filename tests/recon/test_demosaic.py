@@ -108,3 +108,32 @@ def test_demosaic_radius_is_exact_both_ways(method) -> None:
             reach = max(reach, int(torch.maximum((ys - y).abs(), (xs - x).abs()).max()))
     assert reach <= radius
     assert method == "bilinear" or reach >= radius - 1  # the radius is not loose either
+
+
+@pytest.mark.parametrize("method", ["bilinear", "malvar2004", "menon2007"])
+@pytest.mark.parametrize("size", [(1, 1), (9, 1), (1, 9), (1, 2), (2, 1)])
+def test_images_one_pixel_wide_or_high(method, size) -> None:
+    """Images with a side of one pixel (the networks and the LMMSE take them) used to raise an
+    IndexError inside colour-demosaicing. Now each is the package's demosaicking of the mosaic
+    padded with zeros below and to the right to two pixels, cut back; Malvar 2004 keeps every
+    measured sample exactly."""
+    import numpy as np
+
+    raw = torch.rand(2, 1, *size, generator=torch.Generator().manual_seed(3), dtype=torch.float64)
+    out = ClassicalDemosaic(method).reconstruct(raw)
+    assert out.shape == (2, 3, *size) and torch.isfinite(out).all()
+    function = {
+        "bilinear": cd.demosaicing_CFA_Bayer_bilinear,
+        "malvar2004": cd.demosaicing_CFA_Bayer_Malvar2004,
+        "menon2007": cd.demosaicing_CFA_Bayer_Menon2007,
+    }[method]
+    for n in range(2):
+        padded = np.zeros((max(2, size[0]), max(2, size[1])))
+        padded[: size[0], : size[1]] = raw[n, 0].numpy()
+        expected = function(padded, "RGGB")[: size[0], : size[1]].transpose(2, 0, 1)
+        np.testing.assert_allclose(out[n].numpy(), expected, rtol=0, atol=1e-12)
+    if method == "malvar2004":
+        colour = [[0, 1], [1, 2]]  # RGGB
+        for i in range(size[0]):
+            for j in range(size[1]):
+                torch.testing.assert_close(out[:, colour[i % 2][j % 2], i, j], raw[:, 0, i, j])

@@ -55,6 +55,21 @@ def _as_layout(layout: Any) -> np.ndarray:
     return np.asarray(flat, dtype=np.int64).reshape(shape)
 
 
+def _dark_pixel(layout: np.ndarray, kernels: np.ndarray) -> tuple[int, int] | None:
+    """The first pixel of the period (row, column) that no splitter sends light of any colour
+    to, or None: each splitter at ``q`` sends its kernel's light to ``q + offset``, wrapped
+    around the period (the pattern repeats)."""
+    ph, pw = layout.shape
+    kh, kw = kernels.shape[2:]
+    received = np.zeros((ph, pw))
+    light = kernels.sum(axis=1)  # (S, kh, kw): all colours together
+    for (qi, qj), s in np.ndenumerate(layout):
+        for a, b in zip(*np.nonzero(light[s]), strict=True):
+            received[(qi + a - kh // 2) % ph, (qj + b - kw // 2) % pw] += light[s, a, b]
+    dark = np.argwhere(received <= 0)
+    return (int(dark[0][0]), int(dark[0][1])) if dark.size else None
+
+
 def _as_kernels(kernels: Any) -> np.ndarray:
     shape = _nested_shape(kernels, "kernels")
     if len(shape) != 4:
@@ -133,6 +148,14 @@ class Pattern:
             raise PatternError(
                 f"splitter {s}, colour {COLOURS[c]} sums to {sums[s, c]:.6g} > 1: a splitter "
                 f"cannot send on more light than arrives (it would create light)"
+            )
+        dark = _dark_pixel(layout, kernels)
+        if dark is not None:
+            i, j = dark
+            raise PatternError(
+                f"pixel ({i}, {j}) of the period records no light: no splitter sends it any R, G "
+                f"or B, so it measures nothing and no reconstruction can use it (the LMMSE "
+                f"cannot even be solved)"
             )
         layout.setflags(write=False)
         kernels.setflags(write=False)

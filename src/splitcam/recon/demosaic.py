@@ -96,8 +96,15 @@ class ClassicalDemosaic:
             - output: ``(N, 3, H, W)``, same dtype and device as ``raw``.
         """
         cfa = raw.detach().cpu().double().numpy()
+        height, width = cfa.shape[-2:]
+        # colour-demosaicing squeezes its input, so a side of one pixel loses an axis: such an
+        # image is padded with zeros below or to the right (nothing is measured there; the
+        # (0, 0) phase stays where it is) and the result cut back.
+        grow = ((0, 0), (0, 0), (0, max(0, 2 - height)), (0, max(0, 2 - width)))
+        cfa = np.pad(cfa, grow)
         # The package works in float64 on (H, W) arrays and returns (H, W, 3).
         out = np.stack([self._function(cfa[n, 0], "RGGB") for n in range(cfa.shape[0])])
+        out = out[:, :height, :width]
         rgb = torch.from_numpy(np.ascontiguousarray(out.transpose(0, 3, 1, 2)))
         return rgb.to(device=raw.device, dtype=raw.dtype)
 
