@@ -435,3 +435,23 @@ def test_a_table_marks_cells_over_other_images() -> None:
     rows += [EvalRow("a", "D", "set", "i0", 10.0, 25.0, 0.8, 3.0)]
     table = markdown_tables(summarise(rows))
     assert "(n = 1)" in table and "do not rank" in table
+
+
+def test_a_failed_evaluation_leaves_no_half_made_folder(tmp_path) -> None:
+    """A method that crashes on its first image: the new results folder is not left behind
+    holding a header-only CSV. A folder that already held results keeps them."""
+
+    class Broken(Spy):
+        def reconstruct(self, raw, sigma):
+            raise RuntimeError("broken method")
+
+    images = random_images(2)
+    out = tmp_path / "new"
+    with pytest.raises(RuntimeError, match="broken"):
+        evaluate([Broken("x")], [("set", images)], [0], out, progress=False)
+    assert not out.exists()
+    kept = tmp_path / "kept"
+    evaluate([Spy("a")], [("set", images)], [0], kept, progress=False)
+    with pytest.raises(RuntimeError, match="broken"):
+        evaluate([Broken("x")], [("set", images)], [0], kept, progress=False)
+    assert {r.method for r in read_rows(kept / "per_image.csv")} == {"a"}

@@ -516,3 +516,20 @@ def test_resume_is_exact_with_validation_on(image_folder, tmp_path, monkeypatch,
     for key in a:
         if key.startswith("model/"):
             assert torch.equal(a[key], b[key]), key
+
+
+def test_a_run_that_fails_before_writing_anything_leaves_no_folder(tmp_path) -> None:
+    """A training folder with no usable image: refused, and the --out folder it would have
+    made (holding only its lock) is not left behind; an existing folder stays."""
+    empty = tmp_path / "photos"
+    empty.mkdir()
+    (empty / "bad.png").write_bytes(b"not an image")
+    out = tmp_path / "run"
+    with pytest.raises(ValueError, match="no usable images"):
+        train(tiny_config(empty, out, **{"data.val_split": 0}), progress=False)
+    assert not out.exists()
+    out.mkdir()
+    (out / "notes.txt").write_text("mine")
+    with pytest.raises(ValueError, match="no usable images"):
+        train(tiny_config(empty, out, **{"data.val_split": 0}), progress=False)
+    assert (out / "notes.txt").read_text() == "mine"

@@ -22,9 +22,11 @@ same metrics.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import os
+import shutil
 from collections.abc import Iterator, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -286,44 +288,59 @@ def evaluate(
     _check_image_sizes(datasets, crop)
     fingerprints = {result_label(m.name, domain): _fingerprint(m, crop, domain) for m in methods}
     out_dir = Path(out) if out is not None else None
-    done: dict[tuple, EvalRow] = {}
-    others: list[EvalRow] = []
-    if out_dir is not None:
-        done, others = _start_folder(
-            out_dir, methods, fingerprints, sensor_settings, crop, resume=resume
+    with _no_empty_folder(out_dir):
+        done: dict[tuple, EvalRow] = {}
+        others: list[EvalRow] = []
+        if out_dir is not None:
+            done, others = _start_folder(
+                out_dir, methods, fingerprints, sensor_settings, crop, resume=resume
+            )
+        run = _Run(
+            methods=methods,
+            sensors={m.name: SplitterSensor(m.pattern) for m in methods},
+            domain=domain,
+            crop=crop,
+            out_dir=out_dir,
+            done=done,
+            zooms=zoom,
+            save_images=save_images,
+            zoom_only=zoom_only,
+            zoom_sigmas=zoom_sigmas,
         )
-    run = _Run(
-        methods=methods,
-        sensors={m.name: SplitterSensor(m.pattern) for m in methods},
-        domain=domain,
-        crop=crop,
-        out_dir=out_dir,
-        done=done,
-        zooms=zoom,
-        save_images=save_images,
-        zoom_only=zoom_only,
-        zoom_sigmas=zoom_sigmas,
-    )
-    jobs = [
-        (dataset, name, rgb, sigma)
-        for dataset, images in datasets
-        for name, rgb in images
-        for sigma in sigmas
-    ]
-    run.bar = _progress_bar(len(jobs) * len(methods), len(done)) if progress else None
+        jobs = [
+            (dataset, name, rgb, sigma)
+            for dataset, images in datasets
+            for name, rgb in images
+            for sigma in sigmas
+        ]
+        run.bar = _progress_bar(len(jobs) * len(methods), len(done)) if progress else None
+        try:
+            for dataset, image_name, rgb, sigma in jobs:
+                _evaluate_job(run, dataset, image_name, rgb, sigma)
+        finally:
+            if run.bar is not None:
+                run.bar.close()
+        if out_dir is not None:
+            # The folder keeps every result this evaluation did not recompute: other methods', and
+            # this one's at other images, crops, levels or domains.
+            made = {row.key for row in run.rows}
+            kept = [row for row in done.values() if row.key not in made]
+            write_summary([*others, *kept, *run.rows], out_dir)
+        return run.rows
+
+
+@contextlib.contextmanager
+def _no_empty_folder(out_dir: Path | None) -> Iterator[None]:
+    """A results folder that the evaluation inside creates, and that holds no result when it
+    fails (a crash or a refusal), is removed: nothing half-made is left behind."""
+    created = out_dir is not None and not out_dir.exists()
     try:
-        for dataset, image_name, rgb, sigma in jobs:
-            _evaluate_job(run, dataset, image_name, rgb, sigma)
-    finally:
-        if run.bar is not None:
-            run.bar.close()
-    if out_dir is not None:
-        # The folder keeps every result this evaluation did not recompute: other methods', and
-        # this one's at other images, crops, levels or domains.
-        made = {row.key for row in run.rows}
-        kept = [row for row in done.values() if row.key not in made]
-        write_summary([*others, *kept, *run.rows], out_dir)
-    return run.rows
+        yield
+    except BaseException:
+        csv_path = out_dir / CSV_NAME if out_dir is not None else None
+        if created and out_dir.is_dir() and not (csv_path.is_file() and read_rows(csv_path)):
+            shutil.rmtree(out_dir, ignore_errors=True)
+        raise
 
 
 def _check_settings(

@@ -37,6 +37,7 @@ from .distributed import (
 )
 from .rundir import (
     GUARD_GIVES_UP,
+    LOCK_NAME,
     METRICS_NAME,
     RunLog,
     RunStart,
@@ -86,14 +87,29 @@ def train(config: TrainConfig, *, resume: bool = False, progress: bool = True) -
         resumable(run_dir)  # before the lock, so that a refused resume creates no folder
     # Under torchrun only rank 0 locks; the others wait for it in init_process_group.
     started_group = not distributed_initialized()
+    created = not run_dir.exists()
     lock = lock_run(run_dir) if is_main_process() else None
     try:
         result = _train(config, run_dir, resume, progress)
         end_distributed(destroy=started_group)
         return result
+    except BaseException:
+        if lock is not None and created:
+            _remove_if_empty(run_dir)
+        raise
     finally:
         if lock is not None:
             lock.close()
+
+
+def _remove_if_empty(run_dir: Path) -> None:
+    """Remove a run folder that this run created and that holds nothing but its lock: a run
+    that failed before it wrote anything (bad data, a refused setting) leaves nothing behind."""
+    entries = [p for p in run_dir.iterdir() if p.name != LOCK_NAME]
+    if not entries:
+        (run_dir / LOCK_NAME).unlink(missing_ok=True)
+        with contextlib.suppress(OSError):
+            run_dir.rmdir()
 
 
 def _train(config: TrainConfig, run_dir: Path, resume: bool, progress: bool) -> TrainResult:
