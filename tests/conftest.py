@@ -159,6 +159,19 @@ SMALL = {
 SWEEP_SMALL = {k: v for k, v in SMALL.items() if k != "run.threads"}
 
 
+def initial_state(config) -> dict:
+    """The state dict (``model/`` keys, as a checkpoint holds them) a run of ``config`` starts
+    from: the system built as :func:`splitcam.training.setup.prepare` builds it, after the same
+    seeding (a run of zero steps is refused)."""
+    import torch
+
+    from splitcam.training import seeds
+    from splitcam.training.setup import build_system
+
+    torch.manual_seed(seeds.global_seed(config))
+    return {f"model/{k}": v for k, v in build_system(config).state_dict().items()}
+
+
 def small_config(folder: Path, out: Path, **changes):
     """A :class:`TrainConfig` of :data:`SMALL` on ``folder`` into ``out``."""
     return tiny_config(folder, out, **{**SMALL, **changes})

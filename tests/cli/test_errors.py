@@ -24,10 +24,15 @@ def photos(tmp_path):
 
 
 def test_lmmse_of_a_pattern_that_collects_no_light(tmp_path, photos, capsys):
-    dark = dataclasses.replace(
-        patterns.get("D"), name="dark", kernels=np.zeros_like(patterns.get("D").kernels)
-    )
-    patterns.save(dark, tmp_path / "dark.toml")
+    """A pattern file whose kernels record no light passed the validator, then the LMMSE
+    raised LinAlgError (or said so late); now loading the file refuses it, naming the pixel,
+    before any work."""
+    data = patterns.get("D").to_dict()
+    data["name"] = "dark"
+    data["kernels"] = np.zeros_like(patterns.get("D").kernels).tolist()
+    (tmp_path / "dark.json").write_text(json.dumps(data))
+    with pytest.raises(patterns.PatternError, match=r"pixel \(0, 0\) of the period records no"):
+        dataclasses.replace(patterns.get("D"), kernels=np.zeros_like(patterns.get("D").kernels))
     assert (
         main(
             [
@@ -35,9 +40,7 @@ def test_lmmse_of_a_pattern_that_collects_no_light(tmp_path, photos, capsys):
                 "--method",
                 "lmmse",
                 "--patterns",
-                str(tmp_path / "dark.toml"),
-                "--lmmse-train",
-                str(photos),
+                str(tmp_path / "dark.json"),
                 "--datasets",
                 str(photos),
                 "--sigmas",
@@ -50,7 +53,8 @@ def test_lmmse_of_a_pattern_that_collects_no_light(tmp_path, photos, capsys):
         == 1
     )
     err = capsys.readouterr().err
-    assert err.count("\n") == 1 and "receive no light" in err and "'dark'" in err
+    assert err.count("\n") == 1 and "records no light" in err and "dark.json" in err
+    assert not (tmp_path / "o").exists()
 
 
 def test_plot_skips_damaged_metrics_lines_and_names_them(tmp_path, capsys):
@@ -120,3 +124,37 @@ def test_errors_are_one_line(photo, tmp_path, capsys, argv, message):
     assert main(argv) == 1
     err = capsys.readouterr().err
     assert message in err and "Traceback" not in err and err.count("\n") == 1
+
+
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (["train", "--steps", "0"], "optim.steps must be >= 1"),
+        (["train", "--time-limit", "-1"], "run.time_limit must be > 0"),
+        (["train", "--threads", "0"], "run.threads must be >= 1"),
+        (["train", "--patch-size", "3"], "data.patch_size must be >= 8"),
+        (["evaluate", "--method", "lmmse", "--patterns", "D", "--max-images", "0"], "--max-images"),
+        (["evaluate", "--method", "lmmse", "--patterns", "D", "--zoom", "x"], "--save-images"),
+    ],
+)
+def test_nonsense_settings_are_refused_in_one_line(tmp_path, capsys, argv, message) -> None:
+    """Settings that mean nothing (no steps, a negative time, no threads, a patch smaller than
+    two periods, zero images, a zoom that would not be drawn) are refused before any work, in
+    one line, and leave no folder behind."""
+    from splitcam.cli import main
+
+    out = tmp_path / "out"
+    extra = ["--data", str(tmp_path)] if argv[0] == "train" else []
+    assert main([*argv, *extra, "--out", str(out)]) == 1
+    err = capsys.readouterr().err.strip()
+    assert message in err and len(err.splitlines()) == 1
+    assert not out.exists()
+
+
+def test_a_model_of_one_pattern_refuses_another_pattern_in_the_api() -> None:
+    """build_method("D", pattern="A") used to ignore the pattern and reconstruct as D."""
+    from splitcam.recon.registry import build_method
+
+    assert build_method("D", pattern="D").pattern.name == "D"
+    with pytest.raises(ValueError, match="pattern D only, not of A"):
+        build_method("D", pattern="A")

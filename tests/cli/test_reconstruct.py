@@ -223,7 +223,7 @@ def test_raw_files_record_how_they_were_made(photo, tmp_path, capsys, suffix):
     assert main([*rec, "--method", "lmmse", "--pattern", "A"]) == 1
     assert "contradicts the pattern" in capsys.readouterr().err
     assert main([*rec, "--model", "E"]) == 1  # a network of another pattern (1x3 period)
-    assert "differs from the pattern of E" in capsys.readouterr().err
+    assert "reconstructs the raw images of pattern E only, not of D" in capsys.readouterr().err
     # Without a record: both must be given.
     bare = tmp_path / f"bare{suffix}"
     write_raw(bare, read_raw(raw))

@@ -86,13 +86,24 @@ def test_an_edited_model_file_is_refused_and_old_files_are_fingerprinted_by_thei
     path.write_text(json.dumps(edited))
     with pytest.raises(ModelError, match="changed after it was written"):
         load_model(path)
-    # A file from before the field checksum: loads, and its fingerprint follows its fields.
+    # The checksum deleted: refused, since every file of this version carries one.
     del edited["meta_sha256"]
     path.write_text(json.dumps(edited))
-    assert build_model(path).fingerprint != first
+    with pytest.raises(ModelError, match="lacks the checksum of its fields"):
+        load_model(path)
+    # A file from before the field checksum (version 1): loads, and its fingerprint follows
+    # every field, so an edit of any field is another model.
+    old = {**meta, "version": 1}
+    del old["meta_sha256"]
+    path.write_text(json.dumps(old))
+    before = build_model(path).fingerprint
+    for field, value in [("network", {**meta["network"], "radius": 2}), ("description", "x")]:
+        path.write_text(json.dumps({**old, field: value}))
+        assert build_model(path).fingerprint not in (before, first)
     # The shipped files all carry it.
     from splitcam.io.weights import MODELS_DIR
 
     for shipped in MODELS_DIR.glob("*.json"):
         stored = json.loads(shipped.read_text())
         assert stored["meta_sha256"] == meta_checksum(stored), shipped.name
+        assert stored["version"] == 2, shipped.name

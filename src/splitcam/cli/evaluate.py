@@ -178,6 +178,15 @@ def run(args: argparse.Namespace) -> int:
 
     zooms = [parse_zoom(z) for z in args.zoom or ()]  # bad syntax fails before any work
     chosen = args.checkpoint or args.method or args.model
+    if args.max_images is not None and args.max_images < 1:
+        raise ValueError(
+            f"--max-images must be >= 1 (leave it out for every image), got {args.max_images}"
+        )
+    if args.zoom and chosen and not args.save_images:
+        raise ValueError(
+            "--zoom draws zoomed side-by-side crops only with --save-images (the main job, with "
+            "no method named, draws them anyway)"
+        )
     options = {"tile": args.tile, "precision": args.precision, "domain": args.domain}
     # Built-in defaults (the main job): every shipped network, and the training-free baselines,
     # on centre crops of the built-in photos (within 3 minutes on a 2-core CPU): the shipped

@@ -97,6 +97,8 @@ def load_pair(
     version: int,
     what: str,
     error: type[ValueError] = TensorFileError,
+    *,
+    unchecked_before: int | None = None,
 ) -> tuple[dict[str, torch.Tensor], dict[str, Any], Path]:
     """Read a pair written by :func:`save_pair`: ``(tensors, meta, json path)``.
 
@@ -105,6 +107,9 @@ def load_pair(
         version: The version the JSON file must declare.
         what: Words for the kind of file in messages ("LMMSE statistics").
         error: The exception class raised (a subclass of ``ValueError``).
+        unchecked_before: Where the format's versions tell files with the field checksum from
+            files written before it existed: files of a version below this one are read too,
+            and only they may lack ``meta_sha256`` (``version`` must then be at least this).
 
     Raises:
         error: A file is missing or unreadable, the JSON is damaged or of another format or
@@ -122,9 +127,15 @@ def load_pair(
         raise error(f"'{meta_path}' is not valid JSON (damaged?): {exc}") from None
     if not isinstance(meta, dict) or meta.get("format") != fmt:
         raise error(f"'{meta_path}' is not a {what} file ({fmt})")
-    if meta.get("version") != version:
+    older = range(1, unchecked_before) if unchecked_before else range(0)
+    if meta.get("version") != version and meta.get("version") not in older:
         raise error(
             f"'{meta_path}': expected format version {version}, got {meta.get('version')!r}"
+        )
+    if unchecked_before and meta["version"] >= unchecked_before and "meta_sha256" not in meta:
+        raise error(
+            f"'{meta_path}' lacks the checksum of its fields (meta_sha256), which every file of "
+            f"its version carries: it was edited; export it again rather than editing it"
         )
     if "meta_sha256" in meta and meta_checksum(meta) != meta["meta_sha256"]:
         raise error(

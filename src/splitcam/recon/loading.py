@@ -40,7 +40,9 @@ __all__ = [
 
 #: The model file format (``NAME.safetensors`` + ``NAME.json``).
 MODEL_FORMAT = "splitcam-model"
-MODEL_VERSION = 1
+#: 2: the JSON fields carry their checksum (``meta_sha256``); 1: files from before it, read
+#: too, fingerprinted by their fields instead.
+MODEL_VERSION = 2
 
 
 class ModelError(ValueError):
@@ -139,7 +141,7 @@ def load_model(spec: str | os.PathLike[str], device: str | torch.device = "cpu")
     """
     meta_path = resolve_model(spec)
     tensors, meta, _ = load_pair(
-        meta_path, MODEL_FORMAT, MODEL_VERSION, "splitcam model", ModelError
+        meta_path, MODEL_FORMAT, MODEL_VERSION, "splitcam model", ModelError, unchecked_before=2
     )
     try:
         pattern = Pattern.from_dict(meta["pattern"], source=str(meta_path))

@@ -87,11 +87,12 @@ def build_model(
 
     A model for any pattern (``universal``) needs ``pattern`` (a library name, a pattern file or
     a :class:`~splitcam.patterns.Pattern`) and is labelled ``net-<name>-<pattern>``; a model of
-    one pattern ignores it (the CLI checks that the two agree).
+    one pattern takes only its own (or none).
 
     Raises:
         ModelError: Unknown name (the message lists the shipped ones) or a damaged file.
-        ValueError: A model for any pattern without ``pattern``.
+        ValueError: A model for any pattern without ``pattern``, or a model of one pattern given
+            another.
         PatternError: An unknown pattern name or a bad pattern file (the message names it).
         ValueError: ``domain`` is not the one the model was trained in.
     """
@@ -155,6 +156,14 @@ def _network_method(
     (``period`` None) with ``pattern``, labelled ``<label>-<pattern>``; ``fingerprint`` holds
     what, beyond the weights, identifies its results (the pattern's values). A network of any
     pattern fine-tuned on one (``own_pattern``) reconstructs that one unless told another."""
+    if not serves_any_pattern(loaded.network) and pattern is not None:
+        given = patterns.get(pattern)
+        if not given.equals(loaded.pattern):
+            raise ValueError(
+                f"{label} reconstructs the raw images of pattern {loaded.pattern.name} only, not "
+                f"of {_pattern_label(pattern, given)}: use a network of that pattern, the "
+                f"universal network or lmmse"
+            )
     if not serves_any_pattern(loaded.network) or (own_pattern and pattern is None):
         method = NetworkReconstructor(
             loaded.network, loaded.pattern, label, tile=tile, precision=precision

@@ -30,6 +30,9 @@ from ..io import write_text
 from ..io.domains import DEFAULT_DOMAIN, DOMAINS
 from ..io.paper import PAPER_PATTERNS
 
+#: The smallest training patch: two periods of the largest patterns (4x4).
+MIN_PATCH = 8
+
 #: Training losses (``optim.loss``); :func:`splitcam.training.trainer.training_loss` computes them.
 LOSSES = ("mse", "log_mse", "l1", "charbonnier")
 
@@ -367,7 +370,11 @@ class TrainConfig:
                 self.network.features >= 1 and self.network.blocks >= 0,
                 "network.features must be >= 1 and network.blocks >= 0",
             ),
-            (self.data.patch_size >= 1, "data.patch_size must be >= 1"),
+            (
+                self.data.patch_size >= MIN_PATCH,
+                f"data.patch_size must be >= {MIN_PATCH} (a few periods of the largest "
+                f"patterns, 4x4, and context for the network), got {self.data.patch_size}",
+            ),
             (
                 self.data.domain in DOMAINS,
                 f"data.domain must be one of {', '.join(DOMAINS)}, got {self.data.domain!r}",
@@ -385,7 +392,15 @@ class TrainConfig:
                 0 <= self.data.partial_periods <= 1,
                 f"data.partial_periods must be in [0, 1], got {self.data.partial_periods}",
             ),
-            (self.optim.steps >= 0, f"optim.steps must be >= 0, got {self.optim.steps}"),
+            (self.optim.steps >= 1, f"optim.steps must be >= 1, got {self.optim.steps}"),
+            (
+                self.run.time_limit is None or self.run.time_limit > 0,
+                f"run.time_limit must be > 0 minutes or none, got {self.run.time_limit}",
+            ),
+            (
+                self.run.threads is None or self.run.threads >= 1,
+                f"run.threads must be >= 1 or none (torch's choice), got {self.run.threads}",
+            ),
             (self.optim.lr > 0, f"optim.lr must be > 0, got {self.optim.lr}"),
             (self.pattern.lr is None or self.pattern.lr > 0, "pattern.lr must be > 0"),
             (
