@@ -158,3 +158,62 @@ def test_a_model_of_one_pattern_refuses_another_pattern_in_the_api() -> None:
     assert build_method("D", pattern="D").pattern.name == "D"
     with pytest.raises(ValueError, match="pattern D only, not of A"):
         build_method("D", pattern="A")
+
+
+def test_messages_that_help(tmp_path, capsys) -> None:
+    """After a time-limit stop the run says to raise --time-limit, and so does --resume; a
+    corrupt file among good photos is skipped by name in one line and training goes on; an
+    OS error names the user's path, not a temporary one."""
+    import shutil
+
+    from conftest import blocky_images
+
+    photos = blocky_images(tmp_path / "photos", 4)
+    (photos / "zz_corrupt.png").write_bytes(b"\x89PNG broken")
+    run = tmp_path / "run"
+    args = [
+        "train",
+        "--data",
+        str(photos),
+        "--out",
+        str(run),
+        "--patch-size",
+        "16",
+        "--features",
+        "8",
+        "--blocks",
+        "1",
+        "--threads",
+        "1",
+        "--time-limit",
+        "0.002",
+    ]
+    assert main(args) == 0
+    captured = capsys.readouterr()
+    assert "larger --time-limit" in captured.out
+    assert "warning: skipped 1 of" in captured.err and "zz_corrupt.png" in captured.err
+    assert "UserWarning" not in captured.err and "warnings.warn" not in captured.err
+    assert main([*args, "--resume"]) == 0
+    assert "larger --time-limit" in capsys.readouterr().out
+    shutil.rmtree(run)
+    (tmp_path / "afile").write_text("")
+    photo = photos / "im0.png"
+    out = tmp_path / "afile" / "x.png"
+    assert (
+        main(
+            [
+                "reconstruct",
+                "--method",
+                "lmmse",
+                "--pattern",
+                "D",
+                "--image",
+                str(photo),
+                "--out",
+                str(out),
+            ]
+        )
+        == 1
+    )
+    err = capsys.readouterr().err
+    assert str(out) in err and ".tmp-" not in err and len(err.strip().splitlines()) == 1

@@ -12,6 +12,7 @@ import argparse
 import importlib
 import logging
 import sys
+import warnings
 from collections.abc import Sequence
 
 from .. import __version__
@@ -77,6 +78,12 @@ class _Console(logging.Handler):
             self.handleError(record)
 
 
+def _one_line_warning(message, category, filename, lineno, file=None, line=None) -> None:  # noqa: ARG001
+    """A warning on the console as one line (``warning: ...``), not Python's two lines with the
+    file and source line of the library's code."""
+    print(f"warning: {message}", file=sys.stderr, flush=True)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the ``splitcam`` command; returns the exit status."""
     parser = build_parser()
@@ -85,6 +92,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     console, level = _Console(), logger.level
     logger.addHandler(console)
     logger.setLevel(logging.INFO)
+    shown = warnings.showwarning
+    warnings.showwarning = _one_line_warning
     try:
         return args.handler(args)
     except KeyboardInterrupt:
@@ -99,3 +108,4 @@ def main(argv: Sequence[str] | None = None) -> int:
     finally:
         logger.removeHandler(console)
         logger.setLevel(level)
+        warnings.showwarning = shown

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Iterator
-from contextlib import contextmanager
+from contextlib import contextmanager, suppress
 from pathlib import Path
 
 __all__ = ["appending", "atomic_path", "stale_temporaries", "write_bytes", "write_text"]
@@ -43,12 +43,21 @@ def atomic_path(path: str | os.PathLike[str]) -> Iterator[Path]:
         yield tmp
         os.replace(tmp, path)
     except OSError as exc:
-        tmp.unlink(missing_ok=True)
-        reason = exc.strerror or str(exc)
-        raise OSError(exc.errno, f"cannot write {path}: {reason}") from None
+        _discard(tmp)
+        # The user's path, never the temporary one, in the message.
+        reason = (exc.strerror or str(exc)).replace(str(tmp), str(path))
+        raise OSError(
+            exc.errno, f"cannot write {path}: {reason.replace(tmp.name, path.name)}"
+        ) from None
     except BaseException:
-        tmp.unlink(missing_ok=True)
+        _discard(tmp)
         raise
+
+
+def _discard(tmp: Path) -> None:
+    """Remove a temporary file if it is there (its folder may not even exist: then nothing)."""
+    with suppress(OSError):
+        tmp.unlink(missing_ok=True)
 
 
 def write_bytes(path: str | os.PathLike[str], data: bytes) -> Path:

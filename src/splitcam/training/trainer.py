@@ -142,8 +142,17 @@ def _nothing_to_train(state: TrainState, run: Run) -> bool:
     if state.step < run.config.optim.steps and not spent:
         return False
     if run.dist.is_main:
-        budget = "its time limit" if spent else f"{run.config.optim.steps} steps"
-        logger.info(f"{run.run_dir} is already at step {state.step} ({budget}): nothing to train")
+        if spent:
+            logger.info(
+                f"{run.run_dir} has trained its time limit ({limit:g} min) and is at step "
+                f"{state.step}: nothing to train; resume with a larger --time-limit (it counts "
+                f"the run's whole training time) to continue"
+            )
+        else:
+            logger.info(
+                f"{run.run_dir} is already at step {state.step} ({run.config.optim.steps} "
+                f"steps): nothing to train; resume with more --steps to continue"
+            )
     return True
 
 
@@ -443,10 +452,16 @@ def _result(state: TrainState, run: Run, interrupted: bool) -> TrainResult:
     failed (:func:`~splitcam.training.rundir.failure_of`)."""
     failure = None
     if run.dist.is_main:
-        if interrupted or state.timed_out:
-            why = "time limit reached" if state.timed_out else "interrupted"
+        if state.timed_out:
             logger.info(
-                f"{why}: saved step {state.step} to {run.checkpoint_path}; continue with --resume"
+                f"time limit reached ({run.config.run.time_limit:g} min of training): saved step "
+                f"{state.step} to {run.checkpoint_path}; to train further, --resume with a "
+                f"larger --time-limit (it counts the run's whole training time)"
+            )
+        elif interrupted:
+            logger.info(
+                f"interrupted: saved step {state.step} to {run.checkpoint_path}; continue with "
+                f"--resume"
             )
         if not interrupted:
             failure = failure_of(

@@ -35,15 +35,16 @@ def val_split(config: TrainConfig) -> int:
 
 
 def _short_side(path: Path) -> int:
-    """An image file's smaller side, from its header (an unreadable file counts as large:
-    decoding reports it later, naming it)."""
+    """An image file's smaller side, from its header; 0 for an unreadable file, so it is never
+    chosen for validation (it once was, as the only validation image, and the run stopped with
+    "all 1 were skipped" beside good photos): training skips it, naming it, and goes on."""
     from PIL import Image
 
     try:
         with Image.open(path) as im:
             return min(im.size)
     except OSError:
-        return 1 << 30
+        return 0
 
 
 def held_out(config: TrainConfig) -> list[Path]:
@@ -60,7 +61,7 @@ def held_out(config: TrainConfig) -> list[Path]:
         return []
     files = list_images(data.train)
     sides = {f: _short_side(f) for f in files}
-    need = min(data.val_crop or 1, max(sides.values()))
+    need = max(1, min(data.val_crop or 1, max(sides.values())))
     chosen = [f for f in files if sides[f] >= need][-split:]
     if len(chosen) >= len(files):
         raise ConfigError(
