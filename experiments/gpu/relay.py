@@ -5,10 +5,11 @@
 
 **The relay** trains each network of the queue from its shipped weights, on its own recipe (the
 configuration its last training segment saved: pattern, noise, light domain, copies at half
-size, weight average...), at ``--batch`` patches per step with the peak rate scaled by the
-square-root rule (:func:`splitcam.training.schedule.scaled_lr`) and a cosine decay over its time
-slot. The whole command ends within ``--minutes`` of wall time. The training photos are decoded
-once and held on the device (:class:`splitcam.data.patches.DeviceImages`).
+size, weight average...), at ``--batch`` patches per step with the recipe's peak rate carried
+over by ``--lr-rule`` (:func:`splitcam.training.schedule.scaled_lr`; kept as it is by default,
+which measured best at batch 64) and a cosine decay over its time slot. The whole command ends
+within ``--minutes`` of wall time. The training photos are decoded once and held on the device
+(:class:`splitcam.data.patches.DeviceImages`).
 
 - The queue: ``universal`` first (it serves every pattern), then ``universal-photon``, then the
   per-pattern networks furthest below the paper (A, D, D-opt, B, A-opt).
@@ -100,7 +101,9 @@ def relay_config(name: str, args: argparse.Namespace, out: Path, minutes: float)
             "data.train": str(args.data),
             "data.val": None,
             "data.batch_size": args.batch,
-            "optim.lr": scaled_lr(config.optim.lr, config.data.batch_size, args.batch),
+            "optim.lr": scaled_lr(
+                config.optim.lr, config.data.batch_size, args.batch, args.lr_rule
+            ),
             "optim.steps": 10**9,  # the time slot ends the run
             "pattern.design_steps": 0,  # the kernels come from the shipped model
             "run.init_from": name,
@@ -354,6 +357,13 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--data", default=str(REPO / "train-photos"), help="training photos")
     parser.add_argument("--queue", nargs="+", default=QUEUE, help="models, in order")
     parser.add_argument("--batch", type=int, default=256, help="patches per step")
+    parser.add_argument(
+        "--lr-rule",
+        choices=["none", "sqrt", "linear"],
+        default="none",
+        help="how each recipe's peak rate carries to --batch (docs/results/batch: keeping it "
+        "measured best at batch 64, the linear rule diverged)",
+    )
     parser.add_argument("--device", default="cuda", help="cuda, cuda:N or cpu")
     parser.add_argument("--precision", default="auto", help="auto, fp32 or bf16")
     parser.add_argument("--compile", action="store_true", help="torch.compile the networks")

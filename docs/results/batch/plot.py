@@ -18,6 +18,9 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
+#: The rule a batch-64 rate follows, by its ratio to batch 8's 1e-3 per 8 patches.
+RULES = {0.000354: " (square root)", 0.001: " (linear)", 0.000125: " (unscaled)"}
+
 
 def curve(run: Path) -> tuple[int, list[dict]]:
     config = json.loads((run / "config.json").read_text())
@@ -33,21 +36,35 @@ def main() -> None:
     parser.add_argument("--logs", type=Path, default=Path(__file__).with_name("logs"))
     args = parser.parse_args()
     args.logs.mkdir(parents=True, exist_ok=True)
-    fig, axes = plt.subplots(1, 2, figsize=(10, 4), sharex=True)
+    fig, axes = plt.subplots(1, 2, figsize=(10, 4.8), sharex=True)
+    keys = ("val_psnr_0", "val_psnr_15")
+    kept: dict[str, list[float]] = {k: [] for k in keys}
     for run in args.runs:
         batch, rows = curve(run)
         lr = json.loads((run / "config.json").read_text())["optim"]["lr"]
         (args.logs / f"{run.name}.jsonl").write_text("".join(json.dumps(r) + "\n" for r in rows))
         patches = [r["step"] * batch / 1000 for r in rows]
-        for ax, key in zip(axes, ("val_psnr_0", "val_psnr_15"), strict=True):
-            ax.plot(patches, [r[key] for r in rows], marker="o", label=f"batch {batch}, lr {lr:g}")
-    for ax, sigma in zip(axes, (0, 15), strict=True):
+        rule = RULES.get(round(lr * 8 / batch, 6) if batch != 8 else None, "")
+        label = f"batch {batch}, lr {lr:g}{rule}"
+        diverged = min(r["val_psnr"] for r in rows) < rows[0]["val_psnr"] - 1
+        for ax, key in zip(axes, keys, strict=True):
+            values = [r[key] for r in rows]
+            if diverged:
+                label += f" (diverged: down to {min(values):.1f} dB, ends {values[-1]:.1f})"
+                ax.plot([], [], marker="v", ls="--", label=label)  # below the axis
+                label = ""
+                continue
+            kept[key] += values
+            ax.plot(patches, values, marker="o", label=label)
+    for ax, key, sigma in zip(axes, keys, (0, 15), strict=True):
+        ax.set_ylim(min(kept[key]) - 0.3, max(kept[key]) + 0.3)
         ax.set_xlabel("patches seen (thousands)")
         ax.set_ylabel(f"validation PSNR at σ {sigma} (dB)")
         ax.grid(alpha=0.3)
-    axes[0].legend()
+    handles, labels = axes[0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="lower center", ncol=2, fontsize=8)
     fig.suptitle("Pattern D from scratch, equal patches seen: batch 64 against batch 8")
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0.13, 1, 1))
     fig.savefig(args.out, dpi=110)
     print(f"wrote {args.out}")
 
