@@ -534,3 +534,31 @@ def test_a_run_that_fails_before_writing_anything_leaves_no_folder(tmp_path) -> 
     with pytest.raises(ValueError, match="no usable images"):
         train(tiny_config(empty, out, **{"data.val_split": 0}), progress=False)
     assert (out / "notes.txt").read_text() == "mine"
+
+
+def test_training_with_the_photos_held_on_the_device_equals_the_host_path(
+    image_folder, tmp_path, monkeypatch
+):
+    """The device data path inside the training loop (the CPU standing in for the device):
+    the same patches and noise for one seed, so the same weights, bit for bit, with partial
+    periods and half-size copies."""
+    from splitcam.training import setup
+
+    settings = {"optim.steps": 6, "data.partial_periods": 0.5, "data.scales": [1.0, 0.5]}
+    train(tiny_config(image_folder, tmp_path / "host", **settings), progress=False)
+    monkeypatch.setattr(setup, "images_device", lambda device: device)
+    seen = []
+    build = setup.PatchSampler
+
+    def spy(*args, **kwargs):
+        sampler = build(*args, **kwargs)
+        seen.append(sampler.images is not None)
+        return sampler
+
+    monkeypatch.setattr(setup, "PatchSampler", spy)
+    train(tiny_config(image_folder, tmp_path / "held", **settings), progress=False)
+    assert seen == [True]
+    a, b = ckpt_io.load(tmp_path / "host").tensors, ckpt_io.load(tmp_path / "held").tensors
+    for key in a:
+        if key.startswith("model/"):
+            assert torch.equal(a[key], b[key]), key

@@ -309,10 +309,11 @@ def _patch_sampler(
         # A new pattern every step: cut into periods of up to 4 (the largest drawn) instead.
         "period": (4, 4) if run.mix is not None else system.sensor.period,
     }
-    if run.device.type == "cpu":  # the host path is the faster one there (bench_data.py)
+    device = images_device(run.device)
+    if device is None:
         return PatchSampler(cache, **settings)
     try:
-        return PatchSampler(cache, **settings, device=run.device)
+        return PatchSampler(cache, **settings, device=device)
     except torch.OutOfMemoryError:
         warnings.warn(
             f"the {cache.nbytes / 2**20:.0f} MiB of training images do not fit on "
@@ -320,6 +321,13 @@ def _patch_sampler(
             stacklevel=2,
         )
         return PatchSampler(cache, **settings)
+
+
+def images_device(device: torch.device) -> torch.device | None:
+    """Where a run holds its training photos: on an accelerator, the accelerator (one gather per
+    batch, no host copy); on a CPU nowhere but the cache's arrays (None), whose numpy path is
+    the faster one there (benchmarks/bench_throughput.py)."""
+    return None if device.type == "cpu" else device
 
 
 def build_noise(
