@@ -204,21 +204,7 @@ def test_messages_that_help(tmp_path, capsys) -> None:
     (tmp_path / "afile").write_text("")
     photo = photos / "im0.png"
     out = tmp_path / "afile" / "x.png"
-    assert (
-        main(
-            [
-                "reconstruct",
-                "--method",
-                "lmmse",
-                "--pattern",
-                "D",
-                "--image",
-                str(photo),
-                "--out",
-                str(out),
-            ]
-        )
-        == 1
-    )
+    command = ["reconstruct", "--method", "lmmse", "--pattern", "D"]
+    assert main([*command, "--image", str(photo), "--out", str(out)]) == 1
     err = capsys.readouterr().err
     assert str(out) in err and ".tmp-" not in err and len(err.strip().splitlines()) == 1
