@@ -122,7 +122,9 @@ def test_learned_pattern_starts_from_the_model_kernels(run_images, tmp_path):
         small_config(run_images, out, **{"pattern.learn": True, "optim.lr": 0.05}), progress=False
     )
     learned = load_system(out).sensor.pixel_kernels()
-    model = export_model(out, tmp_path / "jm")
+    # The high rate moves the kernels far (and the loss up: the run counts as failed, so its
+    # export needs force); what matters here is that the kernels carry over.
+    model = export_model(out, tmp_path / "jm", force=True)
     out2 = tmp_path / "joint2"
     train(
         small_config(
