@@ -562,3 +562,35 @@ def test_training_with_the_photos_held_on_the_device_equals_the_host_path(
     for key in a:
         if key.startswith("model/"):
             assert torch.equal(a[key], b[key]), key
+
+
+def test_runs_in_one_process_decode_a_folder_once(image_folder, tmp_path, monkeypatch):
+    """The relay trains network after network on one folder: the photos are decoded once, and
+    again only when a file changed or the decoding settings did."""
+    import os
+
+    from splitcam.training import setup
+
+    made = []
+    build = setup.ImageCache
+
+    def counted(*args, **kwargs):
+        made.append(1)
+        return build(*args, **kwargs)
+
+    monkeypatch.setattr(setup, "ImageCache", counted)
+    monkeypatch.setattr(setup, "_LAST_CACHE", {})
+    folder = tmp_path / "photos"
+    blocky_images(folder, 6, seed=5)
+    settings = {"optim.steps": 1, "data.val_split": 0}
+    train(tiny_config(folder, tmp_path / "a", **settings), progress=False)
+    train(tiny_config(folder, tmp_path / "b", **settings), progress=False)
+    assert len(made) == 1
+    first = sorted(folder.iterdir())[0]
+    os.utime(first, ns=(1, first.stat().st_mtime_ns + 10**9))
+    train(tiny_config(folder, tmp_path / "c", **settings), progress=False)
+    train(
+        tiny_config(folder, tmp_path / "d", **settings, **{"data.scales": [1.0, 0.5]}),
+        progress=False,
+    )
+    assert len(made) == 3

@@ -18,7 +18,7 @@ from typing import Any
 import torch
 
 from .. import patterns
-from ..data.patches import ImageCache, PatchSampler
+from ..data.patches import ImageCache, PatchSampler, list_images
 from ..design.kernels import design_pattern
 from ..io import checkpoints as ckpt_io
 from ..patterns.random import PatternMix
@@ -293,7 +293,7 @@ def _patch_sampler(
     """This rank's training patches of the images ``source``, cut at whole periods of the
     pattern."""
     config = run.config
-    cache = ImageCache(
+    cache = decoded(
         source,
         min_size=config.data.patch_size,
         max_images=config.data.max_images,
@@ -321,6 +321,23 @@ def _patch_sampler(
             stacklevel=2,
         )
         return PatchSampler(cache, **settings)
+
+
+_LAST_CACHE: dict[tuple, ImageCache] = {}
+
+
+def decoded(source: Any, **options: Any) -> ImageCache:
+    """The :class:`ImageCache` of ``source``, reused when the run before it in this process
+    decoded the same files the same way (the GPU relay trains several networks on one folder:
+    decoding the 432 photos and their copies again took 20-30 s each time). Only the latest is
+    kept, and only while none of its files changed (size and modification time)."""
+    files = tuple(list_images(source) if isinstance(source, (str, os.PathLike)) else source)
+    stamp = tuple((str(f), f.stat().st_size, f.stat().st_mtime_ns) for f in map(Path, files))
+    key = (stamp, options["min_size"], options["max_images"], tuple(options["scales"]))
+    if key not in _LAST_CACHE:
+        _LAST_CACHE.clear()
+        _LAST_CACHE[key] = ImageCache(list(files), **options)
+    return _LAST_CACHE[key]
 
 
 def images_device(device: torch.device) -> torch.device | None:
