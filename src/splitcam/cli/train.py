@@ -37,6 +37,22 @@ def fine_tuning(init_from: str, given: dict) -> dict:
     return implied
 
 
+def start_settings(candidate: str, given: dict) -> dict:
+    """What a start from ``candidate`` implies for ``--init-from auto``'s probes and run: its
+    network's architecture and size, and :data:`FINE_TUNE_LR` unless a rate is given."""
+    from ..training.init_from import source_network
+
+    network = source_network(candidate) or {}
+    implied = {
+        "network.arch": network.get("arch", "physics"),
+        "network.features": network.get("features", 64),
+        "network.blocks": network.get("blocks", 10),
+    }
+    if "optim.lr" not in given:
+        implied["optim.lr"] = FINE_TUNE_LR
+    return implied
+
+
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "train",
@@ -92,9 +108,17 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError(f"{flags}: settings of the photon model; add --noise photon")
     init_from = overrides.get("run.init_from", config.run.init_from)
     given = {**from_file, **overrides}
-    if not args.resume and init_from and "network.arch" not in given:
+    auto = not args.resume and init_from == "auto"
+    if auto and "optim.steps" not in given and "run.time_limit" not in given:
+        overrides["run.time_limit"] = FINE_TUNE_MINUTES
+        print(f"fine-tuning for {FINE_TUNE_MINUTES:g} minutes (--time-limit), the search included")
+    elif not args.resume and init_from and "network.arch" not in given:
         overrides.update(fine_tuning(init_from, given))
     config = config.override(overrides)
+    if auto:
+        from ..training.auto_init import choose_start
+
+        config, _ = choose_start(config, lambda name: start_settings(name, given))
     # Under torchrun, train() also ends the process group, the same way on every rank.
     result = train(config, resume=args.resume, progress=not args.quiet)
     if int(os.environ.get("RANK", "0")) != 0:
