@@ -250,7 +250,7 @@ class RunConfig:
         "start from the weights of a shipped model (name, e.g. D), a model file, a run folder or "
         "a checkpoint: the network's weights, and the learned kernels for --learn-pattern "
         "(optimiser state starts afresh; its provenance carries over); auto: try universal and "
-        "every shipped network of the pattern's period for an equal share of 30% of the time "
+        "every shipped network of the pattern's period, sharing 3/10 of the time "
         "limit, and continue from the best by validation (splitcam.training.auto_init)",
     )
     continue_schedule: bool = _opt(
