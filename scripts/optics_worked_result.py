@@ -4,11 +4,13 @@ routing (RGGB collection efficiency), in two geometries; their collection effici
 height maps, and their image quality against pattern A and the Bayer filter at equal noise and
 at equal exposure.
 
-    SPLITCAM_DATA=../shared/data python scripts/optics_worked_result.py --out docs/results/optics
+    SPLITCAM_DATA=DIR python scripts/optics_worked_result.py --out docs/results/optics
 
 Every router is scored by the closed-form LMMSE of its kernels (SPEC section 10), and so are A
 and the Bayer filter, so the comparison is between sensors, not between reconstructions. Images:
-the first ``--images`` of Kodak24 and of McMaster (reporting only; nothing here is tuned on them).
+the first ``--images`` of Kodak24 and of McMaster (reporting only; nothing here is tuned on them),
+found by name under the data root ``DIR`` (``splitcam data download kodak24 mcmaster --to DIR``;
+docs/commands.md).
 """
 
 from __future__ import annotations
@@ -127,8 +129,8 @@ def main() -> int:
         None,
         out / "equal_exposure",
         note=f"Images: the first {args.images} of Kodak24 and of McMaster. Read noise 2 e-, no "
-        "saturation or ADC. Command: `SPLITCAM_DATA=../shared/data python "
-        "scripts/optics_worked_result.py`",
+        "saturation or ADC. Command: `SPLITCAM_DATA=DIR python "
+        "scripts/optics_worked_result.py` (DIR: the data root holding kodak24/ and mcmaster/)",
     )
     info = {
         "command": " ".join(["python", *sys.argv]),
@@ -153,7 +155,7 @@ def _write_readme(out: Path, rows: list[dict], summary: dict, study: dict, info:
     lines = [
         "# A metasurface router designed with the reconstruction (issue 12's worked result)",
         "",
-        f"Command: `{info['command']}` with `SPLITCAM_DATA=../shared/data` "
+        f"Command: `{info['command']}` with `SPLITCAM_DATA` the data root of Kodak24 and McMaster "
         f"({info['machine']}; {info['seconds'] / 60:.1f} min in all, {info['steps']} Adam steps "
         f"at lr {info['lr']} per design).",
         "",

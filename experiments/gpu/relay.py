@@ -1,7 +1,7 @@
 """One command for a GPU's minutes: fine-tune a queue of shipped networks, then gate them on a CPU.
 
-    python experiments/gpu/relay.py --minutes 9 --out DIR [--data train-photos] [--batch 256]
-    python experiments/gpu/relay.py --gate DIR [--dry-run] [--data train-photos]
+    python experiments/gpu/relay.py --minutes 9 --out DIR [--data PHOTOS] [--batch 256]
+    python experiments/gpu/relay.py --gate DIR [--dry-run] [--data PHOTOS]
 
 **The relay** trains each network of the queue from its shipped weights, on its own recipe (the
 configuration its last training segment saved: pattern, noise, light domain, copies at half
@@ -47,7 +47,6 @@ import sys
 import time
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parents[2]
 QUEUE = ["universal", "universal-photon", "A", "D", "D-opt", "B", "A-opt"]
 SHARES = {"universal": 3, "universal-photon": 2}
 FIRST_OVERHEAD_S = 30.0
@@ -351,10 +350,16 @@ def run_gate(args: argparse.Namespace) -> int:
 
 
 def parse(argv: list[str] | None = None) -> argparse.Namespace:
+    from splitcam.data.registry import training_folder
+
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--minutes", type=float, help="wall-clock minutes the relay may take")
     parser.add_argument("--out", help="folder for runs, candidates and the table")
-    parser.add_argument("--data", default=str(REPO / "train-photos"), help="training photos")
+    parser.add_argument(
+        "--data",
+        default=str(training_folder()),
+        help="training photos (default: $SPLITCAM_DATA/train, splitcam.data.registry)",
+    )
     parser.add_argument("--queue", nargs="+", default=QUEUE, help="models, in order")
     parser.add_argument("--batch", type=int, default=256, help="patches per step")
     parser.add_argument(

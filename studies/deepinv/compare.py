@@ -35,6 +35,7 @@ import torch
 import splitcam
 from splitcam.data.images import read_image
 from splitcam.data.patches import list_images
+from splitcam.data.registry import training_folder
 from splitcam.data.testsets import centre_crop
 from splitcam.evaluation.protocol import score, simulate_and_reconstruct
 from splitcam.integrations.deepinv import DeepinvReconstructor, SplitterPhysics, dinv
@@ -47,7 +48,11 @@ REPO = Path(__file__).resolve().parents[2]
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--data", default=str(REPO.parent / "shared" / "data" / "train"))
+    p.add_argument(
+        "--data",
+        default=str(training_folder()),
+        help="training photos (default: $SPLITCAM_DATA/train, docs/commands.md)",
+    )
     p.add_argument("--pattern", default="D")
     p.add_argument("--network", default="D", help="shipped model name")
     p.add_argument("--sigmas", type=float, nargs="+", default=[0.0, 15.0])
@@ -208,7 +213,7 @@ fit).
 
 ## Result
 
-{len(test)} held-out images ({", ".join(test)}: the last {len(test)} of `../shared/data/train`
+{len(test)} held-out images ({", ".join(test)}: the last {len(test)} of the training photos
 by name; the network's training and the image statistics left them out), centre crops
 {args.crop}x{args.crop}, pattern {args.pattern}.
 Mean over the images; seconds per image at σ={" / ".join(f"{s:g}" for s in sig)}.{long}

@@ -19,6 +19,7 @@ import torch.nn.functional as F
 from splitcam import patterns
 from splitcam.data.images import read_image
 from splitcam.data.patches import list_images
+from splitcam.data.registry import training_folder
 from splitcam.evaluation.metrics import psnr
 from splitcam.physics.sensor import SplitterSensor
 from splitcam.recon.closed_form import closed_form_lmmse
@@ -32,7 +33,7 @@ files = sys.argv[1:] or [
 ]
 images = [
     torch.from_numpy(read_image(f)).permute(2, 0, 1)
-    for f in list_images("../shared/data/train")[-32:][:6]
+    for f in list_images(training_folder())[-32:][:6]
 ]
 for f in files:
     pattern = patterns.get(f)

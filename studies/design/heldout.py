@@ -1,6 +1,6 @@
 """Score designed patterns against their starts with the closed-form LMMSE on held-out images.
 
-    python studies/design/heldout.py docs/results/design/*.toml [--train ../shared/data/train]
+    python studies/design/heldout.py docs/results/design/*.toml [--train DIR]
 
 For every pattern file written by `splitcam design`, its start (``metadata.start``) and the
 designed pattern are each reconstructed by ``closed_form_lmmse(pattern)`` from the protocol's
@@ -22,6 +22,7 @@ import torch
 from splitcam import patterns
 from splitcam.data.images import read_image
 from splitcam.data.patches import list_images
+from splitcam.data.registry import training_folder
 from splitcam.design import closed_form_psnr
 from splitcam.evaluation.metrics import mean_over_images, psnr
 from splitcam.evaluation.protocol import mean_psnr, score_images
@@ -38,7 +39,12 @@ def held_out(folder: Path, count: int) -> list[tuple[str, torch.Tensor]]:
 def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("files", nargs="+", type=Path)
-    parser.add_argument("--train", type=Path, default=Path("../shared/data/train"))
+    parser.add_argument(
+        "--train",
+        type=Path,
+        default=training_folder(),
+        help="training photos (default: $SPLITCAM_DATA/train, docs/commands.md)",
+    )
     parser.add_argument("--count", type=int, default=32)
     parser.add_argument("--crop", type=int, default=8, help="border of the interior PSNR")
     args = parser.parse_args()

@@ -11,6 +11,7 @@ import torch
 
 from splitcam.data.images import read_image
 from splitcam.data.patches import list_images
+from splitcam.data.registry import training_folder
 from splitcam.data.testsets import centre_crop
 from splitcam.evaluation.protocol import mean_psnr
 from splitcam.io.weights import MODELS_DIR
@@ -20,7 +21,7 @@ from splitcam.recon.registry import build_method
 
 SIGMAS = [0.0, 15.0]
 torch.set_num_threads(2)
-paths = list_images("../shared/data/train")[-16:]  # held out of every shipped run
+paths = list_images(training_folder())[-16:]  # held out of every shipped run
 images = [(p.name, torch.from_numpy(read_image(p)).permute(2, 0, 1).contiguous()) for p in paths]
 for name in sys.argv[1:] or ["C", "E", "B", "D"]:
     net = build_method(name, precision="fp32")

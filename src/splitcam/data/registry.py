@@ -31,6 +31,7 @@ __all__ = [
     "dataset_names",
     "datasets",
     "parse_registry",
+    "training_folder",
 ]
 
 DATA_ENV = "SPLITCAM_DATA"
@@ -187,6 +188,18 @@ def dataset_names() -> tuple[str, ...]:
     """Names of the datasets that can be downloaded and looked up by name (``kodak24``,
     ``mcmaster``)."""
     return tuple(datasets())
+
+
+TRAINING_FOLDER = "train"
+"""The folder of training photos under the data root (the 432 BSDS500 photos the shipped networks
+trained on; docs/commands.md)."""
+
+
+def training_folder(root: str | os.PathLike[str] | None = None) -> Path:
+    """The training photos' folder: :data:`TRAINING_FOLDER` under :func:`data_root`, what the
+    studies and scripts read by default (``SPLITCAM_DATA=DIR`` with the photos in ``DIR/train``).
+    It need not exist."""
+    return data_root(root) / TRAINING_FOLDER
 
 
 def data_root(root: str | os.PathLike[str] | None = None) -> Path:
