@@ -89,7 +89,8 @@ def test_gate_ships_exactly_what_its_table_says(relayed, photos, tmp_path) -> No
     ships = after[0] > before[0] and after[-1] >= before[-1] - 0.05
     assert cells[-1] == ("yes" if ships else "no")
     assert (ship_to / "D.json").exists() == ships
-    assert cells[1] == "14" or int(cells[1]) <= 14  # validation photos + the last 12, whole
+    # The run's validation photo (1 of 14 held out: the last) and the last 12, whole: 12 in all.
+    assert cells[1] == "12"
 
 
 def test_bad_input_gets_one_line_and_changes_nothing(relayed, photos, tmp_path, capsys) -> None:

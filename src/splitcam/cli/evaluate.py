@@ -144,17 +144,17 @@ def _draw_charts(out: Path, rows: list, summary: dict) -> list[Path]:
     for pool in pools:
         suffix = "" if pool == "all" else f"_{pool}"
         curves = [(name, entry[pool]) for name, entry in summary.items() if pool in entry]
-        kinds = {parse_level_label(level)[0] for _, c in curves for level in c}
-        levels = {
-            k: {lv for _, c in curves for lv in c if parse_level_label(lv)[0] == k} for k in kinds
-        }
-        if len(levels.get("sigma", ())) > 1:
+        levels: dict[str, set[str]] = {"sigma": set(), "photons": set()}
+        for _, curve in curves:
+            for level in curve:
+                levels[parse_level_label(level)[0]].add(level)
+        if len(levels["sigma"]) > 1:
             from ..viz.charts import sigma_chart
 
             path = out / f"sigma_curves{suffix}.png"
             sigma_chart(curves, path, patterns_of={n: e["pattern"] for n, e in summary.items()})
             written.append(path)
-        photon = levels.get("photons", set())
+        photon = levels["photons"]
         if len(photon) > 1:
             from ..viz.charts import exposure_chart
 

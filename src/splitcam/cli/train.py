@@ -21,28 +21,22 @@ def fine_tuning(init_from: str, given: dict) -> dict:
     is kept (experiments/gpu/universal.toml sets its own rate and time limit)."""
     from ..training.init_from import source_network
 
-    network = source_network(init_from)
-    if not network or network.get("arch") != "universal":
+    if (source_network(init_from) or {}).get("arch") != "universal":
         return {}
-    implied = {
-        "network.arch": "universal",
-        "network.features": network.get("features", 64),
-        "network.blocks": network.get("blocks", 10),
-    }
+    implied = start_settings(init_from, given)
     if "optim.steps" not in given and "run.time_limit" not in given:
         implied["run.time_limit"] = FINE_TUNE_MINUTES
         print(f"fine-tuning {init_from} for {FINE_TUNE_MINUTES:g} minutes (--time-limit)")
-    if "optim.lr" not in given:
-        implied["optim.lr"] = FINE_TUNE_LR
     return implied
 
 
-def start_settings(candidate: str, given: dict) -> dict:
-    """What a start from ``candidate`` implies for ``--init-from auto``'s probes and run: its
-    network's architecture and size, and :data:`FINE_TUNE_LR` unless a rate is given."""
+def start_settings(source: str, given: dict) -> dict:
+    """What a fine-tuning from ``source`` implies (for ``--init-from universal`` and each of
+    ``--init-from auto``'s candidates): its network's architecture and size, and
+    :data:`FINE_TUNE_LR` unless a rate is given."""
     from ..training.init_from import source_network
 
-    network = source_network(candidate) or {}
+    network = source_network(source) or {}
     implied = {
         "network.arch": network.get("arch", "physics"),
         "network.features": network.get("features", 64),

@@ -60,12 +60,11 @@ def _dark_pixel(layout: np.ndarray, kernels: np.ndarray) -> tuple[int, int] | No
     to, or None: each splitter at ``q`` sends its kernel's light to ``q + offset``, wrapped
     around the period (the pattern repeats)."""
     ph, pw = layout.shape
-    kh, kw = kernels.shape[2:]
+    dy, dx = kernel_offsets(*kernels.shape[2:])
     received = np.zeros((ph, pw))
     light = kernels.sum(axis=1)  # (S, kh, kw): all colours together
     for (qi, qj), s in np.ndenumerate(layout):
-        for a, b in zip(*np.nonzero(light[s]), strict=True):
-            received[(qi + a - kh // 2) % ph, (qj + b - kw // 2) % pw] += light[s, a, b]
+        np.add.at(received, ((qi + dy) % ph, (qj + dx) % pw), light[s])
     dark = np.argwhere(received <= 0)
     return (int(dark[0][0]), int(dark[0][1])) if dark.size else None
 

@@ -82,13 +82,18 @@ class _TrainingDraws:
             state["field"] = self.field.get_state()
         return state
 
-    def load_state_dict(self, state: dict[str, torch.Tensor]) -> None:
+    def load_state_dict(self, state: dict[str, torch.Tensor]) -> bool:
         """Continue from a :meth:`state_dict`; the device generator only from one saved on the
         same kind of device (otherwise it keeps its seed: the stream cannot continue across
-        kinds)."""
+        kinds). Returns whether the whole stream continues."""
         self.generator.set_state(state["generator"])
-        if self.field is not self.generator and "field" in state:
-            self.field.set_state(state["field"])
+        if self.field is self.generator:
+            return True
+        field = state.get("field")
+        if field is None or field.numel() != self.field.get_state().numel():
+            return False
+        self.field.set_state(field)
+        return True
 
 
 class GaussianNoise(_TrainingDraws):

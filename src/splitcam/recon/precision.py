@@ -25,7 +25,15 @@ from pathlib import Path
 
 import torch
 
-__all__ = ["CACHE_ENV", "PrecisionChoice", "cache_path", "choose_precision", "measure"]
+__all__ = [
+    "CACHE_ENV",
+    "PrecisionChoice",
+    "cache_path",
+    "choose_precision",
+    "cpu_model",
+    "device_key",
+    "measure",
+]
 
 logger = logging.getLogger(__name__)
 
@@ -57,7 +65,8 @@ def cache_path() -> Path:
     return Path(root).expanduser() / "precision.json"
 
 
-def _cpu_model() -> str:
+def cpu_model() -> str:
+    """The CPU's model name (``/proc/cpuinfo``), or what :mod:`platform` knows of it."""
     with contextlib.suppress(OSError), open("/proc/cpuinfo", encoding="utf-8") as f:
         for line in f:
             if line.startswith("model name"):
@@ -78,7 +87,7 @@ def device_key(device: torch.device) -> str:
     if device.type == "cuda":
         name = torch.cuda.get_device_name(device)
     else:
-        name = f"{_cpu_model()} ({torch.backends.cpu.get_cpu_capability()})"
+        name = f"{cpu_model()} ({torch.backends.cpu.get_cpu_capability()})"
     return f"{device.type}: {name}; torch {torch.__version__}"
 
 
@@ -96,8 +105,11 @@ def measure(device: torch.device | str, *, steps: int = 3, batch: int = 8) -> Pr
     raw = torch.rand(batch, 1, 64, 64, generator=gen).to(device)
     kernels = pattern_pixel_kernels("D").to(device)
     sigma = torch.full((batch,), 10.0, device=device)
+    with torch.autocast(device.type, dtype=torch.bfloat16):
+        probe = torch.nn.functional.conv2d(raw[:1], torch.ones(1, 1, 3, 3, device=device))
+    runs = probe.dtype == torch.bfloat16
     times = {}
-    for fast in (False, True):
+    for fast in (False, True) if runs else (False,):
         torch.manual_seed(0)
         net = build_network({"arch": "physics", "period": [2, 2], "blocks": 4}).to(device)
         x = raw
@@ -119,11 +131,11 @@ def measure(device: torch.device | str, *, steps: int = 3, batch: int = 8) -> Pr
             step()
             taken.append(time.perf_counter() - t0)
         times[fast] = statistics.median(taken)
-    with torch.autocast(device.type, dtype=torch.bfloat16):
-        probe = torch.nn.functional.conv2d(raw[:1], torch.ones(1, 1, 3, 3, device=device))
+    if not runs:
+        return PrecisionChoice(
+            False, "bfloat16 autocast does not run convolutions here", times[False]
+        )
     fp32_s, bf16_s = times[False], times[True]
-    if probe.dtype != torch.bfloat16:
-        return PrecisionChoice(False, "bfloat16 autocast does not run convolutions here", fp32_s)
     fast = bf16_s < fp32_s
     winner = "bfloat16 + channels-last" if fast else "float32"
     reason = (

@@ -16,7 +16,8 @@ tiled result equal the untiled one up to float error:
 
 from __future__ import annotations
 
-from collections.abc import Callable
+import contextlib
+from collections.abc import Callable, Iterator
 from numbers import Integral
 from typing import Any, NamedTuple
 
@@ -216,8 +217,9 @@ def reconstruct(
         progress: Show a tqdm progress bar over the tiles.
         bf16: Run the network under bfloat16 autocast (much faster on CPUs with AVX512-BF16 or
             AMX; the output is returned in float32; costs some accuracy, see the README).
-        channels_last: Run the convolutions in channels-last memory format (converts the
-            network's weights in place; the results are unchanged).
+        channels_last: Run the convolutions in channels-last memory format (the network's
+            weights are in it for the reconstruction and back in their own layout after it; the
+            results are unchanged).
         sigma: Noise level of ``raw`` (8-bit units), for networks that take it
             (``net.uses_physics``, see :class:`splitcam.recon.networks.PhysicsReconNet`).
         kernels: Pixel kernels ``(Ph, Pw, 3, kh, kw)`` of the sensor, for the same networks.
@@ -244,8 +246,6 @@ def reconstruct(
     radius = int(net.receptive_radius)
     device = _network_device(net, raw.device)
     memory_format = torch.channels_last if channels_last else torch.contiguous_format
-    if channels_last:
-        net.to(memory_format=torch.channels_last)
 
     physics: tuple[Any, ...] = ()
     if getattr(net, "uses_physics", False):
@@ -261,8 +261,27 @@ def reconstruct(
             y = net(x, *physics)
         return y.to(raw.dtype) if bf16 else y
 
-    with torch.inference_mode():
+    layout = _weights_in(net, memory_format) if channels_last else contextlib.nullcontext()
+    with torch.inference_mode(), layout:
         return tiled(run, raw, period, radius, tile=tile, overlap=overlap, progress=progress)
+
+
+@contextlib.contextmanager
+def _weights_in(net: nn.Module, memory_format: torch.memory_format) -> Iterator[None]:
+    """The network's 4-D weights in ``memory_format`` for the reconstruction, and as they were
+    afterwards: a network that is also being trained (validation reconstructs with the training
+    network) must not come back in another layout, which changes the rounding of the steps
+    after it (a resumed run then differed from an uninterrupted one by ~1e-8)."""
+    params = [p for p in net.parameters() if p.dim() == 4]
+    before = [p.data for p in params]
+    with torch.no_grad():
+        for p in params:
+            p.data = p.data.contiguous(memory_format=memory_format)
+    try:
+        yield
+    finally:
+        for p, data in zip(params, before, strict=True):
+            p.data = data
 
 
 def _maybe_progress(items: list[Any], progress: bool) -> Any:

@@ -9,7 +9,6 @@ also when its weights start from a network of the other one (``run.init_from``).
 
 from __future__ import annotations
 
-import contextlib
 import os
 import warnings
 from pathlib import Path
@@ -182,14 +181,9 @@ def device_name(device: torch.device) -> str:
     <instruction set>, N threads)``."""
     if device.type == "cuda":
         return f"cuda ({torch.cuda.get_device_name(device)})"
-    import platform
+    from ..recon.precision import cpu_model
 
-    cpu = platform.processor() or platform.machine()
-    with contextlib.suppress(OSError):
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
+    cpu = cpu_model()
     # The instruction set matters as much as the name: one "AMD EPYC" did 7.0 steps/s with
     # AVX512 (native bfloat16), another 2.4 with AVX2 only.
     capability = torch.backends.cpu.get_cpu_capability()
@@ -332,7 +326,8 @@ def decoded(source: Any, **options: Any) -> ImageCache:
     decoding the 432 photos and their copies again took 20-30 s each time). Only the latest is
     kept, and only while none of its files changed (size and modification time)."""
     files = tuple(list_images(source) if isinstance(source, (str, os.PathLike)) else source)
-    stamp = tuple((str(f), f.stat().st_size, f.stat().st_mtime_ns) for f in map(Path, files))
+    stats = [(str(f), Path(f).stat()) for f in files]
+    stamp = tuple((name, st.st_size, st.st_mtime_ns) for name, st in stats)
     key = (stamp, options["min_size"], options["max_images"], tuple(options["scales"]))
     if key not in _LAST_CACHE:
         _LAST_CACHE.clear()

@@ -87,7 +87,8 @@ class TrainState:
     timed_out: bool = False
     #: The average of the network's weights (``optim.ema``), or None.
     ema: WeightAverage | None = None
-    #: The best validation PSNR (mean over levels) so far, whose weights are in ``best``.
+    #: The best validation PSNR (mean over levels) so far, whose weights are in
+    #: ``best.safetensors`` (:func:`save_best`).
     best_val: float = float("-inf")
 
 
@@ -136,8 +137,8 @@ def save_checkpoint(state: TrainState, run: Run) -> None:
 def save_best(state: TrainState, run: Run, val: float) -> None:
     """Keep the weights that scored ``val``, the best validation so far, as ``best.safetensors``
     beside the latest checkpoint (main process only: validation runs there; no optimiser or
-    generator state, so it needs no other rank). Export and reconstruction of a run folder use
-    it (:func:`~splitcam.io.checkpoints.resolve`)."""
+    generator state, so it needs no other rank). Readers of the run folder use the latest
+    checkpoint and say where this one is (:func:`~splitcam.io.checkpoints.which_checkpoint`)."""
     state.best_val = val
     tensors = {f"model/{k}": v for k, v in state.system.state_dict().items()}
     if state.ema is not None:
@@ -254,17 +255,14 @@ def restore_rng(
     if key in loaded.tensors:
         sampler.generator.set_state(loaded.tensors[key])
         state = {"generator": loaded.tensors[f"rng/noise/{info.rank}"]}
-        field = loaded.tensors.get(f"rng/noise-field/{info.rank}")
-        if "field" in noise.state_dict():
-            if field is not None and field.numel() == noise.field.get_state().numel():
-                state["field"] = field
-            else:
-                warnings.warn(
-                    f"the checkpoint holds no noise state for {noise.device.type}: the noise "
-                    "continues from a fresh stream",
-                    stacklevel=2,
-                )
-        noise.load_state_dict(state)
+        if (field := loaded.tensors.get(f"rng/noise-field/{info.rank}")) is not None:
+            state["field"] = field
+        if not noise.load_state_dict(state):
+            warnings.warn(
+                f"the checkpoint holds no noise state for {noise.device.type}: the noise "
+                "continues from a fresh stream",
+                stacklevel=2,
+            )
     else:
         warnings.warn(f"checkpoint has no RNG state for rank {info.rank}; reseeding", stacklevel=2)
         patches, sensor_noise = seeds.reseeded(sampler.seed, info.rank, int(loaded.meta["step"]))

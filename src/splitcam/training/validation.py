@@ -146,10 +146,10 @@ def validate(
     (``val_psnr_<pattern>_<level>``) and the plain keys hold the means over the patterns.
 
     ``precision`` is the run's own (``fp32``, or ``bf16`` for a run in bfloat16 + channels-last):
-    validation must leave the training state as it found it, and a network validated in
-    another precision would have its weights turned to channels-last in place, which changes
-    the float rounding of the steps after it (a resumed run would then differ from an
-    uninterrupted one). The global generator and the autocast weight cache are restored too.
+    the network is scored as it trains. Validation leaves the training state as it found it:
+    the weights' memory layout (:func:`~splitcam.recon.tiling.reconstruct` restores it), the
+    global generator and the autocast weight cache, so a resumed run equals an uninterrupted
+    one.
     """
     was_training = system.training
     system.eval()
