@@ -131,3 +131,15 @@ def test_registry_and_download_import_neither_torch_nor_numpy() -> None:
     )
     assert {"splitcam.data.registry", "splitcam.data.download"} <= loaded
     assert not {"torch", "numpy", "pooch", "PIL"} & loaded
+
+
+def test_the_training_photos_are_found_under_the_data_root(monkeypatch, tmp_path) -> None:
+    """Scripts and studies read the training photos from $SPLITCAM_DATA/train, never from a
+    folder beside the repository."""
+    from splitcam.data import registry
+
+    monkeypatch.setenv(registry.DATA_ENV, str(tmp_path))
+    assert registry.training_folder() == tmp_path / "train"
+    monkeypatch.delenv(registry.DATA_ENV)
+    assert registry.training_folder() == Path(registry.DEFAULT_ROOT).expanduser() / "train"
+    assert registry.training_folder(tmp_path / "x") == tmp_path / "x" / "train"
