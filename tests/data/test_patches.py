@@ -474,3 +474,41 @@ def test_device_images_of_16_bit_samples_above_32767(tmp_path: Path) -> None:
     patch = PatchSampler(cache, patch_size=16, device="cpu").sample(2)
     assert torch.allclose(patch[:, 0], torch.tensor(65000 / 65535))
     assert torch.allclose(patch[:, 1], torch.tensor(40000 / 65535))
+
+
+def test_hard_patches_follow_the_stated_probabilities(tmp_path: Path) -> None:
+    """A flat image (no gradient energy) and a noisy one: one patch picked among four
+    candidates, each candidate from either image with probability 1/2. With weight h on detail,
+    a batch of one comes from the noisy image with probability
+    sum_k C(4, k) / 16 * (k (1 - h) / 4 + h) over k >= 1 noisy candidates."""
+    _save8(tmp_path / "a_flat.png", np.full((32, 32, 3), 128, np.uint8))
+    _save8(tmp_path / "b_noise.png", _rgb8(32, 32, 5))
+    cache = ImageCache(tmp_path, min_size=16, progress=False)
+    from math import comb
+
+    for h in (0.0, 0.5, 1.0):
+        expect = sum(comb(4, k) / 16 * (k * (1 - h) / 4 + h) for k in range(1, 5))
+        sampler = PatchSampler(cache, patch_size=16, seed=1, hard=h)
+        noisy = [float(sampler.sample(1).std()) > 0 for _ in range(3000)]
+        assert abs(np.mean(noisy) - expect) < 0.03, (h, np.mean(noisy), expect)
+    # Off, it draws exactly what it drew before the option existed.
+    plain, off = (
+        PatchSampler(cache, patch_size=16, seed=2),
+        PatchSampler(cache, patch_size=16, seed=2),
+    )
+    off.hard = 0.0
+    assert torch.equal(plain.sample(4), off.sample(4))
+    with pytest.raises(ValueError, match="hard"):
+        PatchSampler(cache, patch_size=16, hard=1.5)
+
+
+def test_hard_patches_resume_their_sequence(coordinate_cache) -> None:
+    """Chosen by detail, the batches still depend only on the generator's state."""
+    cache, _ = coordinate_cache
+    first = PatchSampler(cache, patch_size=8, seed=3, hard=0.7)
+    first.sample(5)
+    state = first.state_dict()
+    expect = first.sample(5)
+    second = PatchSampler(cache, patch_size=8, seed=3, hard=0.7)
+    second.load_state_dict(state)
+    assert torch.equal(second.sample(5), expect)

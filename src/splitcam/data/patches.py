@@ -38,6 +38,9 @@ __all__ = [
     "load_validation",
 ]
 
+#: Candidates drawn per patch when patches are chosen by detail (``PatchSampler(hard=)``).
+HARD_POOL = 4
+
 # Ranks seed their generators at seed + _RANK_STRIDE * rank: a prime far above any seed sweep.
 _RANK_STRIDE = 1_000_003
 # Below this many files decoding is quick and a progress bar is only noise.
@@ -397,6 +400,12 @@ class PatchSampler:
             sequence is the same as without this option.
         period: The sensor's period (rows, columns): patches hold whole periods of it, and
             ``partial`` cuts into it.
+        hard: Weight of detail in choosing patches (0: uniform). Each patch is picked among
+            :data:`HARD_POOL` patches drawn as above, with probability ``(1 - hard) / HARD_POOL
+            + hard * e / sum(e)``, ``e`` each candidate's gradient energy (mean squared
+            difference of neighbouring pixels): patches with texture and edges, where
+            reconstruction errs most, come more often, and flat ones still come. The
+            candidates of one batch are drawn without replacement.
         device: Hold the images on this device (:class:`DeviceImages`) and build each batch
             there by one gather; None: build batches on the host from the cache's arrays, which
             on a CPU is faster (``benchmarks/bench_data.py``). Either way the random choices are
@@ -417,8 +426,11 @@ class PatchSampler:
         augment: bool = True,
         partial: float = 0.0,
         period: tuple[int, int] = (1, 1),
+        hard: float = 0.0,
         device: torch.device | str | None = None,
     ) -> None:
+        if not 0.0 <= hard <= 1.0:
+            raise ValueError(f"hard must be in [0, 1], got {hard}")
         if patch_size < 1:
             raise ValueError(f"patch_size must be positive, got {patch_size}")
         if not 0.0 <= partial <= 1.0:
@@ -440,6 +452,7 @@ class PatchSampler:
         self.world_size = world_size
         self.augment = augment
         self.partial = float(partial)
+        self.hard = float(hard)
         self.period = (int(period[0]), int(period[1]))
         self.generator = torch.Generator(device="cpu")
         self.generator.manual_seed(seed + _RANK_STRIDE * rank)
@@ -487,7 +500,10 @@ class PatchSampler:
             ``r, c`` the rows and columns cut: ``P mod period``, plus ``1 .. period - 1`` with
             probability ``partial``.
         """
-        batch = self.assemble(*self.draw(batch_size))
+        if self.hard > 0:
+            batch = self._harder(self.assemble(*self.draw(batch_size * HARD_POOL)), batch_size)
+        else:
+            batch = self.assemble(*self.draw(batch_size))
         # Whole periods first (no draw): a 64-pixel patch of a 1x3 pattern would otherwise
         # always end one column into a period, and a network trained only on that edge loses
         # 2-3 dB on crops that end on a whole period (docs/results/edges/).
@@ -499,6 +515,22 @@ class PatchSampler:
                 r = int(torch.randint(1, max(side, 2), (), generator=self.generator))
                 cut[i] += r if hit and side > 1 else 0
         return batch[..., : self.patch_size - cut[0], : self.patch_size - cut[1]]
+
+    def _harder(self, candidates: torch.Tensor, batch_size: int) -> torch.Tensor:
+        """``batch_size`` of ``candidates`` chosen by detail (see ``hard`` in the class)."""
+        energy = (
+            (
+                candidates.diff(dim=-1).square().mean((1, 2, 3))
+                + candidates.diff(dim=-2).square().mean((1, 2, 3))
+            )
+            .double()
+            .cpu()
+        )
+        n = len(candidates)
+        share = energy / energy.sum() if float(energy.sum()) > 0 else torch.full((n,), 1 / n)
+        weights = (1 - self.hard) / n + self.hard * share
+        pick = torch.multinomial(weights, batch_size, replacement=False, generator=self.generator)
+        return candidates[pick.to(candidates.device)]
 
     def assemble(
         self, index: torch.Tensor, corner: torch.Tensor, code: torch.Tensor

@@ -35,6 +35,7 @@ MIN_PATCH = 8
 
 #: Training losses (``optim.loss``); :func:`splitcam.training.trainer.training_loss` computes them.
 LOSSES = ("mse", "log_mse", "l1", "charbonnier")
+ADAPTERS = ("none", "film")
 
 
 class ConfigError(ValueError):
@@ -144,6 +145,12 @@ class DataConfig:
         "docs/results/convergence/5min_lr.md)",
     )
     max_images: int | None = _opt(None, "use at most this many training images")
+    hard_patches: float = _opt(
+        0.0,
+        "weight of detail in choosing patches: each patch is picked among 4 drawn at random "
+        "with probability (1 - h) / 4 + h times its share of their gradient energy (0: "
+        "uniform; splitcam.data.patches.PatchSampler)",
+    )
     scales: list[float] = _opt(
         [1.0],
         "train on each image at each of these sizes (factors in (0, 1], antialiased; e.g. "
@@ -194,6 +201,24 @@ class OptimConfig:
         "decay of an exponential moving average of the network's weights, which validation, "
         "checkpoints' readers and exports then use instead of the last step's (e.g. 0.999: "
         "about the last 1000 steps; none: off; splitcam.training.ema)",
+    )
+    adapter: str = _opt(
+        "none",
+        "fine-tune through an adapter: none (every weight at optim.lr) or film (a scale and "
+        "shift per output channel of every convolution at optim.lr, folded into the weights "
+        "when saved; the network's own weights at optim.lr times optim.base_lr_scale; "
+        "splitcam.training.adapters)",
+        choices=ADAPTERS,
+    )
+    base_lr_scale: float = _opt(
+        0.0,
+        "with an adapter: the network's own weights train at optim.lr times this (0: frozen)",
+    )
+    teacher_weight: float = _opt(
+        0.0,
+        "on steps whose pattern has a shipped per-pattern network of the run's light domain, "
+        "add this weight times the loss between the estimate and that network's estimate from "
+        "the same raw image (0: off; splitcam.training.teachers)",
     )
     clip_grad: float | None = _opt(
         None, "clip the global gradient norm to this (none: no clipping)"
@@ -363,6 +388,29 @@ class TrainConfig:
             (
                 self.optim.ema is None or 0 < self.optim.ema < 1,
                 f"optim.ema must be in (0, 1) or none, got {self.optim.ema!r}",
+            ),
+            (
+                self.optim.adapter in ADAPTERS,
+                f"optim.adapter must be one of {', '.join(ADAPTERS)}, got {self.optim.adapter!r}",
+            ),
+            (
+                self.optim.adapter == "none" or self.optim.ema is None,
+                "optim.adapter and optim.ema: an average of the frozen weights means nothing; "
+                "use one of them",
+            ),
+            (
+                self.optim.base_lr_scale >= 0,
+                f"optim.base_lr_scale must be >= 0, got {self.optim.base_lr_scale}",
+            ),
+            (
+                self.optim.teacher_weight >= 0
+                and (self.optim.teacher_weight == 0 or not self.pattern.learn),
+                "optim.teacher_weight must be >= 0, and 0 with --learn-pattern (a learned "
+                f"pattern has no shipped network), got {self.optim.teacher_weight}",
+            ),
+            (
+                0 <= self.data.hard_patches <= 1,
+                f"data.hard_patches must be in [0, 1], got {self.data.hard_patches}",
             ),
             (
                 self.run.precision in ("auto", "fp32", "bf16"),

@@ -9,6 +9,7 @@ also when its weights start from a network of the other one (``run.init_from``).
 
 from __future__ import annotations
 
+import logging
 import os
 import warnings
 from pathlib import Path
@@ -27,14 +28,17 @@ from ..physics.system import ImagingSystem
 from ..recon.base import fast_precision, strict_float32
 from ..recon.closed_form import shipped_image_statistics
 from ..recon.networks import build_network
-from . import seeds
+from . import adapters, seeds
 from .config import ConfigError, TrainConfig
 from .distributed import DistInfo, init_distributed
 from .ema import WeightAverage
 from .guard import DivergenceGuard
 from .init_from import continue_point, start_from
 from .state import Run, TrainState, restore
+from .teachers import Teachers
 from .validation import say_held_out, train_source, val_images, val_levels
+
+logger = logging.getLogger(__name__)
 
 
 def prepare(
@@ -66,9 +70,12 @@ def prepare(
         strict_float32(device)
     if run.mix is not None:
         run.val_patterns = [patterns.get(p) for p in config.pattern.val_patterns]
+    if config.optim.adapter != "none" and dist.world_size > 1:
+        raise ConfigError("optim.adapter trains in one process; leave it out under torchrun")
+    adapters.attach(system, config.optim.adapter)
     _speed_up(system, run)
-    optimizer = build_optimizer(config, system)
     run.init_from, start_step, lr_scale = _origin(config, system, loaded)
+    optimizer = build_optimizer(config, system)
     sampler = _patch_sampler(run, source, start_step, system, progress)
     run.train_images = sampler.cache.files
     state = TrainState(
@@ -80,11 +87,31 @@ def prepare(
         step=start_step,
         start_step=start_step,
         ema=WeightAverage(system.network, config.optim.ema) if config.optim.ema else None,
+        teachers=_teachers(run, system),
     )
     _validation(run, progress)
     if loaded is not None:
         restore(state, loaded, run)
     return run, state
+
+
+def _teachers(run: Run, system: ImagingSystem) -> Teachers | None:
+    """The shipped per-pattern networks of the run's patterns (``optim.teacher_weight``),
+    watching the run's network; None when off."""
+    config = run.config
+    if not config.optim.teacher_weight:
+        return None
+    own = run.mix.named if run.mix is not None else [system.sensor.to_pattern()]
+    teachers = Teachers.shipped(own, config.data.domain, run.device)
+    if not teachers.pairs:
+        raise ConfigError(
+            "optim.teacher_weight: none of the run's patterns has a shipped per-pattern network "
+            f"of {config.data.domain} light"
+        )
+    if run.dist.is_main:
+        logger.info(f"teachers: the shipped networks of {', '.join(teachers.names)}")
+    teachers.watch(system.network)
+    return teachers
 
 
 def _check_resume_domain(config: TrainConfig, loaded: ckpt_io.Checkpoint) -> None:
@@ -265,15 +292,24 @@ def _metasurface_sensor(spec: str, period: tuple[int, int], config: TrainConfig)
 
 
 def build_optimizer(config: TrainConfig, system: ImagingSystem) -> torch.optim.Optimizer:
-    """Adam over the network (and a learned pattern, at ``pattern.lr``). Each parameter group
-    keeps its ``peak_lr``: what the schedule scales."""
-    groups = [
-        {
-            "params": list(system.network.parameters()),
-            "lr": config.optim.lr,
-            "peak_lr": config.optim.lr,
-        }
-    ]
+    """Adam over the network (and a learned pattern, at ``pattern.lr``); with an adapter
+    (``optim.adapter``), over the adapter and the network at ``optim.base_lr_scale`` of the
+    rate. Each parameter group keeps its ``peak_lr``: what the schedule scales."""
+    lr = config.optim.lr
+    network = list(system.network.parameters())
+    adapter = getattr(system, "adapter", None)
+    if adapter is None:
+        groups = [{"params": network, "lr": lr, "peak_lr": lr}]
+    else:
+        # The adapter at the rate; the network's own weights slower, or frozen (no gradients
+        # computed for them: a frozen network's backward skips their weight gradients).
+        groups = [{"params": list(adapter.parameters()), "lr": lr, "peak_lr": lr}]
+        base = lr * config.optim.base_lr_scale
+        if base > 0:
+            groups.append({"params": network, "lr": base, "peak_lr": base})
+        else:
+            for p in network:
+                p.requires_grad_(False)
     sensor_params = list(system.sensor.parameters())
     if sensor_params:
         pattern_lr = config.pattern.lr or config.optim.lr
@@ -300,6 +336,7 @@ def _patch_sampler(
         "rank": run.dist.rank,
         "world_size": run.dist.world_size,
         "partial": config.data.partial_periods,
+        "hard": config.data.hard_patches,
         # A new pattern every step: cut into periods of up to 4 (the largest drawn) instead.
         "period": (4, 4) if run.mix is not None else system.sensor.period,
     }

@@ -25,11 +25,13 @@ from ..patterns.random import PatternMix
 from ..physics.noise import Exposure, GaussianNoise, PhotonNoise
 from ..physics.system import ImagingSystem
 from . import seeds
+from .adapters import BASE_PREFIX, folded_state, restore_base
 from .checkpoint import load_optimizer, optimizer_tensors
 from .config import TrainConfig
 from .distributed import DistInfo, gather
 from .ema import EMA_PREFIX, WeightAverage
 from .guard import DivergenceGuard
+from .teachers import Teachers
 
 
 @dataclass
@@ -87,6 +89,9 @@ class TrainState:
     timed_out: bool = False
     #: The average of the network's weights (``optim.ema``), or None.
     ema: WeightAverage | None = None
+    #: The per-pattern networks whose estimates are a second target (``optim.teacher_weight``),
+    #: or None.
+    teachers: Teachers | None = None
     #: The best validation PSNR (mean over levels) so far, whose weights are in
     #: ``best.safetensors`` (:func:`save_best`).
     best_val: float = float("-inf")
@@ -100,6 +105,10 @@ def restore(state: TrainState, loaded: ckpt_io.Checkpoint, run: Run) -> None:
     """
     peaks = [group["peak_lr"] for group in state.optimizer.param_groups]
     ckpt_io.load_module(state.system, loaded)
+    try:
+        restore_base(state.system, loaded.section(BASE_PREFIX))
+    except ValueError as exc:
+        raise ckpt_io.CheckpointError(f"checkpoint {str(loaded.path)!r}: {exc}") from None
     load_optimizer(state.optimizer, loaded)
     state.step = int(loaded.meta["step"])
     state.train_seconds = float(loaded.meta.get("train_seconds", 0.0))
@@ -125,7 +134,9 @@ def save_checkpoint(state: TrainState, run: Run) -> None:
     if not run.dist.is_main:
         return
     opt_tensors, opt_meta = optimizer_tensors(state.optimizer)
-    tensors = {f"model/{k}": v for k, v in state.system.state_dict().items()}
+    model, base = folded_state(state.system)
+    tensors = {f"model/{k}": v for k, v in model.items()}
+    tensors.update({f"{BASE_PREFIX}/{k}": v for k, v in base.items()})
     tensors.update(opt_tensors)
     if state.ema is not None:
         tensors.update({f"{EMA_PREFIX}/network.{k}": v for k, v in state.ema.shadow.items()})
@@ -140,7 +151,7 @@ def save_best(state: TrainState, run: Run, val: float) -> None:
     generator state, so it needs no other rank). Readers of the run folder use the latest
     checkpoint and say where this one is (:func:`~splitcam.io.checkpoints.which_checkpoint`)."""
     state.best_val = val
-    tensors = {f"model/{k}": v for k, v in state.system.state_dict().items()}
+    tensors = {f"model/{k}": v for k, v in folded_state(state.system)[0].items()}
     if state.ema is not None:
         tensors.update({f"{EMA_PREFIX}/network.{k}": v for k, v in state.ema.shadow.items()})
     meta = _meta(state, run, {}, {})

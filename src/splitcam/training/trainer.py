@@ -333,6 +333,12 @@ def _forward_backward(
     pred = pred.float()
     loss = F.mse_loss(pred, batch)
     objective = training_loss(run.config.optim.loss, pred, batch, mse=loss)
+    if state.teachers is not None:
+        pattern = run.mix.pattern(state.step) if run.mix is not None else state.system.sensor._meta
+        teacher = state.teachers.estimate(pattern)
+        if teacher is not None:
+            weight = run.config.optim.teacher_weight
+            objective = objective + weight * training_loss(run.config.optim.loss, pred, teacher)
     state.optimizer.zero_grad(set_to_none=True)
     objective.backward()
     trainable = [p for group in state.optimizer.param_groups for p in group["params"]]
