@@ -13,7 +13,8 @@ A pattern file looks like (TOML)::
     G = [[0, 1, 0]]
     B = [[0, 1, 0]]
 
-Kernels may also be given as one 4-D list ``(S, 3, kh, kw)``.
+Kernels may also be given as one 4-D list ``(S, 3, kh, kw)``. A file with ``wavelengths`` is a
+spectral pattern (:mod:`splitcam.patterns.spectral`), reduced to RGB kernels when read.
 """
 
 from __future__ import annotations
@@ -61,7 +62,12 @@ def load(path: str | os.PathLike) -> Pattern:
         data = json.loads(text) if suffix == ".json" else tomllib.loads(text)
     except (json.JSONDecodeError, tomllib.TOMLDecodeError) as exc:
         raise PatternError(f"pattern file {str(path)!r} is not valid {suffix[1:]}: {exc}") from None
-    return Pattern.from_dict(data, source=f"pattern file {str(path)!r}")
+    source = f"pattern file {str(path)!r}"
+    if isinstance(data, dict) and "wavelengths" in data:
+        from .spectral import SpectralPattern
+
+        return SpectralPattern.from_dict(data, source=source).to_pattern()
+    return Pattern.from_dict(data, source=source)
 
 
 def _toml(data: dict) -> str:
