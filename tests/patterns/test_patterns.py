@@ -20,6 +20,10 @@ def test_registry_names_and_case_insensitive_lookup():
         "quad",
         "router-zou",
         "router-best",
+        "bayer-d5100",
+        "rgbw-d5100",
+        "bayer-sdmerrill",
+        "rgbw-sdmerrill",
     ]
     assert patterns.get("d").name == "D"
     assert patterns.get("BAYER").name == "bayer"

@@ -8,9 +8,12 @@ descriptions because the paper's kernels for them are unpublished.
 
 from __future__ import annotations
 
+from functools import partial
+
 import numpy as np
 
 from .core import Pattern
+from .measured import CAMERAS, measured_array
 
 _C3 = [[0, 0, 0], [0, 1, 0], [0, 0, 0]]
 _CROSS = [[0, 0.25, 0], [0.25, 0, 0.25], [0, 0.25, 0]]
@@ -321,4 +324,10 @@ BUILTIN_FACTORIES = {
     "quad": _pattern_quad,
     "router-zou": _router_zou,
     "router-best": _router_best,
+    # Filter arrays of measured camera sensitivities (splitcam.patterns.measured).
+    **{
+        f"{kind}-{camera}": partial(measured_array, kind, camera)
+        for camera in CAMERAS
+        for kind in ("bayer", "rgbw")
+    },
 }

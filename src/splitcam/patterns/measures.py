@@ -9,6 +9,9 @@ pattern, including learned ones:
 - ``split_fraction``: share of the incident (white) light that leaves the pixel it arrived at.
 - ``spread``: the largest distance (in pixels) any light travels; ``mean_travel``: the
   light-weighted mean distance travelled.
+- ``purity``: the mean over the period's pixels of the largest colour's share of what the pixel
+  records under white light: 1 when every pixel records one colour (ideal filters, A), 1/3 for a
+  bare (W) pixel; leaky filters and routers with crosstalk lie between.
 - ``pooling_unit``: how many sites send every colour to exactly the same pixels (the sub-pixel
   structure: the unit pools its light); 1 means no pooling.
 """
@@ -34,6 +37,7 @@ class PatternMeasures:
     spread: float
     mean_travel: float
     pooling_unit: int
+    purity: float = 1.0
 
     @property
     def pooling(self) -> bool:
@@ -52,6 +56,7 @@ class PatternMeasures:
             "period": f"{self.period[0]}x{self.period[1]}",
             "efficiency R/G/B": "/".join(f"{e:.2f}" for e in self.efficiency),
             "white": f"{self.white:.3f}",
+            "purity": f"{self.purity:.2f}",
             "split": f"{self.split_fraction:.2f}",
             "spread (px)": f"{self.spread:.2f}",
             "mean travel (px)": f"{self.mean_travel:.2f}",
@@ -127,7 +132,15 @@ def measure(pattern: Pattern) -> PatternMeasures:
         spread=float(reached.max()) if reached.size else 0.0,
         mean_travel=float((k * dist).sum() / total) if total > 0 else 0.0,
         pooling_unit=unit,
+        purity=_purity(pattern),
     )
+
+
+def _purity(pattern: Pattern) -> float:
+    response = pixel_response(pattern)
+    total = response.sum(axis=2)
+    lit = total > 0
+    return float((response.max(axis=2)[lit] / total[lit]).mean()) if lit.any() else 0.0
 
 
 def pixel_response(pattern: Pattern) -> np.ndarray:
