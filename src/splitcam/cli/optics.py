@@ -40,7 +40,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--steps", type=int, default=200)
     p.add_argument("--lr", type=float, default=0.1)
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--out", required=True, help="pattern file (.toml or .json)")
+    p.add_argument("--out", help="pattern file (.toml or .json); required")
     p.add_argument("--quiet", action="store_true")
     add_search_options(
         p,
@@ -49,6 +49,10 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--out: the front's trial of highest PSNR)",
     )
     p.set_defaults(handler=run)
+    # `splitcam optics rcwa DESIGN.csv`: the full-wave solver, in its own module.
+    from . import rcwa
+
+    rcwa.register(p.add_subparsers(dest="optics_command", metavar="{rcwa}"))
 
 
 #: The settings a metasurface search draws: setting -> (option attribute, default).
@@ -172,6 +176,8 @@ def run(args: argparse.Namespace) -> int:
     from ..physics.optics import Optics, bayer_collection, pattern_of, profile
     from ..viz.patterns import draw_height_maps, draw_pattern
 
+    if not args.out:
+        raise ValueError("splitcam optics: --out FILE is required (or: splitcam optics rcwa ...)")
     period = tuple(int(v) for v in args.period.lower().split("x"))
     if len(period) != 2 or min(period) < 1:
         raise ValueError(f"--period must be like 2x2, got {args.period!r}")

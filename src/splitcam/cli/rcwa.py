@@ -1,0 +1,217 @@
+"""`splitcam optics rcwa`: the full-wave spectra of a 2x2-pixel metasurface router, and its
+spectral pattern file."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+
+def register(optics_sub: argparse._SubParsersAction) -> None:
+    p = optics_sub.add_parser(
+        "rcwa",
+        help="full-wave spectra of a 2x2-pixel metasurface router (RCWA) and its pattern",
+        description="Solves Maxwell's equations for a metasurface design (RCWA, "
+        "splitcam.physics.fullwave; the optional extra splitcam[fullwave]) and writes to --out "
+        "the transmission into each pixel quadrant per wavelength and polarisation "
+        "(spectra.csv, spectra.png) and the spectral pattern file (pattern.toml) that every "
+        "other command takes as --pattern. Cost: about (2 order + 1)^6 per wavelength and "
+        "direction (order 9: 20 s, order 12: 90 s on one CPU core).",
+    )
+    p.add_argument("design", help="CSV grid of 0/1 or densities in [0, 1]; rows along y")
+    p.add_argument("--out", required=True, help="folder for the spectra and pattern.toml")
+    p.add_argument("--name", help="the pattern's name (default: the design file's stem)")
+    p.add_argument("--pitch", type=float, default=1.0, help="pixel pitch, µm (default 1)")
+    p.add_argument("--thickness", type=float, default=0.6, help="layer, µm (default 0.6)")
+    p.add_argument("--depth", type=float, default=2.4, help="monitor below it, µm (default 2.4)")
+    p.add_argument("--pillar", default="Si3N4", help="material or index (default Si3N4)")
+    p.add_argument("--background", default="vacuum", help="material or index (default vacuum)")
+    p.add_argument("--substrate", default="SiO2", help="material or index (default SiO2)")
+    p.add_argument(
+        "--wavelengths",
+        default="400:700:10",
+        help="nm: FIRST:LAST:STEP or a list A,B,C (default 400:700:10)",
+    )
+    p.add_argument("--order", type=int, default=9, help="Fourier order per axis (default 9)")
+    p.add_argument(
+        "--f-number",
+        type=float,
+        help="average over the cone of light of a lens at this f-number (7 directions) "
+        "instead of normal incidence",
+    )
+    p.add_argument("--threads", type=int, help="CPU threads (default: torch's)")
+    p.add_argument("--quiet", action="store_true")
+    p.set_defaults(handler=run)
+
+
+def wavelengths_of(text: str) -> list[float]:
+    """``400:700:10`` or ``450,540,650`` as a list of nm."""
+    try:
+        if ":" in text:
+            first, last, step = (float(v) for v in text.split(":"))
+            if step <= 0 or last < first:
+                raise ValueError
+            count = int(round((last - first) / step)) + 1
+            return [first + i * step for i in range(count)]
+        return [float(v) for v in text.split(",")]
+    except ValueError:
+        raise ValueError(
+            f"--wavelengths: expected FIRST:LAST:STEP or A,B,C in nm, got {text!r}"
+        ) from None
+
+
+def bands(transmission, wavelengths) -> dict[str, float]:
+    """Band efficiencies (the mean transmission of 400-500, 500-600 and 600-700 nm into its
+    own pixels: blue where the shortest wavelength peaks, red where the longest peaks, green the
+    other two) from ``(2, 2, L)`` transmissions."""
+    import numpy as np
+
+    t = np.asarray(transmission).reshape(4, -1)
+    lam = np.asarray(wavelengths)
+    blue, red = int(t[:, 0].argmax()), int(t[:, -1].argmax())
+    green = [q for q in range(4) if q not in (blue, red)]
+    out = {}
+    for name, quads, low, high in (
+        ("blue", [blue], 400, 500),
+        ("green", green, 500, 600),
+        ("red", [red], 600, 700),
+    ):
+        inside = (lam >= low) & (lam <= high)
+        out[name] = float(t[quads][:, inside].sum(axis=0).mean()) if inside.any() else float("nan")
+    out["quadrants"] = {"blue": blue, "red": red}
+    return out
+
+
+def run(args: argparse.Namespace) -> int:
+    import numpy as np
+    import torch
+
+    from .. import patterns
+    from ..io import write_text
+    from ..patterns.spectral import SpectralPattern
+    from ..physics.fullwave import RouterDesign, cone_directions, quadrant_spectra, read_design
+
+    lams = wavelengths_of(args.wavelengths)
+    grid = read_design(args.design)
+    design = RouterDesign(
+        grid,
+        pitch=args.pitch,
+        thickness=args.thickness,
+        depth=args.depth,
+        pillar=_material(args.pillar),
+        background=_material(args.background),
+        substrate=_material(args.substrate),
+    )
+    name = args.name or Path(args.design).stem
+    # The pattern's checks (wavelength range) before minutes of solving.
+    SpectralPattern.from_transmission(name, lams, np.zeros((2, 2, len(lams))))
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise ValueError(f"--out {out} is a file, not a folder")
+    if args.threads:
+        torch.set_num_threads(args.threads)
+    directions = cone_directions(args.f_number) if args.f_number else [(0.0, 0.0, 1.0)]
+    bar = None
+    if not args.quiet:
+        from tqdm import tqdm
+
+        bar = tqdm(total=len(lams), desc=f"rcwa order {args.order}", unit="wavelength")
+    result = quadrant_spectra(
+        design,
+        lams,
+        order=args.order,
+        directions=directions,
+        progress=(lambda n: bar.update(n - bar.n)) if bar else None,
+    )
+    if bar:
+        bar.close()
+    t = result["transmission"]
+    where = (
+        f"{len(directions)} directions of an f/{args.f_number:g} cone"
+        if args.f_number
+        else "normal incidence"
+    )
+    info = {
+        "provenance": f"full-wave (RCWA, order {args.order}, {where})",
+        "description": f"metasurface router {Path(args.design).name}: pitch {args.pitch:g} µm, "
+        f"{args.thickness:g} µm of {args.pillar} in {args.background} on {args.substrate}, "
+        f"monitor {args.depth:g} µm deep; {where}",
+        "reference": "splitcam optics rcwa",
+    }
+    SpectralPattern.from_transmission(name, lams, t, **info)  # light conserved
+    out.mkdir(parents=True, exist_ok=True)
+    header = ["wavelength_nm"]
+    columns = [np.asarray(lams)]
+    for label, values in (
+        ("", t),
+        ("x_", result["by_polarisation"][0]),
+        ("y_", result["by_polarisation"][1]),
+    ):
+        for i in range(2):
+            for j in range(2):
+                header.append(f"{label}T_row{i}_col{j}")
+                columns.append(values[i, j])
+    header.append("reflection")
+    columns.append(result["reflection"])
+    rows = [",".join(header)]
+    rows += [",".join(f"{v:.6g}" for v in row) for row in np.stack(columns, axis=1)]
+    write_text(out / "spectra.csv", "\n".join(rows) + "\n")
+    _chart(lams, t, result["reflection"], out / "spectra.png", f"{name}: {where}")
+    pattern_file = out / "pattern.toml"
+    write_text(pattern_file, spectral_toml(name, lams, t, info))
+    patterns.get(str(pattern_file))  # it reads back
+    eff = bands(t, lams)
+    print(
+        f"blue peaks in quadrant (row, col) {divmod(eff['quadrants']['blue'], 2)}, red in "
+        f"{divmod(eff['quadrants']['red'], 2)}; band efficiency blue {eff['blue']:.3f}, green "
+        f"{eff['green']:.3f}, red {eff['red']:.3f}; reflection {result['reflection'].mean():.3f}"
+    )
+    print(f"wrote {out / 'spectra.csv'}, {out / 'spectra.png'} and {pattern_file}")
+    return 0
+
+
+def spectral_toml(name: str, lams, transmission, info: dict) -> str:
+    """A spectral pattern file: one line per pixel's spectrum."""
+    import json
+
+    lines = [f"name = {json.dumps(name, ensure_ascii=False)}"]
+    lines += [f"{k} = {json.dumps(v, ensure_ascii=False)}" for k, v in info.items()]
+    lines.append("wavelengths = [" + ", ".join(f"{v:g}" for v in lams) + "]")
+    lines.append("# transmission[row][column]: the share of each wavelength's light arriving on")
+    lines.append("# the period that lands on that pixel")
+    lines.append("transmission = [")
+    for row in transmission:
+        lines.append("  [")
+        lines += ["    [" + ", ".join(f"{v:.6g}" for v in px) + "]," for px in row]
+        lines.append("  ],")
+    lines.append("]")
+    return "\n".join(lines) + "\n"
+
+
+def _material(text: str) -> str | float:
+    try:
+        return float(text)
+    except ValueError:
+        return text
+
+
+def _chart(lams, t, reflection, path: Path, title: str) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from ..viz._save import save_figure
+
+    fig, ax = plt.subplots(figsize=(6.4, 4.0))
+    for i in range(2):
+        for j in range(2):
+            ax.plot(lams, t[i, j], marker=".", label=f"pixel row {i}, col {j}")
+    ax.plot(lams, reflection, "k--", label="reflected")
+    ax.set_xlabel("wavelength (nm)")
+    ax.set_ylabel("share of the light on the period")
+    ax.set_ylim(0, max(1e-3, float(t.max())) * 1.1)
+    ax.set_title(title, fontsize=10)
+    ax.legend(fontsize=8)
+    ax.grid(alpha=0.3)
+    save_figure(fig, path)

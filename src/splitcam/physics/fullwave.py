@@ -1,0 +1,273 @@
+"""Full-wave spectra of a 2x2-pixel metasurface colour router, by rigorous coupled-wave analysis.
+
+The scalar optics of :mod:`splitcam.physics.optics` treat a metasurface as a thin phase mask;
+a designer trusts Maxwell's equations. This module solves them for one periodic layer of pillars
+(a grid of cells, each 1 = pillar material, 0 = background, or a density in between, whose
+permittivity is interpolated linearly) on a substrate, lit from above at normal incidence or at
+an angle, in both polarisations, and counts the transmitted power that crosses each pixel
+quadrant of a monitor plane inside the substrate: the time-averaged z-component of the Poynting
+vector, ``0.5 Re(E x H*)``, integrated over the quadrant (midpoint rule on a fine grid). The
+reflected power is counted independently just above the layer (incident minus reflected flux),
+so transmission plus reflection = 1 checks the solve.
+
+The solver is torcwa (Kim & Lee, *TORCWA: GPU-accelerated Fourier modal method and gradient-based
+optimization for metasurface design*, Computer Physics Communications 282, 2023), a PyTorch
+RCWA: the optional extra ``splitcam[fullwave]``. It was chosen over fmmax (JAX) by the side-by-
+side measurement in docs/results/fullwave/: the same numbers at the same Fourier terms, no second
+array library beside torch. ``order`` ``m`` keeps the ``(2m + 1)^2`` lowest Fourier terms.
+
+Materials are published dispersion fits, written here: silicon nitride after Luke et al.,
+*Broadband mid-infrared frequency comb generation in a Si3N4 microresonator*, Opt. Lett. 40,
+2015 (Sellmeier, 0.31-5.5 µm); fused silica after Malitson, *Interspecimen comparison of the
+refractive index of fused silica*, JOSA 55, 1965 (0.21-3.71 µm). Nothing is downloaded.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+__all__ = [
+    "MATERIALS",
+    "FullwaveError",
+    "RouterDesign",
+    "cone_directions",
+    "index_of",
+    "quadrant_spectra",
+    "read_design",
+]
+
+INSTALL = "pip install 'splitcam[fullwave]'"
+
+
+class FullwaveError(ValueError):
+    """A design, a material or a setting the full-wave solver cannot take; one line."""
+
+
+def _sellmeier(terms: Sequence[tuple[float, float]]) -> Callable[[np.ndarray], np.ndarray]:
+    def index(um: np.ndarray) -> np.ndarray:
+        l2 = np.asarray(um, dtype=np.float64) ** 2
+        return np.sqrt(1 + sum(b * l2 / (l2 - c**2) for b, c in terms))
+
+    return index
+
+
+#: Refractive index against wavelength in µm, by name.
+MATERIALS: dict[str, Callable[[np.ndarray], np.ndarray]] = {
+    "Si3N4": _sellmeier([(3.0249, 0.1353406), (40314.0, 1239.842)]),
+    "SiO2": _sellmeier([(0.6961663, 0.0684043), (0.4079426, 0.1162414), (0.8974794, 9.896161)]),
+    "vacuum": lambda um: np.ones_like(np.asarray(um, dtype=np.float64)),
+}
+
+
+def index_of(material: str | float, wavelength_nm: float) -> float:
+    """The refractive index of a named material (:data:`MATERIALS`) or a number."""
+    if isinstance(material, (int, float)):
+        return float(material)
+    try:
+        return float(MATERIALS[material](wavelength_nm / 1000.0))
+    except KeyError:
+        raise FullwaveError(
+            f"unknown material {material!r}; known: {', '.join(MATERIALS)}, or an index"
+        ) from None
+
+
+@dataclass(frozen=True)
+class RouterDesign:
+    """A 2x2-pixel metasurface router (lengths in µm).
+
+    Args:
+        grid: ``(rows, columns)`` densities in [0, 1] over the period; rows run along y,
+            columns along x, as written in a design file.
+        pitch: Pixel pitch (the period is two pixels each way).
+        thickness: Of the patterned layer.
+        depth: Of the monitor plane below the layer, inside the substrate.
+        pillar, background, substrate: Materials (names of :data:`MATERIALS` or indices);
+            light arrives through the background material.
+    """
+
+    grid: np.ndarray
+    pitch: float = 1.0
+    thickness: float = 0.6
+    depth: float = 2.4
+    pillar: str | float = "Si3N4"
+    background: str | float = "vacuum"
+    substrate: str | float = "SiO2"
+
+    def __post_init__(self) -> None:
+        grid = np.asarray(self.grid, dtype=np.float64)
+        if grid.ndim != 2 or min(grid.shape) < 1:
+            raise FullwaveError(f"a design is a 2-D grid, got shape {grid.shape}")
+        if not np.all(np.isfinite(grid)) or grid.min() < 0 or grid.max() > 1:
+            raise FullwaveError("a design's cells are densities in [0, 1]")
+        for name in ("pitch", "thickness"):
+            if not getattr(self, name) > 0:
+                raise FullwaveError(f"{name} must be > 0 µm, got {getattr(self, name)}")
+        if self.depth < 0:
+            raise FullwaveError(f"depth must be >= 0 µm, got {self.depth}")
+        for material in (self.pillar, self.background, self.substrate):
+            index_of(material, 550.0)
+        object.__setattr__(self, "grid", grid)
+
+
+def read_design(path: str | os.PathLike) -> np.ndarray:
+    """A design CSV: a rectangular grid of numbers in [0, 1] (commas, one row per line).
+
+    Raises:
+        FullwaveError: Missing file, a ragged or non-numeric grid, or values outside [0, 1];
+            the message names the file and the row.
+    """
+    path = Path(path)
+    try:
+        lines = [line for line in path.read_text(encoding="utf-8").splitlines() if line.strip()]
+    except (OSError, UnicodeDecodeError) as exc:
+        raise FullwaveError(f"cannot read design {str(path)!r}: {exc}") from None
+    rows = []
+    for i, line in enumerate(lines, 1):
+        try:
+            rows.append([float(v) for v in line.split(",")])
+        except ValueError:
+            raise FullwaveError(f"design {str(path)!r}, row {i}: not a list of numbers") from None
+        if len(rows[-1]) != len(rows[0]):
+            raise FullwaveError(
+                f"design {str(path)!r}, row {i}: {len(rows[-1])} cells, row 1 has "
+                f"{len(rows[0])} (the grid must be rectangular)"
+            )
+    if not rows:
+        raise FullwaveError(f"design {str(path)!r} is empty")
+    grid = np.array(rows)
+    if not np.all(np.isfinite(grid)) or grid.min() < 0 or grid.max() > 1:
+        raise FullwaveError(f"design {str(path)!r}: cells must be densities in [0, 1]")
+    return grid
+
+
+def cone_directions(f_number: float) -> list[tuple[float, float, float]]:
+    """``(polar angle, azimuth, weight)`` (radians) of the light a lens of ``f_number`` sends
+    to a pixel: a 7-point quadrature of its exit pupil, a disk of uniform irradiance. The
+    direction sines ``sin(theta) (cos phi, sin phi)`` fill a disk of radius
+    ``sin(theta_max) = 1 / (2 N)``; the rule (the centre, weight 1/4, and six points at
+    ``sqrt(2/3)`` of the radius, 1/8 each) integrates polynomials up to degree 3 over the disk
+    exactly (tests/physics/test_fullwave.py)."""
+    if not f_number > 0.5:
+        raise FullwaveError(f"f-number must be > 0.5, got {f_number}")
+    radius = 1.0 / (2.0 * f_number)
+    out = [(0.0, 0.0, 0.25)]
+    r = math.sqrt(2.0 / 3.0) * radius
+    for k in range(6):
+        out.append((math.asin(r), k * math.pi / 3.0, 0.125))
+    return out
+
+
+def _solver():
+    try:
+        import torcwa
+    except ImportError:
+        raise FullwaveError(f"the full-wave solver is an optional extra: {INSTALL}") from None
+    return torcwa
+
+
+def quadrant_spectra(
+    design: RouterDesign,
+    wavelengths: Sequence[float],
+    *,
+    order: int = 9,
+    directions: Sequence[tuple[float, float, float]] = ((0.0, 0.0, 1.0),),
+    samples: int = 64,
+    progress: Callable[[int], None] | None = None,
+) -> dict[str, np.ndarray]:
+    """Transmission into each pixel quadrant of the monitor plane, per wavelength.
+
+    Args:
+        design: The router.
+        wavelengths: nm.
+        order: Fourier order per axis: ``(2 order + 1)^2`` terms.
+        directions: ``(polar angle, azimuth, weight)`` of the incident light (radians; the
+            weights are normalised): one direction, or a lens's cone (:func:`cone_directions`).
+        samples: Grid points per pixel and axis of the flux integral.
+        progress: Called with the number of wavelengths done.
+
+    Returns:
+        ``transmission``: ``(2, 2, L)`` the share of the light arriving on the period crossing
+        each quadrant (rows along y, as the design), averaged over the two polarisations and
+        the directions; ``by_polarisation``: ``(2, 2, 2, L)`` for x then y polarisation
+        (direction-averaged); ``reflection``: ``(L,)``.
+    """
+    import torch
+
+    torcwa = _solver()
+    if order < 0:
+        raise FullwaveError(f"order must be >= 0, got {order}")
+    weights = np.array([w for _, _, w in directions], dtype=np.float64)
+    if weights.size == 0 or weights.min() < 0 or weights.sum() <= 0:
+        raise FullwaveError("directions need non-negative weights")
+    weights = weights / weights.sum()
+    period = 2.0 * design.pitch
+    n = 2 * samples
+    coords = (torch.arange(n, dtype=torch.float64) + 0.5) / n * period
+    # Permittivity sampled finely enough for its Fourier series: every cell a whole number of
+    # samples, at least 256 across (torcwa's convolution matrices come from its FFT).
+    rows, cols = design.grid.shape
+    up = max(1, math.ceil(256 / max(rows, cols)))
+    fine = np.kron(design.grid, np.ones((up, up)))
+    by_pol = np.zeros((2, 2, 2, len(wavelengths)))
+    reflection = np.zeros(len(wavelengths))
+    dtype = torch.complex128
+    for li, lam in enumerate(wavelengths):
+        um = lam / 1000.0
+        eps_p = index_of(design.pillar, lam) ** 2
+        eps_b = index_of(design.background, lam) ** 2
+        eps_s = index_of(design.substrate, lam) ** 2
+        layer = torch.tensor(eps_b + (eps_p - eps_b) * fine.T, dtype=dtype)  # torcwa: [x, y]
+        for (theta, phi, _), weight in zip(directions, weights, strict=True):
+            sim = torcwa.rcwa(
+                freq=1.0 / um,
+                order=[order, order],
+                L=[period, period],
+                dtype=dtype,
+                device=torch.device("cpu"),
+            )
+            sim.add_input_layer(eps=complex(eps_b))
+            sim.add_output_layer(eps=complex(eps_s))
+            sim.set_incident_angle(theta, phi)
+            sim.add_layer(thickness=design.thickness, eps=layer)
+            sim.solve_global_smatrix()
+            for p, amplitude in enumerate(([1.0, 0.0], [0.0, 1.0])):
+                # The incident flux of this source: through an empty stack of the background.
+                empty = torcwa.rcwa(
+                    freq=1.0 / um,
+                    order=[0, 0],
+                    L=[period, period],
+                    dtype=dtype,
+                    device=torch.device("cpu"),
+                )
+                empty.add_input_layer(eps=complex(eps_b))
+                empty.add_output_layer(eps=complex(eps_b))
+                empty.set_incident_angle(theta, phi)
+                empty.solve_global_smatrix()
+                empty.source_planewave(amplitude=amplitude, direction="forward")
+                incident = float(_flux(empty.field_xy(-1, coords[:1], coords[:1])).mean())
+                sim.source_planewave(amplitude=amplitude, direction="forward")
+                sz = _flux(sim.field_xy(1, coords, coords, z_prop=design.depth)) / incident
+                quads = sz.reshape(2, samples, 2, samples).mean(axis=(1, 3)) / 4.0
+                by_pol[p, :, :, li] += weight * quads
+                top = _flux(sim.field_xy(-1, coords, coords, z_prop=0.0)) / incident
+                reflection[li] += weight * 0.5 * (1.0 - float(top.mean()))
+        if progress is not None:
+            progress(li + 1)
+    return {
+        "transmission": by_pol.mean(axis=0),
+        "by_polarisation": by_pol,
+        "reflection": reflection,
+    }
+
+
+def _flux(fields) -> np.ndarray:
+    """``(y, x)`` time-averaged z Poynting flux ``0.5 Re(Ex Hy* - Ey Hx*)`` of torcwa's fields
+    (``[x, y]`` arrays)."""
+    (ex, ey, _), (hx, hy, _) = fields
+    return (0.5 * (ex * hy.conj() - ey * hx.conj()).real).numpy().T

@@ -1,0 +1,133 @@
+"""The full-wave solver of metasurface routers (splitcam.physics.fullwave): material fits, a
+flat interface and a thin film against Fresnel and Airy, energy conservation, the lens-cone
+quadrature, the published Zou router, and refusals."""
+
+from __future__ import annotations
+
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from splitcam.physics.fullwave import (
+    MATERIALS,
+    FullwaveError,
+    RouterDesign,
+    cone_directions,
+    quadrant_spectra,
+    read_design,
+)
+
+pytest.importorskip("torcwa")
+
+DESIGNS = Path(__file__).resolve().parents[2] / "experiments" / "fullwave" / "designs"
+
+
+def test_silica_matches_its_published_d_line_index():
+    # Fused silica at the helium d line, 587.56 nm: n_d = 1.4585 (Malitson 1965).
+    assert float(MATERIALS["SiO2"](0.58756)) == pytest.approx(1.4585, abs=2e-4)
+    # Silicon nitride (Luke et al. 2015) lies near 2.0 across the visible, higher in the blue.
+    n = MATERIALS["Si3N4"](np.array([0.45, 0.55, 0.65]))
+    assert np.all((n > 1.98) & (n < 2.1)) and n[0] > n[1] > n[2]
+
+
+def _airy(n_film: float, thickness: float, n_sub: float, lam: float) -> float:
+    """Transmittance of a film on a substrate at normal incidence from vacuum (characteristic
+    matrix of the film)."""
+    delta = 2 * math.pi * n_film * thickness / lam
+    m = np.array(
+        [
+            [math.cos(delta), 1j * math.sin(delta) / n_film],
+            [1j * n_film * math.sin(delta), math.cos(delta)],
+        ]
+    )
+    b, c = m @ np.array([1.0, n_sub])
+    return float(4 * n_sub / abs(b + c) ** 2)
+
+
+@pytest.mark.parametrize("density", [0.0, 1.0, 0.5])
+def test_a_uniform_layer_transmits_what_a_thin_film_does(density):
+    lam = 530.0
+    design = RouterDesign(np.full((4, 4), density), thickness=0.31, depth=0.7)
+    out = quadrant_spectra(design, [lam], order=1, samples=8)
+    eps_p = MATERIALS["Si3N4"](lam / 1000) ** 2
+    n_film = math.sqrt(1 + density * (eps_p - 1))
+    expect = _airy(n_film, 0.31, float(MATERIALS["SiO2"](lam / 1000)), lam / 1000)
+    np.testing.assert_allclose(out["transmission"][:, :, 0], expect / 4, rtol=1e-6)
+    assert out["reflection"][0] == pytest.approx(1 - expect, abs=1e-6)
+
+
+def test_light_is_conserved_and_the_quadrants_split_it():
+    rng = np.random.default_rng(0)
+    design = RouterDesign(rng.random((8, 8)) > 0.5, thickness=0.5, depth=1.0)
+    out = quadrant_spectra(design, [470.0, 610.0], order=3, samples=16)
+    total = out["transmission"].sum(axis=(0, 1)) + out["reflection"]
+    np.testing.assert_allclose(total, 1.0, atol=1e-6)
+    assert out["transmission"].std(axis=(0, 1)).min() > 1e-3  # a patterned layer sorts light
+    # The two polarisations differ for a pattern without symmetry; their mean is reported.
+    np.testing.assert_allclose(out["by_polarisation"].mean(axis=0), out["transmission"])
+
+
+def test_the_cone_quadrature_integrates_low_polynomials_over_the_pupil():
+    points = cone_directions(2.0)
+    radius = 1 / 4
+    w = np.array([p[2] for p in points])
+    assert w.sum() == pytest.approx(1.0)
+    u = np.array([math.sin(t) * math.cos(f) for t, f, _ in points]) / radius
+    v = np.array([math.sin(t) * math.sin(f) for t, f, _ in points]) / radius
+    # Means over the unit disk: x^2 and y^2 1/4, odd and mixed terms 0.
+    for values, mean in [(u**2, 0.25), (v**2, 0.25), (u, 0), (u * v, 0), (u**3, 0), (u * v**2, 0)]:
+        assert float(w @ values) == pytest.approx(mean, abs=1e-12)
+    assert max(t for t, _, _ in points) < math.asin(radius)
+
+
+def test_oblique_light_is_conserved():
+    design = RouterDesign(np.eye(6), thickness=0.4, depth=0.5)
+    out = quadrant_spectra(design, [520.0], order=2, samples=16, directions=cone_directions(2.0))
+    assert out["transmission"].sum() + out["reflection"][0] == pytest.approx(1.0, abs=1e-6)
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("0,1\n1\n", "row 2: 1 cells"),
+        ("0,a\n", "not a list of numbers"),
+        ("0,1.5\n", "densities in \\[0, 1\\]"),
+        ("", "empty"),
+    ],
+)
+def test_bad_designs_are_refused_in_one_line(tmp_path, text, message):
+    path = tmp_path / "d.csv"
+    path.write_text(text)
+    with pytest.raises(FullwaveError, match=message):
+        read_design(path)
+
+
+def test_a_missing_solver_names_its_install_command(monkeypatch):
+    monkeypatch.setitem(sys.modules, "torcwa", None)
+    with pytest.raises(FullwaveError, match=r"pip install 'splitcam\[fullwave\]'"):
+        quadrant_spectra(RouterDesign(np.ones((2, 2))), [500.0], order=0)
+
+
+def test_the_zou_router_sends_blue_and_red_to_opposite_pixels():
+    """At a coarse order the published design already sorts: blue peaks in row 0, column 1 and
+    red in row 1, column 0 of the file's grid (the public simulation flips the rows)."""
+    design = RouterDesign(read_design(DESIGNS / "zou2022-16x16.csv"))
+    t = quadrant_spectra(design, [450.0, 650.0], order=5, samples=16)["transmission"]
+    assert np.unravel_index(t[:, :, 0].argmax(), (2, 2)) == (0, 1)
+    assert np.unravel_index(t[:, :, 1].argmax(), (2, 2)) == (1, 0)
+
+
+@pytest.mark.slow
+def test_the_zou_router_lands_within_the_published_tolerances():
+    """Order 12 (625 Fourier terms), about 90 s per wavelength on one core."""
+    design = RouterDesign(read_design(DESIGNS / "zou2022-16x16.csv"))
+    t = quadrant_spectra(design, [450.0, 540.0, 650.0], order=12)["transmission"]
+    published = {0: (0.436, 0.394, 0.133), 1: (0.160, 0.575, 0.237), 2: (0.117, 0.270, 0.589)}
+    tolerance = {0: (0.27, 0.26, 0.27), 1: (0.25, 0.26, 0.44), 2: (0.11, 0.19, 0.19)}
+    for i in range(3):
+        got = (t[0, 1, i], t[0, 0, i] + t[1, 1, i], t[1, 0, i])
+        for value, ref, tol in zip(got, published[i], tolerance[i], strict=True):
+            assert abs(value - ref) <= tol * ref, (i, got)
