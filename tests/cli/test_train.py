@@ -242,3 +242,40 @@ def test_a_run_that_diverges_says_so_and_fails(tmp_path, capsys):
     assert "splitcam train: failed:" in capsys.readouterr().err
     good = train(tiny_config(data, tmp_path / "good", **{"optim.steps": 6}), progress=False)
     assert good.failure is None
+
+
+def test_a_users_pattern_fine_tunes_the_network_for_any_pattern_by_default(capsys):
+    """A pattern file (or router) has no network of its own: it starts from universal, with the
+    fine-tuning defaults (patches chosen by detail among them), unless the run says otherwise."""
+    from splitcam.cli.train import FINE_TUNE_HARD, own_pattern_start, start_settings
+
+    assert own_pattern_start({"pattern.name": "mine.toml"}) == {"run.init_from": "universal"}
+    assert "no network of its own" in capsys.readouterr().out
+    assert own_pattern_start({"pattern.name": "router(eta=0.5)"}) == {
+        "run.init_from": "universal"
+    }
+    for given in (
+        {"pattern.name": "D"},  # a library pattern trains by its recipe
+        {"pattern.name": "random"},
+        {"pattern.name": "mine.toml", "network.arch": "physics"},
+        {"pattern.name": "mine.toml", "run.init_from": "A"},
+        {"pattern.name": "mine.toml", "pattern.learn": True},
+    ):
+        assert own_pattern_start(given) == {}, given
+    assert start_settings("universal", {})["data.hard_patches"] == FINE_TUNE_HARD
+    assert "data.hard_patches" not in start_settings("universal", {"data.hard_patches": 0.0})
+
+
+def test_train_with_a_pattern_file_starts_from_universal(image_folder, tmp_path):
+    from splitcam.cli import main
+
+    mine = tmp_path / "mine.toml"
+    patterns.save(random_pattern(np.random.default_rng(3)), mine)
+    run = tmp_path / "run"
+    args = ["train", "--pattern", str(mine), "--data", str(image_folder), "--steps", "1"]
+    tiny = ["--val-split", "1", "--patch-size", "16", "--batch-size", "1", "--threads", "1"]
+    assert main([*args, *tiny, "--out", str(run), "--quiet"]) == 0
+    config = json.loads((run / "config.json").read_text())
+    assert config["run"]["init_from"] == "universal"
+    assert config["network"]["arch"] == "universal"
+    assert config["data"]["hard_patches"] == 0.5 and config["optim"]["lr"] == 3e-4

@@ -7,9 +7,12 @@ import os
 import sys
 
 #: Default budget (minutes) and peak learning rate of fine-tuning a network for any pattern to
-#: one pattern (docs/results/universal/README.md: 3e-4 against 1e-3 side by side).
+#: one pattern (docs/results/universal/README.md: 3e-4 against 1e-3 side by side), and its
+#: patches chosen by detail (docs/results/universal/levers.md: against uniform patches, against
+#: adapters and against teachers, side by side).
 FINE_TUNE_MINUTES = 10.0
 FINE_TUNE_LR = 3e-4
+FINE_TUNE_HARD = 0.5
 
 
 def fine_tuning(init_from: str, given: dict) -> dict:
@@ -44,7 +47,27 @@ def start_settings(source: str, given: dict) -> dict:
     }
     if "optim.lr" not in given:
         implied["optim.lr"] = FINE_TUNE_LR
+    if "data.hard_patches" not in given:
+        implied["data.hard_patches"] = FINE_TUNE_HARD
     return implied
+
+
+def own_pattern_start(given: dict) -> dict:
+    """A user's pattern (a file or a router, not a library name) has no network of its own:
+    unless the run says how to start (``--init-from``, ``--arch``, ``--learn-pattern``), it
+    fine-tunes the network for any pattern, ``universal``."""
+    from .. import patterns
+
+    name = str(given.get("pattern.name", ""))
+    if not name or name.strip().lower() in {n.lower() for n in patterns.names()} | {"random"}:
+        return {}
+    if any(k in given for k in ("run.init_from", "network.arch")) or given.get("pattern.learn"):
+        return {}
+    print(
+        f"{name}: no network of its own; fine-tuning universal (--init-from universal; "
+        "--arch physics trains one from scratch)"
+    )
+    return {"run.init_from": "universal"}
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -100,6 +123,8 @@ def run(args: argparse.Namespace) -> int:
     if photon_only and model != "photon":
         flags = ", ".join("--" + k.split(".", 1)[1].replace("_", "-") for k in photon_only)
         raise ValueError(f"{flags}: settings of the photon model; add --noise photon")
+    if not args.resume:
+        overrides.update(own_pattern_start({**from_file, **overrides}))
     init_from = overrides.get("run.init_from", config.run.init_from)
     given = {**from_file, **overrides}
     auto = not args.resume and init_from == "auto"
