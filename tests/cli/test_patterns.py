@@ -16,6 +16,11 @@ def test_patterns_table_lists_every_pattern(capsys):
     for name in patterns.names():
         assert f"| {name} " in out
     assert "yes, 4-pixel unit" in out and "0.25/0.50/0.25" in out
+    # Names without an action list those (it was an argparse error).
+    assert main(["patterns", "D", "bayer-d5100"]) == 0
+    rows = [line for line in capsys.readouterr().out.splitlines() if line.startswith("| ")]
+    assert [r.split("|")[1].strip() for r in rows[1:]] == ["D", "bayer-d5100"]
+    assert main(["patterns", "list", "E"]) == 0 and "| E " in capsys.readouterr().out
 
 
 def test_patterns_show_and_export(tmp_path, capsys):

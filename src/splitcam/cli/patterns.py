@@ -8,6 +8,9 @@ from pathlib import Path
 from ._common import pattern_or_model, table
 
 
+ACTIONS = ("list", "show", "export")
+
+
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "patterns",
@@ -16,8 +19,12 @@ def register(sub: argparse._SubParsersAction) -> None:
         "`patterns show D --out d.png` draws one; `patterns export D --out d.toml` writes its "
         "pattern file (a starting point for your own).",
     )
-    p.add_argument("action", nargs="?", choices=["list", "show", "export"], default="list")
-    p.add_argument("names", nargs="*", metavar="PATTERN", help="pattern names or files")
+    p.add_argument(
+        "words",
+        nargs="*",
+        metavar="[list|show|export] PATTERN",
+        help="an action (default list) and pattern names or files: `patterns D E` lists D and E",
+    )
     p.add_argument("--out", help="output file (PNG for show, .json/.toml for export)")
     p.set_defaults(handler=run)
 
@@ -25,6 +32,9 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from .. import patterns
 
+    words = list(args.words)
+    args.action = words.pop(0) if words and words[0] in ACTIONS else "list"
+    args.names = words
     if args.action == "list":
         names = args.names or patterns.names()
         rows = []
