@@ -131,7 +131,11 @@ def add_precision(p: argparse.ArgumentParser, default: str) -> None:
         f"natively (about 3x faster there), fp32 = bit-exact float32 (default {default})",
     )
     p.add_argument(
-        "--fast", dest="precision", action="store_const", const="bf16", help=argparse.SUPPRESS
+        "--fast",
+        dest="precision",
+        action="store_const",
+        const="bf16",
+        help="the same as --precision bf16",
     )
 
 

@@ -24,6 +24,14 @@ from ._common import (
 MAIN_JOB_MAX_SIZE = 256
 
 
+def _shipped_models() -> list[str]:
+    """The shipped models' names, read from the weights folder (no torch import: --help stays
+    fast)."""
+    from ..io.weights import MODELS_DIR
+
+    return sorted(p.stem for p in MODELS_DIR.glob("*.json"))
+
+
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "evaluate",
@@ -52,8 +60,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         action="append",
         default=[],
         metavar="NAME",
-        help="a shipped model (A-E, bayer, A-opt, D-opt, D-opt-random; `splitcam models`) or a "
-        "model file (repeatable)",
+        help=f"a shipped model ({', '.join(_shipped_models())}; `splitcam models` describes "
+        "them) or a model file (repeatable)",
     )
     p.add_argument(
         "--patterns",

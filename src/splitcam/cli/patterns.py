@@ -7,7 +7,6 @@ from pathlib import Path
 
 from ._common import pattern_or_model, table
 
-
 ACTIONS = ("list", "show", "export")
 
 

@@ -35,13 +35,19 @@ def register(sub: argparse._SubParsersAction) -> None:
         "thread). In linear light by default.",
     )
     p.add_argument("study", choices=["exposure", "breakeven"])
-    p.add_argument("--datasets", default="default")
+    p.add_argument(
+        "--datasets",
+        default="default",
+        help="test sets or image folders, comma-separated (default: the colour photos that "
+        "ship in scikit-image)",
+    )
     p.add_argument("--max-images", type=int, help="at most this many images per dataset")
     p.add_argument("--crop", type=int, help="centre crops of at most this many pixels a side")
     p.add_argument(
         "--patterns",
         type=lambda s: [x for x in s.split(",") if x],
         default=list(PAPER_PATTERNS),
+        help=f"exposure: the sensors, comma-separated (default {','.join(PAPER_PATTERNS)})",
     )
     p.add_argument(
         "--photons", type=float, nargs="+", help="exposures (default: log-spaced from 1 to 10^4)"
@@ -76,12 +82,17 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--chi", type=float, nargs="+", help="breakeven: crosstalks (default 0 to 0.35, 8 steps)"
     )
     p.add_argument("--reference", default="rgbw", help="breakeven: the pattern to tie")
-    p.add_argument("--metric", choices=["psnr", "ssim", "ciede2000"], default="psnr")
+    p.add_argument(
+        "--metric",
+        choices=["psnr", "ssim", "ciede2000"],
+        default="psnr",
+        help="breakeven: the score compared (default psnr)",
+    )
     p.add_argument(
         "--tol", type=float, default=0.0, help="breakeven: differences within this count as ties"
     )
     p.add_argument("--out", help="default results/exposure or results/breakeven")
-    p.add_argument("--quiet", action="store_true")
+    p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.set_defaults(handler=run)
 
 
