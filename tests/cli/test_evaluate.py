@@ -246,19 +246,22 @@ def test_evaluate_photons_cli(tmp_path, capsys) -> None:
 
 
 def test_main_job_uses_the_universal_network_for_patterns_without_one(
-    tiny_universal, tmp_path, capsys, monkeypatch
+    tiny_universal, trained_run, tmp_path, capsys, monkeypatch
 ):
     """`splitcam evaluate --patterns FILE`: a pattern no shipped network serves gets the
-    shipped universal network, and the output says so."""
+    shipped universal network, and the output says so; the shipped networks of other patterns
+    are left out (they once all ran)."""
 
     from splitcam.cli import main
     from splitcam.io import weights
+    from splitcam.training.models import export_model
 
     model, data = tiny_universal
     shipped = tmp_path / "shipped"
     shipped.mkdir()
     for suffix in (".json", ".safetensors"):
         shutil.copy(model.with_suffix(suffix), shipped / f"universal{suffix}")
+    export_model(trained_run, shipped / "D", name="D")  # a network of pattern D only
     monkeypatch.setattr(weights, "MODELS_DIR", shipped)
     mine = tmp_path / "mine.toml"
     patterns.save(random_pattern(np.random.default_rng(5)), mine)
@@ -267,6 +270,9 @@ def test_main_job_uses_the_universal_network_for_patterns_without_one(
     out = capsys.readouterr().out
     assert f"pattern {mine} has no shipped network: reconstructed by the universal network" in out
     assert "net-uni-mine.toml" in out and "lmmse-mine.toml" in out  # labelled by its own name
+    assert f"the main job on {mine}: universal" in out
+    summary = json.loads((tmp_path / "ev" / "summary.json").read_text())
+    assert not [name for name in summary if "D" in name.split("-")[0]], list(summary)
 
 
 def test_evaluate_keeps_earlier_results_of_other_methods(tmp_path, capsys):

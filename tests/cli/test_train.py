@@ -251,9 +251,7 @@ def test_a_users_pattern_fine_tunes_the_network_for_any_pattern_by_default(capsy
 
     assert own_pattern_start({"pattern.name": "mine.toml"}) == {"run.init_from": "universal"}
     assert "no network of its own" in capsys.readouterr().out
-    assert own_pattern_start({"pattern.name": "router(eta=0.5)"}) == {
-        "run.init_from": "universal"
-    }
+    assert own_pattern_start({"pattern.name": "router(eta=0.5)"}) == {"run.init_from": "universal"}
     for given in (
         {"pattern.name": "D"},  # a library pattern trains by its recipe
         {"pattern.name": "random"},

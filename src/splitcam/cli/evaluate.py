@@ -24,6 +24,18 @@ from ._common import (
 MAIN_JOB_MAX_SIZE = 256
 
 
+def _serves_one_of(model: str, specs: list[str]) -> bool:
+    """Whether a shipped model reconstructs one of the patterns ``specs``: a network for any
+    pattern does; a network of one pattern if it is among them."""
+    from .. import patterns
+    from ..recon.loading import load_model, model_serves_any_pattern
+
+    if model_serves_any_pattern(model):
+        return True
+    own = load_model(model).pattern
+    return any(patterns.get(spec).equals(own) for spec in specs)
+
+
 def _shipped_models() -> list[str]:
     """The shipped models' names, read from the weights folder (no torch import: --help stays
     fast)."""
@@ -66,8 +78,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--patterns",
         type=lambda s: [x for x in s.split(",") if x],
-        default=list(PAPER_PATTERNS),
-        help="patterns for lmmse, comma-separated names or files (default: all)",
+        default=None,
+        help="the patterns of lmmse and of a network for any pattern, comma-separated names or "
+        f"files (default: {','.join(PAPER_PATTERNS)}); with no method named, the main job on "
+        "these patterns only",
     )
     p.add_argument(
         "--datasets",
@@ -200,7 +214,15 @@ def run(args: argparse.Namespace) -> int:
     # on centre crops of the built-in photos (within 3 minutes on a 2-core CPU): the shipped
     # networks of the evaluation's light domain (srgb by default; linear: those trained on
     # photons in linear light).
+    given_patterns = args.patterns is not None
+    if not given_patterns:
+        args.patterns = list(PAPER_PATTERNS)
     models = args.model if chosen else model_names()
+    if not chosen and given_patterns:
+        # The main job on the patterns asked for: their own networks and the network for any
+        # pattern, not every shipped network.
+        models = [m for m in models if _serves_one_of(m, args.patterns)]
+        print(f"the main job on {', '.join(args.patterns)}: {', '.join(models) or 'no network'}")
     if not chosen:
         other = [m for m in models if model_domain(m) != args.domain]
         models = [m for m in models if m not in other]
