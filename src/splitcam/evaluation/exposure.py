@@ -317,7 +317,11 @@ def write_study(
     )
     chart = exposure_chart(results, out / "exposure.png", networks=networks)
     photons = sorted(next(iter(results.values())))
-    head = "| pattern | " + " | ".join(f"N={n:.3g}" for n in photons) + " |"
+    head = (
+        "| pattern | "
+        + " | ".join(f"N={n:.3g}" if n < 1000 else f"N={n:.0f}" for n in photons)
+        + " |"
+    )
     rule = "|---|" + "---|" * len(photons)
     lines = [
         "# Filters and splitters at equal exposure",

@@ -267,7 +267,7 @@ def markdown_tables(summary: dict) -> str:
             default=0,
         )
         counts = {st["n_images"] for m in methods for st in summary[m].get(group, {}).values()}
-        lines += [f"### {group} ({n} images): PSNR (dB) / SSIM", ""]
+        lines += [f"### {group} ({n} image{'s' if n != 1 else ''}): PSNR (dB) / SSIM", ""]
         if len(counts) > 1:
             lines += [
                 "Cells over fewer images are marked (n = ...): they are means over other "

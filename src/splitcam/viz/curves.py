@@ -102,7 +102,7 @@ def plot_run(run: str | os.PathLike, out: str | os.PathLike | None = None) -> Pa
     last = val[-1] if val else train[-1]
     name = Path(run).name if Path(run).is_dir() else Path(run).parent.name
     fig.suptitle(
-        f"run {name}: step {last['step']}"
+        f"{name}: step {last['step']}"
         + (f", validation PSNR {last['val_psnr']:.2f} dB (mean over sigmas)" if val else "")
     )
     fig.tight_layout()
