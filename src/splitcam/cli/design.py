@@ -195,7 +195,8 @@ def _print_search(search, space: dict) -> None:
     states = [t.state.name.lower() for t in trials]
     fixed = ", ".join(f"{k} {fmt(v)}" for k, v in space.items()) or "none"
     print(
-        f"search in {search.folder}: {len(trials)} trial{'s' if len(trials) != 1 else ''}, {states.count('complete')} finished, "
+        f"search in {search.folder}: {len(trials)} trial{'s' * (len(trials) != 1)}, "
+        f"{states.count('complete')} finished, "
         f"{states.count('pruned')} pruned (fixed: {fixed})"
     )
     finished = search.best()

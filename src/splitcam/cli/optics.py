@@ -103,7 +103,8 @@ def _print_front(search, space: dict) -> None:
     trials = search.study.trials
     fixed = ", ".join(f"{k} {fmt(v)}" for k, v in space.items()) or "none"
     print(
-        f"search in {search.folder}: {len(trials)} trial{'s' if len(trials) != 1 else ''}, {len(search.finished())} finished "
+        f"search in {search.folder}: {len(trials)} trial{'s' * (len(trials) != 1)}, "
+        f"{len(search.finished())} finished "
         f"(fixed: {fixed})"
     )
     rows = []
