@@ -58,3 +58,12 @@ def test_the_api_reference_has_every_public_module() -> None:
             if not module.stem.startswith("_") and f"::: {name}\n" not in text + "\n":
                 missing.append(name)
     assert not missing, f"not in docs/api: {missing}"
+
+
+def test_the_navigation_holds_every_results_page() -> None:
+    """Every page under docs/results is in mkdocs.yml's navigation (67 once were not)."""
+    nav = (REPO / "mkdocs.yml").read_text(encoding="utf-8")
+    root = REPO / "docs"
+    pages = sorted(p.relative_to(root).as_posix() for p in (root / "results").rglob("*.md"))
+    missing = [p for p in pages if f"- {p}\n" not in nav and f": {p}\n" not in nav]
+    assert not missing, f"not in mkdocs.yml's nav: {missing}"
