@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 
 import numpy as np
+import pytest
 import torch
 from conftest import blocky_images, tiny_config
 from PIL import Image
@@ -277,3 +278,17 @@ def test_train_with_a_pattern_file_starts_from_universal(image_folder, tmp_path)
     assert config["run"]["init_from"] == "universal"
     assert config["network"]["arch"] == "universal"
     assert config["data"]["hard_patches"] == 0.5 and config["optim"]["lr"] == 3e-4
+
+
+def test_data_by_the_name_of_a_downloaded_dataset(tmp_path, monkeypatch):
+    from splitcam.cli.train import training_data
+
+    monkeypatch.setenv("SPLITCAM_DATA", str(tmp_path / "root"))
+    with pytest.raises(ValueError, match="splitcam data download train"):
+        training_data("train")
+    (tmp_path / "root" / "train").mkdir(parents=True)
+    assert training_data("train") == str(tmp_path / "root" / "train")
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "train").mkdir()  # a folder of that name here is the folder meant
+    assert training_data("train") == "train"
+    assert training_data("photos") == "photos"

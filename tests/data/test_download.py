@@ -287,3 +287,35 @@ def test_download_rejects_unknown_names(tmp_path: Path) -> None:
         download("kodak24", tmp_path, mirror=str(tmp_path / "missing"))
     with pytest.raises(ValueError, match="unsupported scheme 'ftp://'"):
         download("kodak24", tmp_path, mirror="ftp://127.0.0.1/data")
+
+
+def test_training_photos_download_from_their_public_source(
+    shared_data: Path, serve, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """`splitcam data download train`: the 432 BSDS500 photos, pinned to a commit of their
+    source repository and verified file by file; a photo the mirror serves wrong is refused."""
+    dataset = registry.datasets()["train"]
+    assert len(dataset.files) == 432
+    assert "c4f9ac8c43397cbacbf2e2ba1505efafa769435d" in dataset.base_url
+    site = tmp_path / "site"
+    for split in ("train", "test", "val"):
+        (site / "BSR" / "BSDS500" / "data" / "images" / split).mkdir(parents=True)
+    picked = ["100075.jpg", "97033.jpg"]
+    for name in picked:
+        entry = _entry("train", name)
+        (site / entry.source_path).symlink_to(shared_data / "train" / name)
+    server = serve(site)
+    monkeypatch.setitem(
+        registry.datasets(), "train", dataclasses.replace(dataset, base_url=server.url + "/")
+    )
+    paths = download("train", tmp_path / "data", progress=False, files=picked)
+    for path in paths:
+        assert path.read_bytes() == (shared_data / "train" / path.name).read_bytes()
+    assert _contents(tmp_path / "data" / "train") == sorted(picked)
+    assert registry.training_folder(tmp_path / "data") == tmp_path / "data" / "train"
+    # A mirror that serves another photo under a name: refused, nothing left behind.
+    wrong = _entry("train", "100080.jpg")
+    (site / wrong.source_path).symlink_to(shared_data / "train" / "100075.jpg")
+    with pytest.raises(ChecksumError):
+        download("train", tmp_path / "data", progress=False, files=["100080.jpg"])
+    assert _contents(tmp_path / "data" / "train") == sorted(picked)

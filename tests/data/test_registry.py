@@ -43,7 +43,16 @@ def test_registry_lists_every_file_with_well_formed_hashes() -> None:
     ]
     kodak = [row for row in rows if row["dataset"] == "kodak24"]
     mcmaster = [row for row in rows if row["dataset"] == "mcmaster"]
-    assert len(kodak) + len(mcmaster) == len(rows)
+    train = [row for row in rows if row["dataset"] == "train"]
+    assert len(kodak) + len(mcmaster) + len(train) == len(rows)
+    assert len(train) == 432 and all(r["file"].endswith(".jpg") for r in train)
+    assert all(
+        r["source_path"] == f"BSR/BSDS500/data/images/{split}/{r['file']}"
+        for r in train
+        for split in [r["source_path"].split("/")[-2]]
+    )
+    assert {r["source_path"].split("/")[-2] for r in train} == {"train", "test", "val"}
+    assert all(row["pixels_sha256"] == "-" for row in train)
     assert [row["file"] for row in kodak] == [f"kodim{i:02d}.png" for i in range(1, 25)]
     assert [row["source_path"] for row in kodak] == [
         f"testsets/Set24/kodim{i:02d}.png" for i in range(1, 25)
@@ -61,7 +70,7 @@ def test_registry_lists_every_file_with_well_formed_hashes() -> None:
         assert len({row[column] for row in rows}) == len(rows), column
 
     # The module serves exactly these rows, and keeps no hashes of its own.
-    assert registry.dataset_names() == ("kodak24", "mcmaster")
+    assert registry.dataset_names() == ("kodak24", "mcmaster", "train")
     loaded = [(d.name, f) for d in registry.datasets().values() for f in d.files]
     assert [
         (name, f.name, f.source_path, f.sha256, f.git_blob, f.pixels_sha256 or "-")
@@ -84,7 +93,10 @@ def test_registry_matches_shared_data(shared_data: Path) -> None:
             sources = {row["file"]: row for row in csv.DictReader(fh, delimiter="\t")}
         dataset = registry.datasets()[name]
         assert {f.name for f in dataset.files} == set(sources)
-        assert {f.name for f in dataset.files} == set(manifest) - {"SOURCES.tsv"}
+        assert {f.name for f in dataset.files} == set(manifest) - {
+            "SOURCES.tsv",
+            "DECODED_RGB.sha256",
+        }
         ((repo, commit),) = {(row["source_repo"], row["source_commit"]) for row in sources.values()}
         assert dataset.base_url == f"https://raw.githubusercontent.com/{repo}/{commit}/"
         for entry in dataset.files:
@@ -126,7 +138,7 @@ def test_registry_and_download_import_neither_torch_nor_numpy() -> None:
     loaded = fresh_modules(
         "import splitcam.data.registry as r\n"
         "assert r.datasets.cache_info().currsize == 0\n"
-        "assert r.dataset_names() == ('kodak24', 'mcmaster')\n"
+        "assert r.dataset_names() == ('kodak24', 'mcmaster', 'train')\n"
         "import splitcam.data.download"
     )
     assert {"splitcam.data.registry", "splitcam.data.download"} <= loaded

@@ -52,6 +52,24 @@ def start_settings(source: str, given: dict) -> dict:
     return implied
 
 
+def training_data(spec: str) -> str:
+    """``--data``: a folder, or the name of a downloadable dataset (``train``: the training
+    photos) found under the data root (``SPLITCAM_DATA``; ``splitcam data download``)."""
+    from pathlib import Path
+
+    from ..data.registry import data_root, dataset_names
+
+    if Path(spec).exists() or spec not in dataset_names():
+        return spec
+    folder = data_root() / spec
+    if not folder.is_dir():
+        raise ValueError(
+            f"--data {spec}: not downloaded to {folder}; splitcam data download {spec} (or set "
+            "SPLITCAM_DATA to the folder that holds it)"
+        )
+    return str(folder)
+
+
 def own_pattern_start(given: dict) -> dict:
     """A user's pattern (a file or a router, not a library name) has no network of its own:
     unless the run says how to start (``--init-from``, ``--arch``, ``--learn-pattern``), it
@@ -123,6 +141,8 @@ def run(args: argparse.Namespace) -> int:
     if photon_only and model != "photon":
         flags = ", ".join("--" + k.split(".", 1)[1].replace("_", "-") for k in photon_only)
         raise ValueError(f"{flags}: settings of the photon model; add --noise photon")
+    if "data.train" in overrides:
+        overrides["data.train"] = training_data(overrides["data.train"])
     if not args.resume:
         overrides.update(own_pattern_start({**from_file, **overrides}))
     init_from = overrides.get("run.init_from", config.run.init_from)

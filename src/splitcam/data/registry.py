@@ -63,6 +63,12 @@ _SOURCES: dict[str, tuple[str, str, str]] = {
         "cszn/FFDNet",
         "e787f46df2f374ff3591186706229cb9a0591fea",
     ),
+    "train": (
+        "training photos: 432 BSDS500 photos of 481x321 (its 200 train, 200 test and 32 of its "
+        "val photos; JPEG), what the shipped networks trained on",
+        "Sisso16/ssn_pytorch",
+        "c4f9ac8c43397cbacbf2e2ba1505efafa769435d",
+    ),
 }
 
 _SHA256 = re.compile(r"[0-9a-f]{64}")
@@ -186,13 +192,13 @@ def datasets() -> dict[str, Dataset]:
 
 def dataset_names() -> tuple[str, ...]:
     """Names of the datasets that can be downloaded and looked up by name (``kodak24``,
-    ``mcmaster``)."""
+    ``mcmaster``, ``train``)."""
     return tuple(datasets())
 
 
 TRAINING_FOLDER = "train"
 """The folder of training photos under the data root (the 432 BSDS500 photos the shipped networks
-trained on; docs/commands.md)."""
+trained on; ``splitcam data download train`` fetches them there; docs/commands.md)."""
 
 
 def training_folder(root: str | os.PathLike[str] | None = None) -> Path:
