@@ -62,3 +62,23 @@ def test_cli_refuses_an_output_that_is_not_a_pattern_file(tmp_path, capsys) -> N
     assert main(["design", "--pattern", "bayer", "--out", str(tmp_path / "b.toml"), "--quiet"]) == 1
     assert "absorbs light" in capsys.readouterr().err
     assert not (tmp_path / "b.toml").exists()
+
+
+def test_design_to_a_read_only_folder_is_refused_before_designing(tmp_path, capsys, monkeypatch):
+    import os
+
+    from splitcam import design
+
+    if os.geteuid() == 0:
+        # root writes anywhere: a file where the folder should be stands in for no permission
+        blocked = tmp_path / "blocked"
+        blocked.write_text("")
+        out = blocked / "d.toml"
+    else:
+        locked = tmp_path / "locked"
+        locked.mkdir()
+        locked.chmod(0o500)
+        out = locked / "d.toml"
+    monkeypatch.setattr(design, "design_pattern", lambda *a, **k: pytest.fail("designed first"))
+    assert main(["design", "--pattern", "D", "--out", str(out), "--quiet"]) == 1
+    assert "cannot write there" in capsys.readouterr().err

@@ -245,3 +245,14 @@ def test_reconstruct_writes_16_bit_and_float_outputs(photo, tmp_path):
     assert rec.shape == (10, 12, 3) and rec.dtype == np.float32
     with Image.open(tmp_path / "r.png") as im:
         assert im.size == (12, 10)
+
+
+def test_a_16_bit_jpeg_is_refused_before_any_work(photo, tmp_path, capsys, monkeypatch):
+    from splitcam.recon import registry
+
+    path, _ = photo
+    monkeypatch.setattr(registry, "build_method", lambda *a, **k: pytest.fail("worked first"))
+    args = ["reconstruct", "--method", "lmmse", "--pattern", "D", "--image", str(path)]
+    assert main([*args, "--out", str(tmp_path / "r.jpg"), "--bits", "16", "--quiet"]) == 1
+    assert "--bits 16 writes .png or .tif files, not .jpg" in capsys.readouterr().err
+    assert not (tmp_path / "r.jpg").exists()

@@ -61,6 +61,21 @@ def check_distinct(inputs: dict[str, str | None], outputs: dict[str, str | None]
         seen.append((flag, path))
 
 
+def check_writable(path: str | os.PathLike[str], flag: str = "--out") -> None:
+    """Refuse an output path that cannot be written, before any work: its folder is made (as
+    the write would) and a file is created and removed there."""
+    import tempfile
+
+    folder = Path(path).expanduser().resolve().parent
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        with tempfile.NamedTemporaryFile(dir=folder, prefix=".splitcam-check-"):
+            pass
+    except OSError as exc:
+        reason = exc.strerror or str(exc)
+        raise ValueError(f"{flag} {path}: cannot write there ({reason})") from None
+
+
 def warn_failed_runs(specs) -> None:
     """One line on stderr for each run folder or latest checkpoint among ``specs`` whose run
     ended in failure (diverged, or far below where it began): its scores are of such weights."""

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from ._common import table
+from ._common import check_writable, table
 
 
 def _network_objective(args: argparse.Namespace) -> dict:
@@ -256,6 +256,7 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if out.suffix.lower() not in (".toml", ".json"):
         raise ValueError(f"--out must end in .toml or .json, got {out.name!r}")
+    check_writable(out)
     if args.search is not None:
         return _search(args, out)
     in_loop = _network_objective(args) if args.objective == "network" else {}

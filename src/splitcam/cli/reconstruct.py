@@ -6,7 +6,13 @@ import argparse
 from pathlib import Path
 
 from ..io.domains import DOMAINS
-from ._common import add_method_options, check_distinct, warn_failed_runs, with_flips
+from ._common import (
+    add_method_options,
+    check_distinct,
+    check_writable,
+    warn_failed_runs,
+    with_flips,
+)
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -70,6 +76,11 @@ def run(args: argparse.Namespace) -> int:
     if (args.image is None) == (args.raw is None):
         raise ValueError("give exactly one of --image (simulate, then reconstruct) or --raw")
     check_distinct({"--image": args.image, "--raw": args.raw}, {"--out": args.out})
+    out_suffix = Path(args.out).suffix.lower()
+    if args.bits == 16 and out_suffix not in (".png", ".tif", ".tiff", ".npy"):
+        # Refused before minutes of reconstruction, not after.
+        raise ValueError(f"--bits 16 writes .png or .tif files, not {out_suffix or 'no suffix'}")
+    check_writable(args.out)
     given = [x for x in (args.method, args.checkpoint, args.model) if x]
     if len(given) != 1:
         raise ValueError(
