@@ -25,24 +25,16 @@ that scale).
 deepinv is an optional dependency (``pip install 'splitcam[deepinv]'``); importing this module
 without it raises an ImportError that says so.
 
-deepinv imports torchvision. A torchvision wheel built for a CUDA torch cannot load its compiled
-operators beside a CPU-only torch, and then fails to import at all (it registers a meta kernel
-for ``torchvision::nms`` whether or not the operator exists). Before importing deepinv this
-module checks for exactly that case; if torchvision's operators cannot load, it declares the
-two operators that torchvision's import needs (``nms``, ``qnms``, schemas only, no kernels) and
-logs a warning. torchvision then imports in its own degraded mode: its image-processing Python
-code works, and ``torchvision.ops`` raise torchvision's error about missing C++ operators when
-called. The clean fix is a torchvision built for the installed torch.
+deepinv imports torchvision, whose compiled operators load only beside the torch they were
+built for (a CUDA wheel of torchvision beside a CPU-only torch fails inside torchvision's own
+import). This module checks that before importing deepinv and, where they do not load, raises
+one ImportError naming the two versions and the install command of the matching torchvision.
 """
 
 from __future__ import annotations
 
-import importlib.machinery
-import importlib.util
 import logging
-import sys
 from collections.abc import Callable
-from pathlib import Path
 from typing import Any
 
 import torch
@@ -50,72 +42,17 @@ import torch
 from ..patterns import Pattern
 from ..physics.noise import Exposure, GaussianNoise, check_level, check_sigma
 from ..physics.sensor import SplitterSensor
+from ._torchvision import torchvision_mismatch
 
 logger = logging.getLogger(__name__)
 
 INSTALL_HINT = "pip install 'splitcam[deepinv]'"
 
-#: The operators whose meta kernels torchvision registers unconditionally on import.
-_TORCHVISION_SCHEMAS = (
-    "nms(Tensor dets, Tensor scores, float iou_threshold) -> Tensor",
-    "qnms(Tensor qdets, Tensor scores, float iou_threshold) -> Tensor",
-)
-#: The library that declares them where torchvision cannot (kept alive: a ``Library`` that is
-#: garbage-collected takes its definitions with it).
-_torchvision_stand_in: torch.library.Library | None = None
-
-
-def _torchvision_op_exists(name: str) -> bool:
-    try:
-        getattr(torch.ops.torchvision, name)
-    except (AttributeError, RuntimeError):
-        return False
-    return True
-
-
-def _torchvision_ops_load(folder: Path) -> bool:
-    """Whether torchvision's compiled operators load with this torch (what its import does)."""
-    for suffix in importlib.machinery.EXTENSION_SUFFIXES:
-        library = folder / f"_C{suffix}"
-        if library.is_file():
-            try:
-                torch.ops.load_library(str(library))
-            except OSError as err:
-                logger.debug("torchvision's operators do not load: %s", err)
-                return False
-            return True
-    return False
-
-
-def _let_torchvision_import() -> None:
-    """Declare torchvision's ``nms``/``qnms`` where its compiled operators cannot load, so that
-    torchvision (and so deepinv) imports; nothing happens in any other case."""
-    global _torchvision_stand_in
-    if _torchvision_stand_in is not None or "torchvision" in sys.modules:
-        return
-    spec = importlib.util.find_spec("torchvision")
-    if spec is None or not spec.submodule_search_locations:
-        return
-    if _torchvision_ops_load(Path(next(iter(spec.submodule_search_locations)))):
-        return
-    missing = [s for s in _TORCHVISION_SCHEMAS if not _torchvision_op_exists(s.split("(")[0])]
-    if not missing:
-        return
-    library = torch.library.Library("torchvision", "FRAGMENT")
-    for schema in missing:
-        library.define(schema)
-    _torchvision_stand_in = library
-    logger.warning(
-        "torchvision's compiled operators do not load with torch %s (a torchvision built for "
-        "another torch, e.g. a CUDA wheel beside a CPU-only torch); declared torchvision::nms "
-        "and ::qnms so that torchvision imports without them (torchvision.ops will not run). "
-        "Install the torchvision built for this torch to remove this warning.",
-        torch.__version__,
-    )
-
 
 def _import_deepinv() -> Any:
-    _let_torchvision_import()
+    problem = torchvision_mismatch()
+    if problem is not None:
+        raise ImportError(problem)
     try:
         import deepinv
     except ImportError as err:
