@@ -8,16 +8,12 @@ operator and through splitcam's evaluation protocol. Skipped where deepinv is no
 
 from __future__ import annotations
 
-import importlib.util
-
 import pytest
 import torch
 
-if importlib.util.find_spec("deepinv") is not None:
-    # splitcam's module first: it lets torchvision (which deepinv imports) load beside a
-    # CPU-only torch where a torchvision wheel for another torch is installed.
-    import splitcam.integrations.deepinv  # noqa: F401
-
+# splitcam's module first: where deepinv is missing, or the installed torchvision cannot load
+# beside this torch, the skip says why in one line (and how to install the matching one).
+pytest.importorskip("splitcam.integrations.deepinv")
 dinv = pytest.importorskip("deepinv")
 
 from splitcam import patterns  # noqa: E402
