@@ -10,8 +10,10 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
+from splitcam.data.registry import data_root
+
 ROOT = Path(__file__).resolve().parents[1]
-SHARED_DATA = ROOT.parent / "shared" / "data"
+SHARED_DATA = data_root()  # the data root: $SPLITCAM_DATA (splitcam.data.registry)
 
 
 def machine() -> str:

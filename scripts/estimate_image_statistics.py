@@ -17,6 +17,7 @@ import time
 from pathlib import Path
 
 from splitcam.data.patches import list_images
+from splitcam.data.registry import training_folder
 from splitcam.io.domains import DOMAINS
 from splitcam.recon.closed_form import SHIPPED_PATHS, estimate_image_statistics
 
@@ -25,7 +26,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--train", default=str(ROOT.parent / "shared" / "data" / "train"))
+    parser.add_argument("--train", default=str(training_folder()))
     parser.add_argument("--held-out", type=int, default=32)
     parser.add_argument("--domain", choices=DOMAINS, default="srgb")
     parser.add_argument("--every", type=int, default=1, help="use every K-th image (default 1)")

@@ -9,6 +9,7 @@ from pathlib import Path
 
 from splitcam import patterns
 from splitcam.data.patches import ImageCache
+from splitcam.data.registry import training_folder
 from splitcam.io.weights import LMMSE_DIR
 from splitcam.recon.lmmse import LMMSE
 
@@ -17,7 +18,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--train", default=str(ROOT.parent / "shared" / "data" / "train"))
+    parser.add_argument("--train", default=str(training_folder()))
     args = parser.parse_args()
     cache = ImageCache(args.train, min_size=48)
     out = LMMSE_DIR

@@ -15,7 +15,18 @@ import pytest
 TESTS = Path(__file__).resolve().parent
 sys.path.insert(0, str(TESTS))
 REPO = TESTS.parent
-SHARED_DATA = REPO.parent / "shared" / "data"
+
+
+#: The data root the tests read photos from (the test sets and the training photos), found the
+#: way the package finds it: ``$SPLITCAM_DATA`` or the download cache
+#: (:func:`splitcam.data.registry.data_root`). Tests that need it skip where it is absent.
+def _data_root() -> Path:
+    from splitcam.data.registry import data_root
+
+    return data_root()
+
+
+SHARED_DATA = _data_root()
 
 
 def fresh_modules(code: str) -> set[str]:
@@ -51,9 +62,9 @@ def _own_cache(tmp_path_factory: pytest.TempPathFactory) -> None:
 
 @pytest.fixture
 def shared_data() -> Path:
-    """``../shared/data`` beside the repository; tests using it skip where it is absent."""
-    if not SHARED_DATA.is_dir():
-        pytest.skip(f"shared data not found at {SHARED_DATA}")
+    """The data root (:data:`SHARED_DATA`); tests using it skip where it is absent."""
+    if not (SHARED_DATA / "kodak24").is_dir() and not (SHARED_DATA / "train").is_dir():
+        pytest.skip(f"no datasets under {SHARED_DATA} (set SPLITCAM_DATA; splitcam data download)")
     return SHARED_DATA
 
 

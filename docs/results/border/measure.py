@@ -5,7 +5,8 @@ PSNR of the whole image.
         [--out FILE.md]
 
 Every model is a shipped model's name (default: all of them), a model file or a run folder. The
-photos are the last ``--images`` of ``../shared/data/train`` (sorted by name; no run trains or
+photos are the last ``--images`` of the training photos (``$SPLITCAM_DATA/train``, sorted by
+name; no run trains or
 selects on the last 24, see ``docs/results/universal/heldout.py``), scored by the evaluation
 protocol at sigma 0 and 15 twice: whole (481x321 or 321x481, odd sides: the last row and column
 are part-way through every period above 1) and cropped to even sides (480x320). A network that
@@ -22,13 +23,14 @@ import torch
 
 from splitcam.data.imageio import read_image
 from splitcam.data.patches import list_images
+from splitcam.data.registry import training_folder
 from splitcam.evaluation.metrics import mean_over_images
 from splitcam.evaluation.protocol import score, score_images
 from splitcam.recon.loading import model_names, model_serves_any_pattern
 from splitcam.recon.registry import build_method
 
 SIGMAS = [0.0, 15.0]
-DATA = Path(__file__).resolve().parents[4] / "shared" / "data" / "train"
+DATA = training_folder()
 BORDER = 4
 
 

@@ -12,6 +12,7 @@ import torch
 
 from splitcam.data.imageio import read_image
 from splitcam.data.patches import list_images
+from splitcam.data.registry import training_folder
 from splitcam.evaluation import evaluate, summarise
 from splitcam.recon.closed_form import closed_form_lmmse
 
@@ -19,7 +20,7 @@ ROOT = Path(__file__).resolve().parents[3]
 
 
 def main() -> None:
-    train = Path(sys.argv[1]) if len(sys.argv) > 1 else ROOT.parent / "shared" / "data" / "train"
+    train = Path(sys.argv[1]) if len(sys.argv) > 1 else training_folder()
     files = list_images(train)[-6:]
     images = [(f.stem, torch.from_numpy(read_image(f)).permute(2, 0, 1)) for f in files]
     print("images:", ", ".join(n for n, _ in images))

@@ -11,17 +11,17 @@ Kodak24 and McMaster have) or, with --odd, whole (481x321).
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
 import torch
 
 from splitcam.data.images import read_image
 from splitcam.data.patches import list_images
+from splitcam.data.registry import training_folder
 from splitcam.evaluation.protocol import mean_psnr
 from splitcam.recon.ensemble import SelfEnsemble, symmetries
 from splitcam.recon.registry import build_method
 
-DATA = Path(__file__).resolve().parents[4] / "shared" / "data" / "train"
+DATA = training_folder()
 
 
 def main() -> int:

@@ -5,7 +5,8 @@
         [--out FILE.md]
 
 UNIVERSAL is a model name or file, or a run folder. The photos are the last ``--images`` of
-``../shared/data/train`` (sorted by name): every run holds out the last 32 and validates on the
+the training photos (``splitcam.data.registry.training_folder``: ``$SPLITCAM_DATA/train``,
+sorted by name): every run holds out the last 32 and validates on the
 first 8 of those, so the last 24 are used neither for training nor for selection. They are scored
 whole (481x321 or 321x481: odd sides, ending part-way through every period above 1) by the
 evaluation protocol (:func:`splitcam.evaluation.protocol.mean_psnr`) at sigma 0 and 15. A pattern
@@ -27,6 +28,7 @@ import torch
 from splitcam import patterns
 from splitcam.data.imageio import read_image
 from splitcam.data.patches import list_images
+from splitcam.data.registry import training_folder
 from splitcam.evaluation.protocol import mean_psnr
 from splitcam.recon.ensemble import with_flips
 from splitcam.recon.loading import load_model, model_names
@@ -34,7 +36,7 @@ from splitcam.recon.networks import serves_any_pattern
 from splitcam.recon.registry import build_method, model_domain
 
 SIGMAS = [0.0, 15.0]
-DATA = Path(__file__).resolve().parents[4] / "shared" / "data" / "train"
+DATA = training_folder()
 
 
 def shipped_for(pattern: patterns.Pattern) -> str | None:

@@ -5,7 +5,7 @@
 # one thread each (what the README's timings are).
 set -euo pipefail
 RESULTS=docs/results/universal
-DATA=${DATA:-../shared/data/train}
+DATA=${DATA:-${SPLITCAM_DATA:?set SPLITCAM_DATA to the data root (splitcam data download train)}/train}
 PAT=$RESULTS/patterns
 export OMP_NUM_THREADS=1
 
