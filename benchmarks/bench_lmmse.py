@@ -1,11 +1,11 @@
 """Training-free baselines on Kodak24 + McMaster: LMMSE for every pattern, classical demosaicking.
 
 Fits LMMSE (radius 4, default patches) for A, B, C, D, E and bayer on ``data/train``, scores it
-on Kodak24 and McMaster (42 images) at sigma 0 and 10 with PSNR, SSIM and CIEDE2000 (SPEC
-section 7, no border crop), and scores bilinear, Malvar 2004 and Menon 2007 demosaicking of the
+on Kodak24 and McMaster (42 images) at sigma 0 and 10 with PSNR, SSIM and CIEDE2000 (model.md
+§7, no border crop), and scores bilinear, Malvar 2004 and Menon 2007 demosaicking of the
 bayer raw image at sigma 0. Also prints PSNR with a 10-pixel border crop at sigma 0, the
 convention of published demosaicking tables (Malvar 2004: 35.78 dB Kodak, 34.43 dB McMaster), and
-the paper's trained-network figures (SPEC section 8) for context. Nothing is fitted or tuned on
+the paper's trained-network figures (model.md §8) for context. Nothing is fitted or tuned on
 the test images.
 
     python benchmarks/bench_lmmse.py [--max-images N] [--sigmas 0 10] [--json out.json]
@@ -32,7 +32,7 @@ SETS = ("kodak24", "mcmaster")
 CROP = 10
 #: Published Malvar 2004 PSNR with a 10-pixel border crop (Kodak, McMaster).
 MALVAR_PUBLISHED = {"kodak24": 35.78, "mcmaster": 34.43}
-#: Paper Table 1 (trained network, mean over the 42 images), SPEC section 8: PSNR per sigma.
+#: Paper Table 1 (trained network, mean over the 42 images), model.md §8: PSNR per sigma.
 PAPER_NET = {
     "A": {0: 40.02, 5: 37.58, 10: 35.72, 15: 34.44, 20: 33.47},
     "B": {0: 32.93, 5: 32.70, 10: 32.33, 15: 31.93, 20: 31.54},

@@ -5,8 +5,8 @@ LMMSE of any pattern) on the training images, leaving out the last 32 (sorted by
 
 ``--domain srgb`` (default) writes ``image_statistics.{json,safetensors}`` (moments of the 8-bit
 display values / 255); ``--domain linear`` writes ``image_statistics_linear.{json,safetensors}``
-(moments of the linear radiance each image decodes to with the sRGB transfer function, SPEC
-section 13). ``--every K`` keeps every K-th image of the training list (all by default); the
+(moments of the linear radiance each image decodes to with the sRGB transfer function, model.md
+§13). ``--every K`` keeps every K-th image of the training list (all by default); the
 subsample is recorded in the file's ``info``.
 """
 

@@ -6,7 +6,7 @@ at equal exposure.
 
     SPLITCAM_DATA=DIR python scripts/optics_worked_result.py --out docs/results/optics
 
-Every router is scored by the closed-form LMMSE of its kernels (SPEC section 10), and so are A
+Every router is scored by the closed-form LMMSE of its kernels (model.md §10), and so are A
 and the Bayer filter, so the comparison is between sensors, not between reconstructions. Images:
 the first ``--images`` of Kodak24 and of McMaster (reporting only; nothing here is tuned on them),
 found by name under the data root ``DIR`` (``splitcam data download kodak24 mcmaster --to DIR``;

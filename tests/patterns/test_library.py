@@ -33,7 +33,7 @@ def test_library_values_follow_the_spec():
 
 
 def test_pattern_b_two_green_pixels_of_a_cell_read_the_same():
-    """SPEC: B pools each cell's green half/half into its two G sub-pixels."""
+    """model.md §2: B pools each cell's green half/half into its two G sub-pixels."""
     import torch
 
     from splitcam.physics.sensor import SplitterSensor
@@ -44,7 +44,7 @@ def test_pattern_b_two_green_pixels_of_a_cell_read_the_same():
 
 
 def test_router_model_is_a_with_losses_and_crosstalk():
-    """SPEC 15: router(1, 0) is A; every colour's kernel sums to eta + chi (light lost, never
+    """model.md §15: router(1, 0) is A; every colour's kernel sums to eta + chi (light lost, never
     created); the eta part lands on pixels of its colour and the chi part only on others."""
     import numpy as np
 

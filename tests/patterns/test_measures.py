@@ -32,7 +32,7 @@ def test_measures_match_hand_computation():
 
 
 def test_low_light_filter_arrays_collect_their_share_of_white_light():
-    """SPEC section 14: RGBW collects 2/3 of white light (twice Bayer), Quad Bayer 1/3; counted
+    """model.md §14: RGBW collects 2/3 of white light (twice Bayer), Quad Bayer 1/3; counted
     independently here from the layouts' pixel types."""
     import numpy as np
 

@@ -1,5 +1,5 @@
 """Noise (splitcam.physics.noise): Gaussian training and evaluation noise, and the photon-limited
-sensor model (SPEC section 11)."""
+sensor model (model.md §11)."""
 
 from __future__ import annotations
 
@@ -128,7 +128,7 @@ def test_evaluation_noise_is_deterministic_per_image_and_exposure() -> None:
 
 def test_equal_exposure_pattern_a_red_pixel_gathers_four_times_bayer() -> None:
     """On a white scene the R pixel of pattern A collects 4 times the light of a Bayer R pixel
-    at the same exposure (SPEC section 11): 4N/3 against N/3 photo-electrons."""
+    at the same exposure (model.md §11): 4N/3 against N/3 photo-electrons."""
     white = torch.ones(1, 3, 12, 12, dtype=torch.float64)
     exposure = Exposure(300.0, read_noise=0.0, shot=False)
     gen = torch.Generator().manual_seed(0)
@@ -188,7 +188,7 @@ def test_training_draws_exposures_log_uniformly_and_resumes() -> None:
 
 
 def test_linear_white_gives_n_photo_electrons_in_a_lossless_filterless_pixel() -> None:
-    """SPEC 11 and 13: an 8-bit white scene decodes to linear radiance 1 in every colour; a
+    """model.md §11 and 13: an 8-bit white scene decodes to linear radiance 1 in every colour; a
     pixel with no filter and no loss (all three colours' light lands on it) then collects N
     photo-electrons at exposure N on average, with Poisson shot noise (variance N)."""
     from splitcam.patterns import Pattern

@@ -1,4 +1,4 @@
-"""Training in the linear domain (SPEC section 13): ``data.domain``, patches decoded to radiance
+"""Training in the linear domain (model.md §13): ``data.domain``, patches decoded to radiance
 before the sensor, the LMMSE inside the networks from the linear image statistics, validation
 scored like ``evaluate --domain linear``, and models that reconstruct only their own domain."""
 

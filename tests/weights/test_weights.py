@@ -25,7 +25,7 @@ def _one_pattern_models() -> list[str]:
 
 
 def _photon_models() -> list[str]:
-    """Shipped models trained on photons in linear light (SPEC 11, 13)."""
+    """Shipped models trained on photons in linear light (model.md §11, 13)."""
     return [name for name in model_names() if model_domain(name) == "linear"]
 
 

@@ -55,7 +55,7 @@ def design_metasurface(
     progress: bool = False,
     objective: str = "lmmse",
 ) -> MetasurfaceDesign:
-    """Optimise a metasurface height map for the closed-form LMMSE (SPEC sections 10 and 12), or
+    """Optimise a metasurface height map for the closed-form LMMSE (model.md §10 and §12), or
     for Bayer-type routing.
 
     The height is ``h_max * sigmoid(z)`` (always in ``[0, h_max]``); Adam on ``z`` maximises,

@@ -1,4 +1,4 @@
-"""Where a lossy colour router ties a filter array: the break-even map (SPEC sections 11, 14, 15).
+"""Where a lossy colour router ties a filter array: the break-even map (model.md §§11, 14, 15).
 
 :func:`break_even` scores the closed-form LMMSE of ``router(eta, chi)`` (the same efficiency and
 crosstalk in every band, on pattern A's geometry) over a grid of ``(eta, chi)`` against a

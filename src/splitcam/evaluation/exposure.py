@@ -1,15 +1,15 @@
 """Filters and splitters at equal exposure: image quality against light level, and the raw SNR
-against theory (SPEC section 11).
+against theory (model.md §11).
 
 :func:`exposure_study` scores the closed-form LMMSE of every pattern (its filters solved for the
-photon model's signal-dependent noise, SPEC section 10) on test images simulated at exposures
+photon model's signal-dependent noise, model.md §10) on test images simulated at exposures
 from a few to thousands of photo-electrons per full-light pixel, with the same photon flux for
 every pattern, and finds the exposure below which each splitter beats the Bayer filter.
 :func:`raw_snr_check` compares the raw images' SNR of each pattern with the filter's before any
 reconstruction, against ``10 log10 k`` (shot-noise limited) and ``20 log10 k`` (read-noise
 limited) for a ``k``-fold signal gain.
 
-Both take a light domain (SPEC section 13); the default is ``linear``, where photons belong: the
+Both take a light domain (model.md §13); the default is ``linear``, where photons belong: the
 scenes are decoded to linear radiance before the sensor and the noise, the LMMSE filters come
 from the linear image statistics, and reconstructions are encoded back to 8-bit sRGB to be
 scored. ``srgb`` takes the display values as light (the paper's protocol).

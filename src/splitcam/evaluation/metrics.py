@@ -1,4 +1,4 @@
-"""Image-quality metrics with the paper's evaluation conventions (SPEC, evaluation protocol).
+"""Image-quality metrics with the paper's evaluation conventions (model.md §7).
 
 Every metric first brings both images to 8 bits the same way: clamp to [0, 1], multiply by 255,
 round to integers (:func:`quantize`). The metrics are then computed in float64 on those integer

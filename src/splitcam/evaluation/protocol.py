@@ -1,4 +1,4 @@
-"""The paper's evaluation protocol (SPEC section 7), the one path every score goes through.
+"""The paper's evaluation protocol (model.md §7), the one path every score goes through.
 
 Every method sees the same scenes and the same noise: the raw image of each scene is simulated
 with the method's pattern (:func:`splitcam.physics.simulate`: float64 sensor, evaluation noise
@@ -12,7 +12,7 @@ seeded by the image name and sigma), reconstructed through the
 ``per_image.csv`` as soon as it is computed, and continues an interrupted evaluation of the same
 settings where it stopped.
 
-Every step takes a light domain (SPEC section 13). ``srgb`` is the paper's protocol: the test
+Every step takes a light domain (model.md §13). ``srgb`` is the paper's protocol: the test
 image's 8-bit values / 255 are the light. In ``linear`` the scene is decoded to linear radiance
 with the sRGB transfer function before the sensor and the noise, the method (which must be of
 the linear domain, :func:`~splitcam.recon.base.method_domain`) estimates radiance, and the
@@ -73,7 +73,7 @@ def check_method_domains(methods: Sequence[Reconstructor], domain: str) -> str:
         raise ValueError(
             f"method(s) of another light domain than this evaluation's ({domain}): "
             f"{', '.join(wrong)}; a method reconstructs raw images of the domain it was made "
-            f"for (SPEC section 13)"
+            f"for (model.md §13)"
         )
     return domain
 
@@ -91,7 +91,7 @@ def simulate_and_reconstruct(
     and the method's reconstruction, clamped to [0, 1]. ``sigma`` is a Gaussian sigma or a
     photon-model :class:`~splitcam.physics.noise.Exposure`. In the ``linear`` domain the sensor
     sees the scene's linear radiance and the estimate is encoded back to sRGB display values
-    before the clamp (SPEC section 13); the output is always of display values.
+    before the clamp (model.md §13); the output is always of display values.
 
     Raises:
         ValueError: The method is not of ``domain``.
@@ -107,7 +107,7 @@ def simulate_and_reconstruct(
 
 
 def score(pred: torch.Tensor, rgb: torch.Tensor, *, crop: int = 0) -> dict[str, float]:
-    """PSNR, SSIM and CIEDE2000 of a reconstruction on 8-bit images (SPEC section 7)."""
+    """PSNR, SSIM and CIEDE2000 of a reconstruction on 8-bit images (model.md §7)."""
     return compute_all(pred, rgb.cpu(), crop=crop)
 
 
@@ -251,7 +251,7 @@ def evaluate(
 ) -> list[EvalRow]:
     """Score every method on every image at every noise level, writing results to ``out`` as it
     goes. A noise level is the paper's Gaussian sigma (8-bit units) or a photon-model
-    :class:`~splitcam.physics.noise.Exposure` (SPEC section 11; rows labelled ``N<photons>``);
+    :class:`~splitcam.physics.noise.Exposure` (model.md §11; rows labelled ``N<photons>``);
     the exposures of one evaluation share their sensor settings (read noise, full well, ADC).
 
     Writes ``per_image.csv`` (a row as soon as it is computed), then ``summary.json``,
@@ -265,7 +265,7 @@ def evaluate(
     ``zoom_only`` draws the zoom figures without writing every reconstruction; ``zoom_sigmas``
     limits the zoom figures to those noise levels.
 
-    ``domain``: the light domain (SPEC section 13), ``srgb`` (the paper's protocol) or
+    ``domain``: the light domain (model.md §13), ``srgb`` (the paper's protocol) or
     ``linear`` (:func:`simulate_and_reconstruct`); every method must be of it. Each row records
     it, and in the summary and tables a method's results of the linear domain are labelled
     ``<method> (linear)``, so one folder keeps the results of both domains apart.

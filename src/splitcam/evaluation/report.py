@@ -19,7 +19,7 @@ from .tables import ENTRY_FIELDS, domain_line, method_of_label
 #: The paper's test sets: its numbers are means over all their images, whole.
 PAPER_DATASETS = {"kodak24": 24, "mcmaster": 18}
 
-#: SPEC section 8: mean over Kodak24 and McMaster (42 images), PSNR dB / SSIM, from 10^6 GPU
+#: model.md §8: mean over Kodak24 and McMaster (42 images), PSNR dB / SSIM, from 10^6 GPU
 #: training steps on DIV2K (Liu & Lam, Tables 1-3).
 PAPER = {
     "A": [(40.02, 0.9764), (37.58, 0.9569), (35.72, 0.9376), (34.44, 0.9207), (33.47, 0.9052)],
@@ -135,8 +135,8 @@ def make_report(results: list[str | os.PathLike], out: str | os.PathLike) -> Pat
         "Ours: mean over all images evaluated (`all`); the paper: mean over Kodak24 + McMaster "
         "(42 images) after 10^6 GPU training steps on DIV2K. Cells: ours PSNR dB / SSIM, then, "
         "for a network scored on all of Kodak24 and McMaster whole (what the paper's numbers "
-        "are), (paper PSNR, difference ours − paper). B, C and E are modelled patterns (SPEC "
-        "section 2), so their gaps are not only a matter of training budget.",
+        "are), (paper PSNR, difference ours − paper). B, C and E are modelled patterns "
+        "(docs/model.md section 2), so their gaps are not only a matter of training budget.",
         "",
         domain_line(e.get("domain", "srgb") for _, _, e, _ in entries),
         "",
@@ -246,7 +246,7 @@ def _ranks(values: dict[str, float]) -> dict[str, int]:
 
 
 def checks(summary: dict, rows: dict[str, str], sigmas: list[str]) -> list[tuple[str, bool, str]]:
-    """The paper's conclusions (SPEC section 8), each ``(statement, holds, the numbers)``, on
+    """The paper's conclusions (model.md §8), each ``(statement, holds, the numbers)``, on
     the mean over all images. ``rows`` maps paper row names to method names in ``summary``."""
 
     def at(row: str, s: str, metric: str = "psnr") -> float | None:
@@ -406,7 +406,7 @@ def _intro(t: _Tables) -> list[str]:
         "",
         f"Ours: mean over {n} images; cells are our PSNR dB / SSIM, then (the paper's PSNR, "
         "ours − paper). The paper trained 10^6 GPU steps of batch 80 on DIV2K; our budgets are "
-        "below. B, C and E are modelled patterns (SPEC section 2).",
+        "below. B, C and E are modelled patterns (model.md §2).",
         "",
         domain_line(domains),
         "",

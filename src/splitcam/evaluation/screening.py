@@ -52,7 +52,7 @@ def evaluate_method(
     *,
     psnr_crops: Sequence[int] = (),
 ) -> list[dict[str, Any]]:
-    """Score a method on whole test images (SPEC section 7), one row per image and sigma.
+    """Score a method on whole test images (model.md §7), one row per image and sigma.
 
     The protocol's own steps (:func:`~splitcam.evaluation.protocol.simulate_and_reconstruct`
     and :func:`~splitcam.evaluation.protocol.score`, as ``splitcam evaluate``), with the time of

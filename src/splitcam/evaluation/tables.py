@@ -2,7 +2,7 @@
 (:class:`EvalRow`), ``per_image.csv`` written row by row (so an interrupted evaluation keeps what
 it did), and the means per image set in the layout of the paper's Table 1.
 
-Every row records its light domain (SPEC section 13: ``srgb``, the paper's protocol, or
+Every row records its light domain (model.md §13: ``srgb``, the paper's protocol, or
 ``linear``); a file written without the ``domain`` column reads as ``srgb``. Results of one
 method in two domains are kept apart: in summaries and tables a method of the linear domain is
 labelled ``<method> (linear)`` (:func:`result_label`), and every table says its domain."""
@@ -230,7 +230,7 @@ _DOMAIN_TEXT = {
     "srgb": "srgb (the paper's protocol: the 8-bit sRGB values / 255 are the light the sensor "
     "sees)",
     "linear": "linear (scenes decoded to linear radiance before the sensor and the noise, "
-    "reconstructions encoded back to 8-bit sRGB before scoring; SPEC section 13)",
+    "reconstructions encoded back to 8-bit sRGB before scoring; model.md §13)",
 }
 
 

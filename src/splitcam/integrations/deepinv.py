@@ -5,21 +5,21 @@ splitcam reconstruction methods.
 solvers (proximal gradient, ADMM, plug-and-play, unrolled networks, ...) run on any
 :class:`deepinv.physics.LinearPhysics`; this module makes a splitter sensor one:
 
-- :class:`SplitterPhysics`: ``A`` is the sensor's image formation (SPEC section 1, Eq. 1) and
+- :class:`SplitterPhysics`: ``A`` is the sensor's image formation (model.md §1, Eq. 1) and
   ``A_adjoint`` its exact adjoint, for any pattern of the library, a pattern file or a
   :class:`~splitcam.patterns.Pattern`. Built from a
   :class:`~splitcam.physics.sensor.LearnableSplitterSensor`, the kernels stay learnable: the
   sensor's logits are the physics' parameters, and gradients reach them through ``A``.
-- :class:`SplitcamGaussianNoise`: the paper's noise ``N(0, (sigma/255)^2)`` (SPEC section 3),
+- :class:`SplitcamGaussianNoise`: the paper's noise ``N(0, (sigma/255)^2)`` (model.md §3),
   ``sigma`` in 8-bit units, drawn by :class:`splitcam.physics.noise.GaussianNoise`.
-- :class:`SplitcamPhotonNoise`: the photon model at one exposure (SPEC section 11), drawn by
+- :class:`SplitcamPhotonNoise`: the photon model at one exposure (model.md §11), drawn by
   :meth:`splitcam.physics.noise.Exposure.apply`.
 - :class:`DeepinvReconstructor`: any ``deepinv`` reconstruction ``model(y, physics)`` as a
   splitcam :class:`~splitcam.recon.Reconstructor`, so :mod:`splitcam.evaluation` scores it on the
   same scenes and noise as every other method.
 
 Images are ``(N, 3, H, W)`` in [0, 1] (any ``H, W >= 1``), measurements ``(N, 1, H, W)`` on the
-raw scale of SPEC section 1 (a white scene gives up to 4 at a splitter pixel; noise is added on
+raw scale of model.md §1 (a white scene gives up to 4 at a splitter pixel; noise is added on
 that scale).
 
 deepinv is an optional dependency (``pip install 'splitcam[deepinv]'``); importing this module
@@ -77,7 +77,7 @@ NoiseLevel = float | Exposure | dinv.physics.NoiseModel | None
 
 
 class SplitcamGaussianNoise(dinv.physics.NoiseModel):
-    """splitcam's Gaussian noise (SPEC section 3) as a deepinv noise model: ``y = z + n``,
+    """splitcam's Gaussian noise (model.md §3) as a deepinv noise model: ``y = z + n``,
     ``n ~ N(0, (sigma_8bit / 255)^2)``, drawn by :class:`splitcam.physics.noise.GaussianNoise`
     with a fixed sigma (for one seed, the same draws as that class).
 
@@ -148,9 +148,9 @@ class SplitcamGaussianNoise(dinv.physics.NoiseModel):
 
 
 class SplitcamPhotonNoise(dinv.physics.NoiseModel):
-    """splitcam's photon model at one exposure (SPEC section 11) as a deepinv noise model.
+    """splitcam's photon model at one exposure (model.md §11) as a deepinv noise model.
 
-    The measurement ``z`` (raw units, SPEC section 1) becomes ``e = z N / 3`` photo-electrons;
+    The measurement ``z`` (raw units, model.md §1) becomes ``e = z N / 3`` photo-electrons;
     shot noise, read noise, full well and ADC follow as :meth:`Exposure.apply
     <splitcam.physics.noise.Exposure.apply>` draws them (for one seed, the same draws), and the
     result is back on the raw scale. Like that method, the noise is not differentiable (the
@@ -231,7 +231,7 @@ class SplitterPhysics(dinv.physics.LinearPhysics):
     """A splitter sensor as a deepinv linear operator: ``y = N(A x)``.
 
     ``A`` is the sensor's image formation (:func:`~splitcam.physics.sensor.splitter_forward`,
-    SPEC section 1) and ``A_adjoint`` its exact adjoint
+    model.md §1) and ``A_adjoint`` its exact adjoint
     (:func:`~splitcam.physics.sensor.splitter_adjoint`); both compute in the input's dtype and
     on its device (``physics.to(device)`` moves the sensor). The sensor is a sub-module
     (:attr:`splitter`), so a :class:`~splitcam.physics.sensor.LearnableSplitterSensor` keeps its
@@ -303,7 +303,7 @@ class DeepinvReconstructor:
         physics: The :class:`SplitterPhysics` of the pattern whose raw images it reconstructs.
         name: Short label for tables.
         domain: The light domain of the raw images and estimates (``srgb`` or ``linear``,
-            SPEC section 13).
+            model.md §13).
     """
 
     def __init__(

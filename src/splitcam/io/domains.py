@@ -1,4 +1,4 @@
-"""The names of the light domains (SPEC section 13), importable without torch (command-line
+"""The names of the light domains (model.md §13), importable without torch (command-line
 parsers list them as choices).
 
 - ``srgb``: the paper's protocol. A scene's 8-bit sRGB values divided by 255 are the light the

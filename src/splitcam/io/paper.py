@@ -1,4 +1,4 @@
-"""The paper's protocol in names and numbers (SPEC section 7), importable without torch: the one
+"""The paper's protocol in names and numbers (model.md §7), importable without torch: the one
 home of the noise levels it scores and the patterns it compares, which the CLI's defaults, the
 design objective, training's pattern mix and the reports read."""
 

@@ -15,5 +15,5 @@ MODELS_DIR = WEIGHTS_DIR / "models"
 LMMSE_DIR = WEIGHTS_DIR / "lmmse"
 #: The pattern-independent image statistics of the closed-form LMMSE (``.json`` + tensors).
 IMAGE_STATISTICS = WEIGHTS_DIR / "image_statistics.json"
-#: The same statistics of linear radiance (training images decoded from sRGB, SPEC section 13).
+#: The same statistics of linear radiance (training images decoded from sRGB, model.md §13).
 IMAGE_STATISTICS_LINEAR = WEIGHTS_DIR / "image_statistics_linear.json"

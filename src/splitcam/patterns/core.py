@@ -3,7 +3,7 @@
 A pattern has a period ``(Ph, Pw)``, a ``layout`` of shape ``(Ph, Pw)`` naming the splitter used at
 each position of the period, and ``kernels`` of shape ``(S, 3, kh, kw)``: light of colour ``c``
 arriving where splitter ``s`` sits puts the fraction ``kernels[s, c, a, b]`` on the pixel offset by
-``(a - kh // 2, b - kw // 2)`` (SPEC section 1). Kernel sums below 1 model absorbed light (a colour
+``(a - kh // 2, b - kw // 2)`` (model.md §1). Kernel sums below 1 model absorbed light (a colour
 filter); sums above 1 would create light and are refused.
 """
 

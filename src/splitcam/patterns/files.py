@@ -71,7 +71,7 @@ def load(path: str | os.PathLike) -> Pattern:
 
 
 def _toml(data: dict) -> str:
-    """TOML with one line per kernel row, so a pattern file reads like the SPEC's tables.
+    """TOML with one line per kernel row, so a pattern file reads like the tables of docs/model.md.
 
     ``tomli_w`` would put every number on a line of its own; the format here is simple enough
     to write directly (strings as JSON strings, which are valid TOML basic strings).

@@ -1,5 +1,5 @@
-"""The published splitter patterns A–E, the Bayer filter (SPEC section 2) and the low-light
-filter arrays RGBW and Quad Bayer (SPEC section 14).
+"""The published splitter patterns A–E, the Bayer filter (model.md §2) and the low-light
+filter arrays RGBW and Quad Bayer (model.md §14).
 
 Kernels are written ``[row][col]``; the centre tap is the light that stays on the pixel where it
 arrived. A and D match the authors' code exactly; B, C and E are modelled from the device
@@ -138,7 +138,7 @@ def _pattern_bayer() -> Pattern:
     )
 
 
-# Filters of the low-light arrays (SPEC section 14): W passes every colour, R, G, B their own.
+# Filters of the low-light arrays (model.md §14): W passes every colour, R, G, B their own.
 _W, _R, _G, _B = 0, 1, 2, 3
 _FILTERS = np.zeros((4, 3, 1, 1))
 _FILTERS[_W] = 1.0
@@ -173,7 +173,7 @@ def _pattern_quad() -> Pattern:
     )
 
 
-# Which colour each pixel of A's RGGB arrangement collects (SPEC section 2).
+# Which colour each pixel of A's RGGB arrangement collects (model.md §2).
 _A_COLOURS = np.array([[0, 1], [1, 2]])
 
 
@@ -185,7 +185,7 @@ def router(
     description: str = "",
     reference: str = "",
 ) -> Pattern:
-    """A Bayer-type colour router with losses and crosstalk, on pattern A's geometry (SPEC 15).
+    """A Bayer-type colour router with losses and crosstalk, on pattern A's geometry (model.md §15).
 
     For each colour ``c``: ``w = eta_c * w_A + chi_c * x_A``, where ``w_A`` is A's kernel (all
     light of colour ``c`` to the nearest pixel(s) of colour ``c``) and ``x_A`` spreads light
@@ -241,7 +241,7 @@ def router(
         name=label,
         layout=a.layout,
         kernels=kernels,
-        provenance="router model (SPEC section 15)",
+        provenance="router model (model.md §15)",
         description=description
         or f"Bayer-type router with band efficiency {', '.join(f'{v:g}' for v in e)} and "
         f"crosstalk {', '.join(f'{v:g}' for v in x)} (R, G, B) on pattern A's geometry",
@@ -277,7 +277,7 @@ def parse_router(spec: str) -> Pattern | None:
     return router(values["eta"], values.get("chi", [0.0]))
 
 
-# Calibration of the router presets (SPEC 15) to the invrs-gym Bayer-sorter leaderboard
+# Calibration of the router presets (model.md §15) to the invrs-gym Bayer-sorter leaderboard
 # (github.com/invrs-io/leaderboard, challenges/bayer_sorter/leaderboard.txt, full-wave FMM
 # simulations). There, efficiency_c is the in-band light of colour c reaching the pixel(s) of
 # colour c, which is eta_c here; crosstalk_p is the out-of-band light landing in pixel p, a

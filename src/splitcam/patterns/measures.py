@@ -1,4 +1,4 @@
-"""Design-principle measures of a pattern (paper section 3.1, SPEC section 2).
+"""Design-principle measures of a pattern (paper section 3.1, model.md §2).
 
 The paper's three principles — avoid the sub-pixel (pooling) structure, split colours to a region
 as small as possible, split the incident light fully — become numbers that can be read for any

@@ -1,4 +1,4 @@
-"""Random valid patterns, to train one network over many patterns (SPEC section 16).
+"""Random valid patterns, to train one network over many patterns (model.md §16).
 
 :func:`random_pattern` draws a pattern from one of three families, each a kind of sensor a
 designer brings:

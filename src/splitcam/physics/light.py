@@ -1,5 +1,4 @@
-"""Linear light: the sRGB transfer function between display values and radiance (SPEC
-section 13).
+"""Linear light: the sRGB transfer function between display values and radiance (model.md §13).
 
 Test and training images are 8-bit sRGB display values. In the ``linear`` domain a scene is
 decoded to linear radiance (:func:`srgb_to_linear`) before the sensor and the noise act on it,

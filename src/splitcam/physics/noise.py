@@ -1,5 +1,5 @@
-"""Sensor noise. The paper's model (SPEC section 3): additive Gaussian noise in 8-bit units on the
-raw image's scale. The physical model at equal exposure (SPEC section 11): :class:`Exposure`
+"""Sensor noise. The paper's model (model.md §3): additive Gaussian noise in 8-bit units on the
+raw image's scale. The physical model at equal exposure (model.md §11): :class:`Exposure`
 (photo-electrons, shot and read noise, full well, ADC) and :class:`PhotonNoise` for training.
 
 Training noise comes from :class:`GaussianNoise` and :class:`PhotonNoise`, which own seeded
@@ -178,7 +178,7 @@ def add_evaluation_noise(raw: torch.Tensor, image_name: str, sigma: float) -> to
     )
 
 
-# --- photon-limited sensing (SPEC section 11) ---------------------------------------------------
+# --- photon-limited sensing (model.md §11) ---------------------------------------------------
 
 
 @dataclass(frozen=True)
@@ -187,14 +187,14 @@ class Exposure:
 
     Exposure is stated by ``photons`` (``N``): the mean photo-electrons that a lossless pixel
     without filter or splitter collects from a white scene (``f = 1`` in every colour). Its raw
-    value in the units of SPEC section 1 is ``R + G + B = 3``, so a raw value ``g`` means
+    value in the units of model.md §1 is ``R + G + B = 3``, so a raw value ``g`` means
     ``e = g N / 3`` photo-electrons: every pattern sees the same photon flux, and a filter's lost
     light shows as lost signal. Noise, in order: shot noise ``Poisson(e)`` (``shot``), read noise
     ``N(0, read_noise^2)`` electrons, saturation to ``[0, full_well]`` (``full_well`` not None),
     an ADC ``DN = round(e / gain)`` clipped to ``[0, 2^bits - 1]`` (``gain`` not None); the raw
     image handed on is ``DN * gain * 3 / N`` (or ``e * 3 / N`` without ADC), the same scale for
     every pattern. With ``shot=False``, no full well, no ADC and ``read_noise = N sigma / (3 *
-    255)`` this is the Gaussian model of SPEC section 3.
+    255)`` this is the Gaussian model of model.md §3.
 
     Raises:
         ValueError: Non-positive or non-finite ``photons``; negative ``read_noise``;
@@ -249,7 +249,7 @@ class Exposure:
         return a, b
 
     def apply(self, raw: torch.Tensor, generator: torch.Generator) -> torch.Tensor:
-        """The noisy raw image of a clean one (``raw``, values >= 0 in the units of SPEC 1)."""
+        """The noisy raw image of a clean one (``raw``, values >= 0 in the units of model.md §1)."""
         e = raw.detach().to(torch.float64).clamp_min(0).cpu() * self.electrons_per_unit
         if self.shot:
             e = torch.poisson(e, generator=generator)
@@ -336,7 +336,7 @@ def photon_noise(
     differ, as in :class:`PhotonNoise`.
 
     Shape:
-        raw: ``(N, 1, H, W)``, values >= 0 in the units of SPEC 1; ``len(exposures) == N``;
+        raw: ``(N, 1, H, W)``, values >= 0 in the units of model.md §1; ``len(exposures) == N``;
         output: like ``raw``, on its device and in its dtype.
     """
     first = exposures[0]

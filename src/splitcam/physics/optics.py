@@ -1,4 +1,4 @@
-"""Scalar wave optics: from a metasurface above the sensor to the splitter kernels (SPEC 12).
+"""Scalar wave optics: from a metasurface above the sensor to the splitter kernels (model.md §12).
 
 A metasurface over one period of ``Ph x Pw`` pixels (pitch ``p``), sampled at ``q`` points per
 pixel and axis, sits a distance ``d`` above the photodiodes in a spacer of index ``n_s``. Its phase

@@ -7,7 +7,7 @@ and trained networks (:class:`NetworkReconstructor`) alike. The evaluation proto
 the Python API only ever talk to this interface; :mod:`splitcam.recon.registry` builds one from a
 name.
 
-A method also works in a light domain (SPEC section 13), its ``domain`` attribute: ``srgb`` (the
+A method also works in a light domain (model.md §13), its ``domain`` attribute: ``srgb`` (the
 raw image is of display values and the estimate is of display values, the paper's protocol) or
 ``linear`` (the raw image is of linear radiance and so is the estimate). A method without the
 attribute is of ``srgb`` (:func:`method_domain`).

@@ -19,7 +19,7 @@ gather the moments of its raw neighbourhoods) this needs no simulation, works fo
 change at every step of an optimisation, and is differentiable in the kernels, so gradients reach
 a learned pattern through it (:func:`closed_form_filters`).
 
-Statistics are shipped for both light domains (SPEC section 13): of the training images' sRGB
+Statistics are shipped for both light domains (model.md §13): of the training images' sRGB
 display values (``srgb``, the paper's protocol) and of their linear radiance (``linear``: each
 image decoded with the sRGB transfer function before the moments are taken);
 :func:`shipped_image_statistics` takes the domain, and an LMMSE built from statistics works in
@@ -192,7 +192,7 @@ def estimate_image_statistics(
         max_images: Use at most this many images (from the start of the sorted list).
         progress: Show a progress bar over the images.
         domain: ``srgb``: the moments of the display values themselves; ``linear``: of the
-            linear radiance each image decodes to (SPEC section 13), taken in float64.
+            linear radiance each image decodes to (model.md §13), taken in float64.
 
     Raises:
         ValueError: No image larger than ``2L + 1`` pixels in each direction, or an unknown
@@ -333,7 +333,7 @@ def _solve(
     level. ``levels`` ``(S, 2)`` holds ``(a, b)``: the noise variance of a raw pixel of expected
     value ``g`` is ``a g + b`` (Gaussian: ``a = 0``, ``b = (sigma/255)^2``; photon model:
     :meth:`~splitcam.physics.noise.Exposure.variance_coefficients`), evaluated at each window
-    pixel's expected signal ``A_p mu_M`` (SPEC section 10)."""
+    pixel's expected signal ``A_p mu_M`` (model.md §10)."""
     cxx, cyx, mean_x, cyy = _moments(kernels, stats, radius)
     d = cxx.shape[-1]
     trace = torch.diagonal(cxx, dim1=-2, dim2=-1).sum(-1)
@@ -391,7 +391,7 @@ def closed_form_filters(
             flow back to them).
         sigma: Noise standard deviation in 8-bit units, a number or a 1-D tensor of several; or
             a photon-model :class:`~splitcam.physics.noise.Exposure` (signal-dependent noise,
-            SPEC section 10), or a list of them.
+            model.md §10), or a list of them.
         statistics: Image statistics (default: the shipped ones).
         radius: Neighbourhood radius ``r``; filters are ``(2r+1) x (2r+1)``.
 

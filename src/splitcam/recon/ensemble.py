@@ -14,7 +14,7 @@ transforms; with only the identity it is the method itself.
 The usual test-time augmentation of image restoration flips the input regardless; for a
 colour-routing sensor that would feed the network raw images no sensor of its pattern produces,
 so only the exact symmetries are used here. A network told each pixel's kernels (``universal``,
-SPEC section 16) is not bound to one pattern: ``g(raw)`` is exactly the raw image that the
+model.md §16) is not bound to one pattern: ``g(raw)`` is exactly the raw image that the
 flipped pattern :func:`transformed` records of ``g(x)``, so it can take all eight looks, each
 told the pattern it sees (``every_look``; measured, it pays only where the network knows the
 flipped patterns as well as the pattern itself).

@@ -227,7 +227,7 @@ class _WithStatistics(nn.Module):
     """The image statistics a network solves its LMMSE filters from, kept as (float64) buffers
     so a checkpoint carries them, and the check of the physics a network is called with.
 
-    The statistics belong to a light domain (SPEC section 13): a network for raw images of
+    The statistics belong to a light domain (model.md §13): a network for raw images of
     linear radiance holds statistics of linear images (``shipped_image_statistics("linear")``),
     one for sRGB values (the default) the sRGB ones."""
 
@@ -338,7 +338,7 @@ class PhysicsReconNet(_Reconstructor, _WithStatistics):
 
 
 class UniversalReconNet(_WithStatistics):
-    """One network for any pattern: the physics network, told each pixel's kernel (SPEC 16).
+    """One network for any pattern: the physics network, told each pixel's kernel (model.md §16).
 
     Like :class:`PhysicsReconNet` it corrects the closed-form LMMSE estimate of the pattern it is
     given, but nothing in it depends on the period: the trunk runs on fixed 2x2 cells (half the

@@ -13,7 +13,7 @@ name means the same thing everywhere:
   :func:`splitcam.recon.loading.model_names`) or a model file: a trained network shipped with
   splitcam (``splitcam evaluate --model D``).
 
-Every method works in a light domain (SPEC section 13, the ``domain`` attribute): ``lmmse``
+Every method works in a light domain (model.md §13, the ``domain`` attribute): ``lmmse``
 in the one asked for (``srgb``: the shipped fit of a built-in pattern; ``linear``: the closed form
 from the shipped linear image statistics), classical demosaicking in either (fixed interpolation,
 no image statistics), a network in the one it was trained in (its config's ``data.domain``,
@@ -137,7 +137,7 @@ def _check_network_domain(label: str, config: dict | None, domain: str | None) -
     if domain is not None and check_domain(domain) != own:
         raise ValueError(
             f"{label} was trained in the {own} domain and cannot reconstruct raw images of the "
-            f"{check_domain(domain)} domain (SPEC section 13): use --domain {own}, or a network "
+            f"{check_domain(domain)} domain (model.md §13): use --domain {own}, or a network "
             f"trained with data.domain {check_domain(domain)}"
         )
     return own

@@ -1,7 +1,7 @@
 """Typed training configuration: dataclasses that load from TOML/YAML/JSON, take command-line
 overrides, and are written resolved into every run folder.
 
-Defaults follow the paper's recipe (SPEC section 6: batch 80 of 64x64 patches, Adam, MSE,
+Defaults follow the paper's recipe (model.md §6: batch 80 of 64x64 patches, Adam, MSE,
 ``sigma ~ U[0, 30]``, 10^6 steps, 10 blocks of 64 features) except where measurement chose
 better per CPU-hour (docs/results/convergence/): the physics-informed network and Adam peaking
 at 1e-3 after 100 warm-up steps with cosine decay. ``--arch paper --schedule constant --lr 1e-4``
@@ -108,8 +108,8 @@ class NetworkConfig:
         "physics",
         "physics (corrects the closed-form LMMSE estimate for the sensor's kernels and noise "
         "level; the default because it wins at equal CPU time, see docs/results), universal "
-        "(the same for any pattern, told each pixel's kernel; SPEC section 16), packed "
-        "(blind, at 1/(Ph*Pw) of the positions) or paper (full resolution, SPEC section 5)",
+        "(the same for any pattern, told each pixel's kernel; model.md §16), packed "
+        "(blind, at 1/(Ph*Pw) of the positions) or paper (full resolution, model.md §5)",
     )
     features: int = _opt(64, "channels of the hidden layers")
     blocks: int = _opt(10, "residual blocks")
@@ -159,7 +159,7 @@ class DataConfig:
     )
     domain: str = _opt(
         DEFAULT_DOMAIN,
-        "light domain (SPEC section 13): srgb (the paper's: the 8-bit values / 255 are the "
+        "light domain (model.md §13): srgb (the paper's: the 8-bit values / 255 are the "
         "light) or linear (patches decoded to linear radiance before the sensor and the noise; "
         "the network estimates radiance, the loss compares it with the patch's radiance, and "
         "the LMMSE inside the physics and universal networks uses the linear image statistics); "
@@ -241,7 +241,7 @@ class NoiseConfig:
     model: str = _opt(
         "gaussian",
         "gaussian (the paper's: sigma ~ U[optim.sigma_min, optim.sigma_max]) or photon (shot "
-        "and read noise at an exposure drawn log-uniformly from --photons, SPEC section 11)",
+        "and read noise at an exposure drawn log-uniformly from --photons, model.md §11)",
         flag="noise",
     )
     photons: list[float] = _opt(

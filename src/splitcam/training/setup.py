@@ -3,7 +3,7 @@ system (sensor + network), the optimiser, where the weights start, the training 
 noise, and the validation images; :func:`prepare` does it all in order, for a new run or for
 one that resumes a checkpoint.
 
-A run works in one light domain (``data.domain``, SPEC section 13): a network that solves the
+A run works in one light domain (``data.domain``, model.md §13): a network that solves the
 LMMSE inside (``physics``, ``universal``) holds the shipped image statistics of that domain,
 also when its weights start from a network of the other one (``run.init_from``)."""
 

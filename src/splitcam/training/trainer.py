@@ -306,7 +306,7 @@ def _schedule(state: TrainState, run: Run) -> None:
 def _next_batch(state: TrainState, run: Run) -> torch.Tensor:
     """This rank's next batch of patches as the light the sensor sees (and, in a run over many
     patterns, this step's pattern): the patches' sRGB values, or in the linear domain their
-    radiance (SPEC section 13), which is then also the target of the loss."""
+    radiance (model.md §13), which is then also the target of the loss."""
     batch = state.sampler.sample(run.config.data.batch_size).to(run.device, non_blocking=True)
     batch = decode_scene(batch, run.config.data.domain)
     state.last_batch = batch

@@ -138,7 +138,7 @@ def validate(
     it, the same simulation, noise, reconstruction, rounding and averaging as ``splitcam
     evaluate``, so the logged value is what ``evaluate`` reports for this step.
 
-    ``domain`` is the run's light domain (SPEC section 13): in ``linear`` the images are decoded
+    ``domain`` is the run's light domain (model.md §13): in ``linear`` the images are decoded
     to radiance before the sensor and the network's estimate is encoded back to 8-bit sRGB
     before it is scored against them, as ``evaluate --domain linear`` does.
 
