@@ -6,7 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from ..io.domains import DOMAINS
+from ..io.domains import DEFAULT_DOMAIN, DOMAINS
 from ..io.paper import PAPER_PATTERNS, PAPER_SIGMAS
 from ._common import (
     add_method_options,
@@ -107,7 +107,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--domain",
         choices=DOMAINS,
-        default="srgb",
+        default=DEFAULT_DOMAIN,
         help="light domain: srgb (default, the paper's protocol: 8-bit values taken as light) or "
         "linear (scenes decoded to linear radiance before the sensor and the noise, "
         "reconstructions encoded back to 8-bit sRGB before scoring; the LMMSE uses the linear "

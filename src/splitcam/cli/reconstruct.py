@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from ..io.domains import DOMAINS
+from ..io.domains import DOMAINS, SRGB
 from ._common import (
     add_method_options,
     check_distinct,
@@ -107,7 +107,7 @@ def run(args: argparse.Namespace) -> int:
                     f"--pattern {pattern} contradicts the pattern recorded in {args.raw} "
                     f"({recorded.name}); leave --pattern out"
                 )
-            made_in = made.get("domain", "srgb")  # files that do not record it are of srgb
+            made_in = made.get("domain", SRGB)  # files that do not record it are of srgb
             if domain is not None and domain != made_in:
                 raise ValueError(
                     f"--domain {domain} contradicts the light domain recorded in {args.raw} "
@@ -159,6 +159,6 @@ def run(args: argparse.Namespace) -> int:
             np.save(tmp, out[0].permute(1, 2, 0).float().numpy())
     else:
         write_image(args.out, out[0].clamp(0, 1), bits=args.bits)
-    where = "" if domain == "srgb" else f" ({domain} domain)"
+    where = "" if domain == SRGB else f" ({domain} domain)"
     print(f"{method.name}{where}: wrote {args.out} ({out.shape[-1]}x{out.shape[-2]})")
     return 0

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from ..io.domains import DOMAINS
+from ..io.domains import DEFAULT_DOMAIN, DOMAINS, SRGB
 from ._common import check_distinct
 
 
@@ -24,7 +24,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--domain",
         choices=DOMAINS,
-        default="srgb",
+        default=DEFAULT_DOMAIN,
         help="light domain: srgb (default: the 8-bit values are the light) or linear (the image "
         "is decoded to linear radiance first); recorded in the raw file",
     )
@@ -66,7 +66,7 @@ def run(args: argparse.Namespace) -> int:
     scale = write_raw(out, raw, meta=made)
     write_image(preview, false_colour(raw, pattern))
     stored = f"16-bit PNG, full scale {scale:g}" if out.suffix.lower() == ".png" else "float32"
-    where = "" if args.domain == "srgb" else f", {args.domain} domain"
+    where = "" if args.domain == SRGB else f", {args.domain} domain"
     print(
         f"pattern {pattern.name}, sigma {args.sigma:g}{where}: "
         f"raw {raw.shape[1]}x{raw.shape[0]}, values {raw.min():.3f}..{raw.max():.3f}"

@@ -7,7 +7,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from ..io.domains import DOMAINS
+from ..io.domains import DOMAINS, LINEAR
 from ..io.paper import PAPER_PATTERNS
 from ._common import add_sensor_options, model_methods, sensor_settings
 
@@ -57,7 +57,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--domain",
         choices=DOMAINS,
-        default="linear",
+        default=LINEAR,
         help="light domain: linear (default: scenes decoded to linear radiance before the sensor "
         "and the photon noise, reconstructions encoded back to 8-bit sRGB before scoring) or "
         "srgb (8-bit values taken as light, the paper's protocol)",

@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from ..io import write_text
+from ..io.domains import LINEAR
 from ..patterns import Pattern, get, router
 from ..recon.base import Reconstructor
 from ..recon.closed_form import closed_form_lmmse
@@ -82,7 +83,7 @@ def break_even(
     candidate: Callable[[float, float], Pattern] | None = None,
     method: Callable[[Pattern], Reconstructor] | None = None,
     read_noise: float = 2.0,
-    domain: str = "linear",
+    domain: str = LINEAR,
     tol: float = 0.0,
     progress: bool = False,
     **settings: Any,

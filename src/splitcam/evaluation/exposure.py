@@ -28,6 +28,7 @@ import numpy as np
 import torch
 
 from ..io import write_text
+from ..io.domains import LINEAR
 from ..patterns import Pattern, get
 from ..physics.light import check_domain, decode_scene
 from ..physics.noise import Exposure, add_exposure_noise, level_label
@@ -56,7 +57,7 @@ def exposure_study(
     read_noise: float = 2.0,
     methods: Sequence[Reconstructor] = (),
     progress: bool = True,
-    domain: str = "linear",
+    domain: str = LINEAR,
     out: str | os.PathLike[str] | None = None,
     **settings: Any,
 ) -> dict[str, dict[float, dict[str, float]]]:
@@ -228,7 +229,7 @@ def raw_snr_check(
     shot_limited: float = 1e4,
     read_limited: float = 10.0,
     read_noise: float = 20.0,
-    domain: str = "linear",
+    domain: str = LINEAR,
 ) -> dict[str, dict[str, float]]:
     """Raw SNR of each pattern against the Bayer filter, before reconstruction, of the scenes
     as light of ``domain`` (default ``linear``: decoded to radiance).
@@ -285,7 +286,7 @@ def write_study(
     out: str | os.PathLike[str],
     *,
     note: str = "",
-    domain: str = "linear",
+    domain: str = LINEAR,
     references: Sequence[str] = ("bayer",),
     networks: dict[str, str] | None = None,
 ) -> Path:

@@ -36,6 +36,7 @@ import torch
 
 from ..data.imageio import write_image
 from ..io import write_text
+from ..io.domains import SRGB
 from ..patterns import Pattern, save
 from ..physics.light import check_domain, decode_scene, encode_estimate
 from ..physics.noise import Exposure, check_level, level_label
@@ -85,7 +86,7 @@ def simulate_and_reconstruct(
     rgb: torch.Tensor,
     sigma: float | Exposure,
     *,
-    domain: str = "srgb",
+    domain: str = SRGB,
 ) -> torch.Tensor:
     """One step of the protocol: the noisy raw image of ``rgb`` (:func:`splitcam.physics.simulate`)
     and the method's reconstruction, clamped to [0, 1]. ``sigma`` is a Gaussian sigma or a
@@ -118,7 +119,7 @@ def score_images(
     *,
     crop: int = 0,
     sensor: SplitterSensor | None = None,
-    domain: str = "srgb",
+    domain: str = SRGB,
 ) -> Iterator[tuple[str, float, torch.Tensor, dict[str, float]]]:
     """``(image name, sigma, reconstruction, scores)`` for every image at every sigma, in the
     light domain ``domain`` (:func:`simulate_and_reconstruct`)."""
@@ -137,7 +138,7 @@ def mean_psnr(
     sigmas: Sequence[float],
     *,
     sensor: SplitterSensor | None = None,
-    domain: str = "srgb",
+    domain: str = SRGB,
 ) -> dict[float, float]:
     """Mean PSNR per sigma over ``images`` (infinite PSNRs left out, as in the tables); a noise
     level may also be a photon-model :class:`~splitcam.physics.noise.Exposure`. ``domain``:
@@ -214,7 +215,7 @@ def _zoom_at(zooms: list[Zoom], sigma: float | Exposure) -> Zoom | None:
     return (exact or [z for z in zooms if z.sigma is None] or [None])[0]
 
 
-def _fingerprint(method: Reconstructor, crop: int, domain: str = "srgb") -> str:
+def _fingerprint(method: Reconstructor, crop: int, domain: str = SRGB) -> str:
     """What a stored result depends on besides its key: the method's kind, its pattern's kernels
     and the border crop, bfloat16 inference where a network runs in it, and a light domain other
     than srgb. A result is reused on resume only if this is unchanged."""
@@ -224,7 +225,7 @@ def _fingerprint(method: Reconstructor, crop: int, domain: str = "srgb") -> str:
     items = [type(method).__name__, pattern.to_dict(), crop, getattr(method, "fingerprint", None)]
     if fast_precision(getattr(method, "precision", "fp32"), "cpu"):
         items.append("bf16")  # float32 results keep the fingerprint they had before
-    if domain != "srgb":  # srgb results keep the fingerprint they had before
+    if domain != SRGB:  # srgb results keep the fingerprint they had before
         items.append(f"domain:{domain}")
     text = json.dumps(
         items,
@@ -247,7 +248,7 @@ def evaluate(
     resume: bool = True,
     zoom_only: bool = False,
     zoom_sigmas: Sequence[float] | None = None,
-    domain: str = "srgb",
+    domain: str = SRGB,
 ) -> list[EvalRow]:
     """Score every method on every image at every noise level, writing results to ``out`` as it
     goes. A noise level is the paper's Gaussian sigma (8-bit units) or a photon-model
@@ -629,7 +630,7 @@ def _save_images(
     outputs: dict,
     zoom: Zoom | None,
     zoom_outputs: dict | None = None,
-    domain: str = "srgb",
+    domain: str = SRGB,
 ) -> None:
     """Write each reconstruction in ``outputs`` and, with ``zoom``, the side-by-side zoom of
     ``zoom_outputs`` (default: ``outputs``); file names of the linear domain end in
@@ -639,7 +640,7 @@ def _save_images(
         suffix, title = level_label(sigma), f"{sigma.photons:g} photo-electrons"
     else:
         suffix, title = f"sigma{sigma:g}", f"sigma {sigma:g}"
-    if domain != "srgb":
+    if domain != SRGB:
         suffix, title = f"{suffix}_{domain}", f"{title}, {domain} light"
     for name, (pred, _) in outputs.items():
         path = out_dir / "images" / name / dataset / f"{safe}_{suffix}.png"

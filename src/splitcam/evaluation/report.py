@@ -10,6 +10,7 @@ from pathlib import Path
 
 from .. import patterns
 from ..io import write_text
+from ..io.domains import SRGB
 from ..io.paper import PAPER_PATTERNS, PAPER_SIGMAS, TABLE1_PATTERNS
 from ..physics.noise import level_heading, level_key, parse_level_label
 from ..viz.charts import exposure_chart, sigma_chart
@@ -75,7 +76,7 @@ def comparable(method: str, entry: dict) -> bool:
     named ``kodak24-256px``), in the paper's light domain (srgb)."""
     if method.startswith("lmmse") or method.startswith("bayer+"):
         return False
-    if entry.get("domain", "srgb") != "srgb":
+    if entry.get("domain", SRGB) != SRGB:
         return False
     sets = {k for k in entry if k != "all" and k not in ENTRY_FIELDS}
     if sets != set(PAPER_DATASETS):
@@ -111,7 +112,7 @@ def _load(results: list[str | os.PathLike]) -> list[tuple[str, str, dict, patter
                     f"{str(folder)!r} holds image sets cut differently (whole photos and "
                     f"centre crops); give a folder of one evaluation's image sets"
                 )
-            name = method_of_label(method, entry.get("domain", "srgb"))
+            name = method_of_label(method, entry.get("domain", SRGB))
             pattern_file = folder / "patterns" / f"{name}.json"
             pattern = (
                 patterns.load(pattern_file)
@@ -138,7 +139,7 @@ def make_report(results: list[str | os.PathLike], out: str | os.PathLike) -> Pat
         "are), (paper PSNR, difference ours − paper). B, C and E are modelled patterns "
         "(docs/model.md section 2), so their gaps are not only a matter of training budget.",
         "",
-        domain_line(e.get("domain", "srgb") for _, _, e, _ in entries),
+        domain_line(e.get("domain", SRGB) for _, _, e, _ in entries),
         "",
     ]
     sigmas = sorted({s for _, _, e, _ in entries for s in e["all"]}, key=level_key)
@@ -400,7 +401,7 @@ def _intro(t: _Tables) -> list[str]:
         ),
         default=0,
     )
-    domains = (t.summary[m].get("domain", "srgb") for m in t.rows.values() if m in t.summary)
+    domains = (t.summary[m].get("domain", SRGB) for m in t.rows.values() if m in t.summary)
     return [
         "# The paper's tables, reproduced with splitcam's shipped models",
         "",

@@ -19,7 +19,7 @@ from dataclasses import astuple, dataclass, fields
 from pathlib import Path
 
 from ..io import appending, atomic_path, write_text
-from ..io.domains import DOMAINS
+from ..io.domains import DOMAINS, LINEAR, SRGB
 from ..physics.noise import Exposure, level_heading, level_key, level_label
 from .metrics import mean_over_images
 
@@ -53,15 +53,15 @@ _FORMATS = {
 }
 
 
-def result_label(method: str, domain: str = "srgb") -> str:
+def result_label(method: str, domain: str = SRGB) -> str:
     """What labels a method's results of a light domain in summaries and tables: the method's
     name in ``srgb``, ``"<name> (linear)"`` in ``linear``."""
-    return method if domain == "srgb" else f"{method} ({domain})"
+    return method if domain == SRGB else f"{method} ({domain})"
 
 
-def method_of_label(label: str, domain: str = "srgb") -> str:
+def method_of_label(label: str, domain: str = SRGB) -> str:
     """The method's name of a :func:`result_label`."""
-    return label if domain == "srgb" else label.removesuffix(f" ({domain})")
+    return label if domain == SRGB else label.removesuffix(f" ({domain})")
 
 
 @dataclass(frozen=True)
@@ -83,7 +83,7 @@ class EvalRow:
     ssim: float
     ciede2000: float
     photons: float = 0.0
-    domain: str = "srgb"
+    domain: str = SRGB
 
     @property
     def key(self) -> tuple[str, str, str, str, str]:
@@ -227,19 +227,18 @@ def summarise(rows: Sequence[EvalRow]) -> dict:
 ENTRY_FIELDS = ("pattern", "domain")
 
 _DOMAIN_TEXT = {
-    "srgb": "srgb (the paper's protocol: the 8-bit sRGB values / 255 are the light the sensor "
-    "sees)",
-    "linear": "linear (scenes decoded to linear radiance before the sensor and the noise, "
+    SRGB: "srgb (the paper's protocol: the 8-bit sRGB values / 255 are the light the sensor sees)",
+    LINEAR: "linear (scenes decoded to linear radiance before the sensor and the noise, "
     "reconstructions encoded back to 8-bit sRGB before scoring; model.md §13)",
 }
 
 
 def domain_line(domains: Iterable[str]) -> str:
     """The line that says which light domain(s) a table's results are in."""
-    found = list(dict.fromkeys(domains)) or ["srgb"]
+    found = list(dict.fromkeys(domains)) or [SRGB]
     if len(found) == 1:
         return f"Light domain: {_DOMAIN_TEXT[found[0]]}."
-    marked = ", ".join(f"`<method> ({d})`" for d in found if d != "srgb")
+    marked = ", ".join(f"`<method> ({d})`" for d in found if d != SRGB)
     return (
         f"Light domains: rows labelled {marked} are of that domain, the others of srgb. "
         + "; ".join(_DOMAIN_TEXT[d] for d in found)
@@ -255,7 +254,7 @@ def markdown_tables(summary: dict) -> str:
     if len(groups) == 2 and groups[1] == "all":  # one image set: "all" would repeat it
         groups = groups[:1]
     sigmas = list(dict.fromkeys(s for m in methods for g in groups for s in summary[m].get(g, {})))
-    lines: list[str] = [domain_line(summary[m].get("domain", "srgb") for m in methods), ""]
+    lines: list[str] = [domain_line(summary[m].get("domain", SRGB) for m in methods), ""]
     for group in groups:
         n = max(
             (

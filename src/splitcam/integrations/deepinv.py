@@ -39,6 +39,7 @@ from typing import Any
 
 import torch
 
+from ..io.domains import SRGB
 from ..patterns import Pattern
 from ..physics.noise import Exposure, GaussianNoise, check_level, check_sigma
 from ..physics.sensor import SplitterSensor
@@ -311,7 +312,7 @@ class DeepinvReconstructor:
         model: Callable[[torch.Tensor, SplitterPhysics], torch.Tensor],
         physics: SplitterPhysics,
         name: str = "deepinv",
-        domain: str = "srgb",
+        domain: str = SRGB,
     ) -> None:
         self.model = model
         self.physics = physics

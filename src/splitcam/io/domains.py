@@ -10,9 +10,13 @@ parsers list them as choices).
 
 from __future__ import annotations
 
-__all__ = ["DEFAULT_DOMAIN", "DOMAINS"]
+__all__ = ["DEFAULT_DOMAIN", "DOMAINS", "LINEAR", "SRGB"]
 
+#: The paper's protocol: 8-bit sRGB values / 255 are the light.
+SRGB = "srgb"
+#: Linear radiance, decoded from sRGB (photon-limited work).
+LINEAR = "linear"
 #: The light domains, the paper's first.
-DOMAINS = ("srgb", "linear")
+DOMAINS = (SRGB, LINEAR)
 #: The paper's protocol.
-DEFAULT_DOMAIN = "srgb"
+DEFAULT_DOMAIN = SRGB

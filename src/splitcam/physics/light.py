@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import torch
 
-from ..io.domains import DEFAULT_DOMAIN, DOMAINS
+from ..io.domains import DEFAULT_DOMAIN, DOMAINS, LINEAR
 
 __all__ = [
     "DEFAULT_DOMAIN",
@@ -88,10 +88,10 @@ def linear_to_srgb(lin: torch.Tensor) -> torch.Tensor:
 def decode_scene(rgb: torch.Tensor, domain: str) -> torch.Tensor:
     """The light the sensor sees of a scene of display values ``rgb`` in ``domain``: ``rgb``
     itself in ``srgb``, its linear radiance in ``linear``."""
-    return srgb_to_linear(rgb) if check_domain(domain) == "linear" else rgb
+    return srgb_to_linear(rgb) if check_domain(domain) == LINEAR else rgb
 
 
 def encode_estimate(estimate: torch.Tensor, domain: str) -> torch.Tensor:
     """Display values of a reconstruction made in ``domain`` (the estimate itself in ``srgb``,
     encoded in ``linear``), not clipped."""
-    return linear_to_srgb(estimate) if check_domain(domain) == "linear" else estimate
+    return linear_to_srgb(estimate) if check_domain(domain) == LINEAR else estimate

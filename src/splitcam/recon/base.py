@@ -21,6 +21,7 @@ from typing import Protocol, runtime_checkable
 import torch
 from torch import nn
 
+from ..io.domains import SRGB
 from ..patterns import Pattern
 from ..physics.light import check_domain
 from ..physics.noise import check_level, check_sigma
@@ -113,7 +114,7 @@ def method_domain(method: object) -> str:
     Raises:
         ValueError: The attribute is not a known domain.
     """
-    return check_domain(getattr(method, "domain", None) or "srgb")
+    return check_domain(getattr(method, "domain", None) or SRGB)
 
 
 class NetworkReconstructor:
@@ -141,7 +142,7 @@ class NetworkReconstructor:
         *,
         tile: int | None = 512,
         precision: str = "auto",
-        domain: str = "srgb",
+        domain: str = SRGB,
     ) -> None:
         fast_precision(precision, "cpu")  # an unknown precision fails here, not at first use
         self.domain = check_domain(domain)

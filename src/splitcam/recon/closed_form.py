@@ -38,6 +38,7 @@ import numpy as np
 import torch
 
 from ..data.patches import ImageCache
+from ..io.domains import LINEAR, SRGB
 from ..io.tensorfiles import load_pair, save_pair
 from ..io.weights import IMAGE_STATISTICS, IMAGE_STATISTICS_LINEAR
 from ..patterns import Pattern, get
@@ -71,7 +72,7 @@ _FORMAT = "splitcam-image-statistics"
 _VERSION = 1
 SHIPPED_PATH = IMAGE_STATISTICS
 #: The shipped statistics of each light domain.
-SHIPPED_PATHS = {"srgb": IMAGE_STATISTICS, "linear": IMAGE_STATISTICS_LINEAR}
+SHIPPED_PATHS = {SRGB: IMAGE_STATISTICS, LINEAR: IMAGE_STATISTICS_LINEAR}
 
 
 @dataclass(eq=False)
@@ -108,7 +109,7 @@ class ImageStatistics:
     def domain(self) -> str:
         """The light domain of the images the moments were taken of (``info["domain"]``;
         statistics that do not record one are of sRGB values)."""
-        return check_domain(self.info.get("domain", "srgb"))
+        return check_domain(self.info.get("domain", SRGB))
 
     @property
     def max_offset(self) -> int:
@@ -147,7 +148,7 @@ class ImageStatistics:
             raise LMMSEFileError(f"damaged image statistics '{meta_path}': {exc}") from None
 
 
-def shipped_image_statistics(domain: str = "srgb") -> ImageStatistics:
+def shipped_image_statistics(domain: str = SRGB) -> ImageStatistics:
     """The statistics shipped with splitcam for a light domain (``srgb`` or ``linear``),
     estimated by ``scripts/estimate_image_statistics.py [--domain linear]``.
 
@@ -175,7 +176,7 @@ def estimate_image_statistics(
     max_offset: int = DEFAULT_MAX_OFFSET,
     max_images: int | None = None,
     progress: bool = False,
-    domain: str = "srgb",
+    domain: str = SRGB,
 ) -> ImageStatistics:
     """Estimate :class:`ImageStatistics` from whole training images.
 
@@ -225,7 +226,7 @@ def estimate_image_statistics(
     count = 0
     for img in images:
         f = img.to(torch.float64)
-        if domain == "linear":
+        if domain == LINEAR:
             f = srgb_to_linear(f)
         _, h, w = f.shape
         if h <= 2 * lo or w <= 2 * lo:
@@ -488,7 +489,7 @@ def closed_form_lmmse(
         ValueError: ``domain`` differs from the domain of ``statistics``, or is unknown.
     """
     if statistics is None:
-        statistics = shipped_image_statistics(domain or "srgb")
+        statistics = shipped_image_statistics(domain or SRGB)
     elif domain is not None and check_domain(domain) != statistics.domain:
         raise ValueError(
             f"image statistics of the {statistics.domain} domain cannot make an LMMSE of the "
@@ -496,7 +497,7 @@ def closed_form_lmmse(
         )
     lmmse = LMMSE(ClosedFormFilters(pattern, statistics, radius), name=name)  # type: ignore[arg-type]
     lmmse.domain = statistics.domain
-    if statistics.domain != "srgb":  # what tells its results apart from the sRGB LMMSE's
+    if statistics.domain != SRGB:  # what tells its results apart from the sRGB LMMSE's
         lmmse.fingerprint = f":statistics:{statistics.domain}:{statistics.count}"
     return lmmse
 

@@ -34,6 +34,7 @@ from pathlib import Path
 
 from .. import patterns
 from ..io.checkpoints import read_meta, resolve, run_folder_of
+from ..io.domains import LINEAR, SRGB
 from ..io.tensorfiles import meta_checksum
 from ..physics.light import check_domain
 from .base import NetworkReconstructor, Reconstructor
@@ -112,7 +113,7 @@ def trained_domain(config: dict | None) -> str:
     """The light domain a network was trained in, from its run's (or model's) saved config:
     ``data.domain``, ``srgb`` where the config does not record one."""
     data = (config or {}).get("data") or {}
-    return check_domain(data.get("domain") or "srgb")
+    return check_domain(data.get("domain") or SRGB)
 
 
 def model_domain(spec: str | os.PathLike) -> str:
@@ -276,20 +277,20 @@ def build_method(
     if key in DEMOSAICKING:
         method = ClassicalDemosaic(key)
         method.name = f"bayer+{key}"
-        method.domain = domain or "srgb"
+        method.domain = domain or SRGB
         return method
     if key == "lmmse":
         if pattern is None:
             raise ValueError("method 'lmmse' needs a pattern (a name such as D, or a file)")
         resolved = patterns.get(pattern)
-        if domain == "linear":
+        if domain == LINEAR:
             if lmmse_train is not None:
                 raise ValueError(
                     "the LMMSE fitted on training images (--lmmse-train) is of sRGB values; in "
                     "the linear domain the LMMSE is the closed form from the shipped linear "
                     "image statistics: leave --lmmse-train out"
                 )
-            lmmse = closed_form_lmmse(resolved, domain="linear")
+            lmmse = closed_form_lmmse(resolved, domain=LINEAR)
         elif lmmse_train is not None:
             lmmse = LMMSE.fit(resolved, lmmse_train, progress=progress)
         else:
@@ -299,7 +300,7 @@ def build_method(
                 lmmse = closed_form_lmmse(resolved)
         lmmse.pattern = resolved
         lmmse.name = f"lmmse-{_pattern_label(pattern, resolved)}"
-        lmmse.domain = domain or "srgb"
+        lmmse.domain = domain or SRGB
         return lmmse
     check_unambiguous(spec, "method")
     options = {"pattern": pattern, "tile": tile, "precision": precision, "domain": domain}

@@ -27,7 +27,7 @@ else:  # pragma: no cover
 
 from ..data.scales import valid_scales
 from ..io import write_text
-from ..io.domains import DEFAULT_DOMAIN, DOMAINS
+from ..io.domains import DEFAULT_DOMAIN, DOMAINS, SRGB
 from ..io.paper import PAPER_PATTERNS
 
 #: The smallest training patch: two periods of the largest patterns (4x4).
@@ -171,7 +171,7 @@ class DataConfig:
 #: Settings added after runs were saved without them, and the value that reproduces those runs.
 SAVED_BEFORE: dict[tuple[str, str], Any] = {
     ("data", "partial_periods"): 0.0,
-    ("data", "domain"): "srgb",
+    ("data", "domain"): SRGB,
 }
 
 

@@ -27,6 +27,7 @@ from typing import Any
 import torch
 
 from ..io import checkpoints as ckpt_io
+from ..io.domains import SRGB
 from ..io.tensorfiles import paired_paths, save_pair
 from ..recon.loading import MODEL_FORMAT, MODEL_VERSION, ModelError, load_network
 from .rundir import METRICS_NAME, changes_rows, failure_of, last_metrics, metrics_rows
@@ -272,7 +273,7 @@ def model_summary(name: str, meta: dict[str, Any]) -> dict[str, str]:
     segs = prov.get("segments", [])
     config = meta.get("config") or {}
     trained_on = config.get("pattern", {}).get("name")
-    light = (config.get("data") or {}).get("domain") or "srgb"
+    light = (config.get("data") or {}).get("domain") or SRGB
     noise = (config.get("noise") or {}).get("model") or "gaussian"
     return {
         "model": name,

@@ -13,6 +13,7 @@ from .. import patterns
 from ..data.patches import ImageCache, list_images
 from ..data.testsets import centre_crop
 from ..evaluation.protocol import mean_psnr
+from ..io.domains import SRGB
 from ..physics.noise import Exposure
 from ..physics.system import ImagingSystem
 from ..recon.base import NetworkReconstructor
@@ -129,7 +130,7 @@ def validate(
     sigmas: list[float] | list[Exposure],
     val_patterns: list[patterns.Pattern] | None = None,
     *,
-    domain: str = "srgb",
+    domain: str = SRGB,
     precision: str = "fp32",
 ) -> dict[str, float]:
     """Mean PSNR per noise level (a sigma, or a photon-model exposure: ``val_psnr_N<photons>``)
