@@ -99,6 +99,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--config", help="TOML, YAML or JSON configuration file")
     p.add_argument("--resume", action="store_true", help="continue the run in --out")
+    p.add_argument(
+        "--recipe",
+        metavar="MODEL|FILE",
+        help="train a shipped model again end to end: every stage of experiments/recipes/"
+        "MODEL.toml in order, each from the last, into --out/<n>-<stage>; finished stages are "
+        "skipped and an interrupted one resumed; other flags apply to every stage",
+    )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     from ..training.config import train_flags
 
@@ -121,6 +128,8 @@ def run(args: argparse.Namespace) -> int:
     from ..training.rundir import resume_config
     from ..training.sweep import STOPPED
 
+    if args.recipe:
+        return _run_recipe(args)
     if args.resume and not args.config:
         # Continue with the run's own settings (those of its checkpoint, or the config.json of a
         # run killed before its first one); flags given now override them.
@@ -130,6 +139,9 @@ def run(args: argparse.Namespace) -> int:
         data = read_config_file(args.config) if args.config else {}
         config = TrainConfig.from_dict(data, source=args.config or "the defaults")
         from_file = dotted(data)  # the keys the file sets
+        if args.config and "run.config_file" not in from_file:
+            from_file["run.config_file"] = args.config
+            config = config.override({"run.config_file": args.config})
     # Flags left out keep the config file's (or the default) value.
     overrides = {}
     for flag in train_flags():
@@ -173,3 +185,33 @@ def run(args: argparse.Namespace) -> int:
         print(f"splitcam train: failed: {result.failure}", file=sys.stderr)
         return 1
     return STOPPED if result.interrupted else 0
+
+
+def _run_recipe(args: argparse.Namespace) -> int:
+    from ..training.config import train_flags
+    from ..training.recipe import read_recipe, run_recipe
+    from ..training.sweep import STOPPED
+
+    if args.config or args.resume:
+        raise ValueError(
+            "--recipe names its own configuration files and continues by itself: "
+            "leave --config and --resume out"
+        )
+    recipe = read_recipe(args.recipe)
+    overrides = {}
+    for flag in train_flags():
+        value = getattr(args, flag.name, None)
+        if value is not None and flag.key != "run.out":
+            overrides[flag.key] = value
+    if "data.train" in overrides:
+        overrides["data.train"] = training_data(overrides["data.train"])
+    out = args.out or f"runs/{recipe.model}"
+    print(f"recipe {recipe.model}: {len(recipe.stages)} stages into {out}")
+    results = run_recipe(recipe, out, overrides, progress=not args.quiet)
+    if any(r.failure for r in results):
+        print(f"splitcam train: failed: {results[-1].failure}", file=sys.stderr)
+        return 1
+    if any(r.interrupted for r in results):
+        return STOPPED
+    print(f"recipe {recipe.model}: every stage done; the model: {out} (its last stage)")
+    return 0

@@ -285,6 +285,11 @@ class RunConfig:
         "did not survive) ends on the same schedule and budget as one straight run; the Adam "
         "moments restart under a new warm-up, the divergence guard's scale carries over",
     )
+    config_file: str | None = _opt(
+        None,
+        "the configuration file these settings came from (--config and each stage of --recipe "
+        "set it); recorded in the provenance of the run and of the models exported from it",
+    )
     device: str = _opt("auto", "auto, cpu, cuda, cuda:N or mps")
     log_every: int = _opt(10, "log every N steps")
     val_every: int = _opt(500, "validate every N steps")

@@ -91,6 +91,8 @@ def provenance_of(loaded: ckpt_io.Checkpoint, run_dir: Path | None = None) -> di
     segment = {
         "run": run_dir.name if run_dir else Path(loaded.path).parent.name,
         "init_from": previous.get("name"),
+        # the configuration file of this segment (a recipe's stage), where one was given
+        "config_file": run.get("config_file"),
         "steps": int(meta.get("step", 0)) - int(meta.get("start_step", 0)),
         "batch_size": data.get("batch_size"),
         # patches seen by this segment, all processes together
