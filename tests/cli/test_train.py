@@ -292,3 +292,32 @@ def test_data_by_the_name_of_a_downloaded_dataset(tmp_path, monkeypatch):
     (tmp_path / "train").mkdir()  # a folder of that name here is the folder meant
     assert training_data("train") == "train"
     assert training_data("photos") == "photos"
+
+
+@pytest.mark.parametrize("period", [(2, 2), (3, 3), (4, 4), (2, 4)])
+def test_a_users_pattern_file_of_any_period_fine_tunes_and_reconstructs(
+    tiny_universal, tmp_path, period
+):
+    """A pattern file of period 2x2 to 4x4 trains like any other (from the network for any
+    pattern) and its run reconstructs a photo of odd size that ends part-way through a period."""
+    from splitcam.physics.noise import add_evaluation_noise
+    from splitcam.physics.sensor import SplitterSensor
+    from splitcam.recon.registry import build_method
+
+    model, data = tiny_universal
+    rng = np.random.default_rng(sum(period))
+    while True:  # a draw of exactly this period
+        drawn = random_pattern(rng)
+        if drawn.period == period:
+            break
+    mine = tmp_path / "mine.toml"
+    patterns.save(drawn, mine)
+    run = tmp_path / "run"
+    args = ["train", "--pattern", str(mine), "--init-from", str(model), "--data", str(data)]
+    tiny = ["--val-split", "2", "--val-images", "1", "--patch-size", "16", "--batch-size", "2"]
+    assert main([*args, *tiny, "--steps", "2", "--out", str(run), "--quiet"]) == 0
+    method = build_method(str(run), precision="fp32")
+    scene = torch.rand(1, 3, 13, 11, generator=torch.Generator().manual_seed(0))
+    raw = add_evaluation_noise(SplitterSensor(drawn)(scene), "x", 5.0)
+    out = method.reconstruct(raw, 5.0)
+    assert out.shape == (1, 3, 13, 11) and torch.isfinite(out).all()
