@@ -130,7 +130,8 @@ def test_cell_text() -> None:
 
     window = {"verdict": "mixed", "crossings": [[1.4, "down"], [5.1, "up"], [68.0, "down"]]}
     assert cell_text({**window, "break_even": 68.0}) == "5.1–68"
-    assert cell_text({"verdict": "below", "break_even": 1234.0}) == "<1.2e3"
+    assert cell_text({"verdict": "below", "break_even": 1234.0}) == "<1200"  # not 1.2e3
+    assert cell_text({"verdict": "below", "break_even": 23456.0}) == "<2.3e4"
     assert cell_text({"verdict": "above", "break_even": 40.0}) == ">40"
     assert cell_text({"verdict": "infeasible", "break_even": None}) == ""
 

@@ -23,7 +23,9 @@ def test_zoom_figure_wraps_many_methods_onto_rows_of_whole_crops(tmp_path):
     rgb[:, 10:30, 10:30] = torch.rand(3, 20, 20, generator=torch.Generator().manual_seed(1))
     outputs = {f"m{i}": (torch.full((3, 40, 40), i / 16), None) for i in range(16)}
     path = zoom_figure(rgb, outputs, tmp_path / "z.png", region=(0, 0, 40), columns=6)
+    # The image is cut to what is drawn, so its size is within a few per cent of the cells'.
     width, height = Image.open(path).size
-    assert (width, height) == (round(2.6 * 6 * 130), round(3.1 * 3 * 130))
+    assert abs(width / (2.6 * 6 * 130) - 1) < 0.05 and abs(height / (3.1 * 3 * 130) - 1) < 0.1
     few = zoom_figure(rgb, dict(list(outputs.items())[:2]), tmp_path / "few.png")
-    assert Image.open(few).size == (round(2.6 * 4 * 130), round(3.1 * 130))
+    width, height = Image.open(few).size
+    assert abs(width / (2.6 * 4 * 130) - 1) < 0.05 and abs(height / (3.1 * 130) - 1) < 0.15

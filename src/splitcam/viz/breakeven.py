@@ -17,7 +17,12 @@ _NOTE = {"always": "all", "never": "none", "tie": "tie", "infeasible": ""}
 
 
 def _short(n: float) -> str:
-    return (f"{n:.2g}" if n < 1e3 else f"{n:.1e}").replace("e+0", "e")
+    """Two significant digits, written out below 10^4 (``300``, not ``3e+02``)."""
+    if n < 10:
+        return f"{n:.2g}"
+    if n < 1e4:
+        return f"{float(f'{n:.2g}'):.0f}"
+    return f"{n:.1e}".replace("e+0", "e")
 
 
 def cell_text(cell: Mapping[str, Any]) -> str:
@@ -60,7 +65,8 @@ def breakeven_chart(
         for j, x in enumerate(chis):
             if cells[(e, x)]["break_even"] is not None:
                 grid[i, j] = math.log10(cells[(e, x)]["break_even"])
-    fig = Figure(figsize=(1.0 + 0.75 * len(chis), 1.3 + 0.55 * len(etas)))
+    # At least the width the two-line title needs, and room for the colour bar's label.
+    fig = Figure(figsize=(max(7.5, 1.0 + 0.75 * len(chis)), max(4.0, 1.3 + 0.55 * len(etas))))
     ax = fig.subplots()
     image = ax.imshow(
         grid, origin="lower", aspect="auto", cmap="viridis", vmin=lo, vmax=hi,
@@ -99,6 +105,7 @@ def breakeven_chart(
         f"read noise {result['read_noise']:g} e⁻\n<N: router better below N; >N: above; a–b: "
         "between; all / none: at every / no exposure; hatched: η + χ > 1",
         fontsize=9,
+        pad=14,
     )
     fig.tight_layout()
     return save_figure(fig, path, dpi=120)
