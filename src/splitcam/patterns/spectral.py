@@ -114,7 +114,10 @@ class SpectralPattern:
         wavelengths: ``(L,)`` increasing, nm, within 380-780.
         kernels: ``(S, L, kh, kw)``, odd ``kh, kw``, non-negative, each ``(s, l)`` kernel
             summing to at most 1.
-        provenance, description, reference: As for :class:`~splitcam.patterns.core.Pattern`.
+        provenance: As for :class:`~splitcam.patterns.core.Pattern`.
+        description: As for :class:`~splitcam.patterns.core.Pattern`.
+        reference: As for :class:`~splitcam.patterns.core.Pattern`.
+        metadata: Anything else to keep with the pattern.
 
     Raises:
         PatternError: Any of the above violated; a kernel that creates light names its

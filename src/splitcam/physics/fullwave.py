@@ -87,8 +87,9 @@ class RouterDesign:
         pitch: Pixel pitch (the period is two pixels each way).
         thickness: Of the patterned layer.
         depth: Of the monitor plane below the layer, inside the substrate.
-        pillar, background, substrate: Materials (names of :data:`MATERIALS` or indices);
-            light arrives through the background material.
+        pillar: The pillars' material (a name of :data:`MATERIALS` or an index).
+        background: Between the pillars; light arrives through it.
+        substrate: Below the layer, where the monitor plane lies.
     """
 
     grid: np.ndarray
