@@ -16,7 +16,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("experiments", nargs="+", metavar="FILE", help="experiment config files")
     p.add_argument("--out", default="runs", help="folder of the run folders (default: runs)")
-    p.add_argument("--data", help="training images for every experiment (replaces data.train)")
+    p.add_argument(
+        "--data",
+        help="training images for every experiment (replaces data.train): a folder, or a "
+        "downloaded dataset's name (train)",
+    )
     p.add_argument(
         "--set",
         action="append",
@@ -64,7 +68,10 @@ def run(args: argparse.Namespace) -> int:
         if not sep:
             raise ValueError(f"--set expects KEY=VALUE (e.g. optim.steps=2000), got {item!r}")
         overrides[key.strip()] = read_config_value(value)
-    experiments = load_experiments(args.experiments, args.out, data=args.data, overrides=overrides)
+    from .train import training_data
+
+    data = training_data(args.data) if args.data else None  # a folder, or a dataset's name
+    experiments = load_experiments(args.experiments, args.out, data=data, overrides=overrides)
     if not args.retrain_shipped:
         experiments = without_shipped(experiments, args.snapshots)
     if args.dry_run:

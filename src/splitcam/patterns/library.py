@@ -9,6 +9,7 @@ descriptions because the paper's kernels for them are unpublished.
 from __future__ import annotations
 
 from functools import partial
+from pathlib import Path
 
 import numpy as np
 
@@ -313,6 +314,18 @@ def _router_best() -> Pattern:
     )
 
 
+#: Spectral patterns shipped as data (``patterns/data/<name>.toml``, written by
+#: ``splitcam optics rcwa``; docs/results/fullwave/): a user needs no solver to use them.
+_SPECTRA_DIR = Path(__file__).resolve().parent / "data"
+_SHIPPED_SPECTRAL = sorted(p.stem for p in _SPECTRA_DIR.glob("*.toml"))
+
+
+def _shipped_spectral(name: str) -> Pattern:
+    from .files import load
+
+    return load(_SPECTRA_DIR / f"{name}.toml")
+
+
 BUILTIN_FACTORIES = {
     "A": _pattern_a,
     "B": _pattern_b,
@@ -324,6 +337,8 @@ BUILTIN_FACTORIES = {
     "quad": _pattern_quad,
     "router-zou": _router_zou,
     "router-best": _router_best,
+    # Routers from full-wave simulation (splitcam optics rcwa), shipped as spectra.
+    **{name: partial(_shipped_spectral, name) for name in _SHIPPED_SPECTRAL},
     # Filter arrays of measured camera sensitivities (splitcam.patterns.measured).
     **{
         f"{kind}-{camera}": partial(measured_array, kind, camera)
