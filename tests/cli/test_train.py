@@ -281,7 +281,7 @@ def test_train_with_a_pattern_file_starts_from_universal(image_folder, tmp_path)
 
 
 def test_data_by_the_name_of_a_downloaded_dataset(tmp_path, monkeypatch):
-    from splitcam.cli.train import training_data
+    from splitcam.cli._common import training_data
 
     monkeypatch.setenv("SPLITCAM_DATA", str(tmp_path / "root"))
     with pytest.raises(ValueError, match="splitcam data download train"):

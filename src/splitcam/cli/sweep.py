@@ -68,7 +68,7 @@ def run(args: argparse.Namespace) -> int:
         if not sep:
             raise ValueError(f"--set expects KEY=VALUE (e.g. optim.steps=2000), got {item!r}")
         overrides[key.strip()] = read_config_value(value)
-    from .train import training_data
+    from ._common import training_data
 
     data = training_data(args.data) if args.data else None  # a folder, or a dataset's name
     experiments = load_experiments(args.experiments, args.out, data=data, overrides=overrides)

@@ -6,6 +6,8 @@ import argparse
 import os
 import sys
 
+from ._common import training_data
+
 #: Default budget (minutes) and peak learning rate of fine-tuning a network for any pattern to
 #: one pattern (docs/results/universal/README.md: 3e-4 against 1e-3 side by side), and its
 #: patches chosen by detail (docs/results/universal/levers.md: against uniform patches, against
@@ -50,24 +52,6 @@ def start_settings(source: str, given: dict) -> dict:
     if "data.hard_patches" not in given:
         implied["data.hard_patches"] = FINE_TUNE_HARD
     return implied
-
-
-def training_data(spec: str) -> str:
-    """``--data``: a folder, or the name of a downloadable dataset (``train``: the training
-    photos) found under the data root (``SPLITCAM_DATA``; ``splitcam data download``)."""
-    from pathlib import Path
-
-    from ..data.registry import data_root, dataset_names
-
-    if Path(spec).exists() or spec not in dataset_names():
-        return spec
-    folder = data_root() / spec
-    if not folder.is_dir():
-        raise ValueError(
-            f"--data {spec}: not downloaded to {folder}; splitcam data download {spec} (or set "
-            "SPLITCAM_DATA to the folder that holds it)"
-        )
-    return str(folder)
 
 
 def own_pattern_start(given: dict) -> dict:
