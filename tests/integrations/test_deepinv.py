@@ -13,7 +13,7 @@ import torch
 
 # splitcam's module first: where deepinv is missing, or the installed torchvision cannot load
 # beside this torch, the skip says why in one line (and how to install the matching one).
-pytest.importorskip("splitcam.integrations.deepinv")
+pytest.importorskip("splitcam.integrations.deepinv", exc_type=ImportError)
 dinv = pytest.importorskip("deepinv")
 
 from splitcam import patterns  # noqa: E402
