@@ -127,7 +127,7 @@ class Pattern:
             i, j = (int(v) for v in bad[0])
             raise PatternError(
                 f"layout index {int(layout[i, j])} at position ({i}, {j}) is out of range for "
-                f"{n_split} splitters (valid: 0..{n_split - 1})"
+                f"{n_split} splitter{'s' * (n_split != 1)} (valid: 0..{n_split - 1})"
             )
         if not np.all(np.isfinite(kernels)):
             s, c, a, b = (int(v) for v in np.argwhere(~np.isfinite(kernels))[0])
