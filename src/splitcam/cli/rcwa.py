@@ -126,6 +126,17 @@ def run(args: argparse.Namespace) -> int:
     if bar:
         bar.close()
     t = result["transmission"]
+    # A quadrant that receives almost nothing can come out a rounding error below zero; a
+    # clearly negative net flux means the solve is not converged (raise --order).
+    lowest = float(t.min())
+    if lowest < -1e-3:
+        i, j, li = np.unravel_index(int(t.argmin()), t.shape)
+        _write_spectra(out, lams, result)
+        raise ValueError(
+            f"quadrant ({i}, {j}) at {lams[li]:g} nm transmits {lowest:.4f} < 0: not converged "
+            f"at order {args.order}; raise --order (spectra.csv written for a look)"
+        )
+    t = np.clip(t, 0.0, None)
     where = (
         f"{len(directions)} directions of an f/{args.f_number:g} cone"
         if args.f_number
@@ -139,23 +150,7 @@ def run(args: argparse.Namespace) -> int:
         "reference": "splitcam optics rcwa",
     }
     SpectralPattern.from_transmission(name, lams, t, **info)  # light conserved
-    out.mkdir(parents=True, exist_ok=True)
-    header = ["wavelength_nm"]
-    columns = [np.asarray(lams)]
-    for label, values in (
-        ("", t),
-        ("x_", result["by_polarisation"][0]),
-        ("y_", result["by_polarisation"][1]),
-    ):
-        for i in range(2):
-            for j in range(2):
-                header.append(f"{label}T_row{i}_col{j}")
-                columns.append(values[i, j])
-    header.append("reflection")
-    columns.append(result["reflection"])
-    rows = [",".join(header)]
-    rows += [",".join(f"{v:.6g}" for v in row) for row in np.stack(columns, axis=1)]
-    write_text(out / "spectra.csv", "\n".join(rows) + "\n")
+    _write_spectra(out, lams, {**result, "transmission": t})
     _chart(lams, t, result["reflection"], out / "spectra.png", f"{name}: {where}")
     pattern_file = out / "pattern.toml"
     write_text(pattern_file, spectral_toml(name, lams, t, info))
@@ -168,6 +163,31 @@ def run(args: argparse.Namespace) -> int:
     )
     print(f"wrote {out / 'spectra.csv'}, {out / 'spectra.png'} and {pattern_file}")
     return 0
+
+
+def _write_spectra(out: Path, lams, result: dict) -> None:
+    """``spectra.csv``: the mean of the polarisations, each polarisation, and the reflection."""
+    import numpy as np
+
+    from ..io import write_text
+
+    out.mkdir(parents=True, exist_ok=True)
+    header = ["wavelength_nm"]
+    columns = [np.asarray(lams)]
+    for label, values in (
+        ("", result["transmission"]),
+        ("x_", result["by_polarisation"][0]),
+        ("y_", result["by_polarisation"][1]),
+    ):
+        for i in range(2):
+            for j in range(2):
+                header.append(f"{label}T_row{i}_col{j}")
+                columns.append(values[i, j])
+    header.append("reflection")
+    columns.append(result["reflection"])
+    rows = [",".join(header)]
+    rows += [",".join(f"{v:.6g}" for v in row) for row in np.stack(columns, axis=1)]
+    write_text(out / "spectra.csv", "\n".join(rows) + "\n")
 
 
 def spectral_toml(name: str, lams, transmission, info: dict) -> str:
