@@ -131,3 +131,25 @@ def test_the_zou_router_lands_within_the_published_tolerances():
         got = (t[0, 1, i], t[0, 0, i] + t[1, 1, i], t[1, 0, i])
         for value, ref, tol in zip(got, published[i], tolerance[i], strict=True):
             assert abs(value - ref) <= tol * ref, (i, got)
+
+
+def test_the_command_writes_spectra_a_chart_and_a_pattern_file(tmp_path, capsys):
+    from splitcam import patterns
+    from splitcam.cli import main
+
+    out = tmp_path / "zou"
+    args = ["optics", "rcwa", str(DESIGNS / "zou2022-16x16.csv"), "--out", str(out)]
+    assert main([*args, "--order", "2", "--wavelengths", "450,550,650", "--quiet"]) == 0
+    assert {p.name for p in out.iterdir()} == {"spectra.csv", "spectra.png", "pattern.toml"}
+    rows = (out / "spectra.csv").read_text().splitlines()
+    assert len(rows) == 4 and rows[0].startswith("wavelength_nm,T_row0_col0")
+    pattern = patterns.get(str(out / "pattern.toml"))
+    assert pattern.period == (2, 2) and "full-wave" in pattern.provenance
+    assert "band efficiency" in capsys.readouterr().out
+    # Bad input: one line, nothing written.
+    bad = tmp_path / "bad.csv"
+    bad.write_text("0,1\n2,0\n")
+    assert main(["optics", "rcwa", str(bad), "--out", str(tmp_path / "x")]) == 1
+    assert "densities in [0, 1]" in capsys.readouterr().err and not (tmp_path / "x").exists()
+    assert main([*args[:3], "--out", str(tmp_path / "y"), "--wavelengths", "350,450"]) == 1
+    assert "outside 380-780" in capsys.readouterr().err and not (tmp_path / "y").exists()
