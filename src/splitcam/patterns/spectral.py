@@ -91,6 +91,19 @@ def _check_wavelengths(wavelengths: Any) -> np.ndarray:
     return grid
 
 
+def _numbers(values: Any, name: str, what: str) -> np.ndarray:
+    try:
+        return np.asarray(values, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise PatternError(f"spectral pattern {name!r}: {what} must be numbers") from None
+
+
+def _light(values: np.ndarray, name: str, what: str) -> None:
+    """Refuse shares of light that are not finite or negative."""
+    if not np.all(np.isfinite(values)) or values.min() < 0:
+        raise PatternError(f"spectral pattern {name!r}: {what} must be finite and >= 0")
+
+
 def _nearest_copies(q: tuple[int, int], p: tuple[int, int], period: tuple[int, int]) -> list:
     """Offsets from pixel ``q`` to the nearest copies of pixel ``p`` of the repeating period
     (several where they tie, e.g. left and right in a period of 2)."""
@@ -136,18 +149,14 @@ class SpectralPattern:
     def __post_init__(self) -> None:
         self.layout = _as_layout(self.layout)
         self.wavelengths = _check_wavelengths(self.wavelengths)
-        try:
-            k = np.asarray(self.kernels, dtype=np.float64)
-        except (TypeError, ValueError):
-            raise PatternError(f"spectral pattern {self.name!r}: kernels must be numbers") from None
+        k = _numbers(self.kernels, self.name, "kernels")
         s, length = int(self.layout.max()) + 1, len(self.wavelengths)
         if k.ndim != 4 or k.shape[:2] != (s, length) or k.shape[2] % 2 == 0 or k.shape[3] % 2 == 0:
             raise PatternError(
                 f"spectral pattern {self.name!r}: kernels must have shape (splitters {s}, "
                 f"wavelengths {length}, odd kh, odd kw), got {k.shape}"
             )
-        if not np.all(np.isfinite(k)) or k.min() < 0:
-            raise PatternError(f"spectral pattern {self.name!r}: kernels must be finite and >= 0")
+        _light(k, self.name, "kernels")
         sums = k.sum(axis=(2, 3))
         if sums.max() > 1 + 1e-9:
             si, li = np.unravel_index(int(sums.argmax()), sums.shape)
@@ -179,18 +188,14 @@ class SpectralPattern:
             PatternError: Not ``(Ph, Pw, L)``, negative, or pixel shares summing above 1 at a
                 wavelength (light created; the message names it).
         """
-        try:
-            t = np.asarray(transmission, dtype=np.float64)
-        except (TypeError, ValueError):
-            raise PatternError(f"spectral pattern {name!r}: transmission must be numbers") from None
+        t = _numbers(transmission, name, "transmission")
         grid = _check_wavelengths(wavelengths)
         if t.ndim != 3 or t.shape[2] != len(grid):
             raise PatternError(
                 f"spectral pattern {name!r}: transmission must have shape (rows, columns, "
                 f"{len(grid)} wavelengths), got {t.shape}"
             )
-        if not np.all(np.isfinite(t)) or t.min() < 0:
-            raise PatternError(f"spectral pattern {name!r}: transmission must be finite and >= 0")
+        _light(t, name, "transmission")
         total = t.sum(axis=(0, 1))
         if total.max() > 1 + 1e-9:
             li = int(total.argmax())

@@ -225,31 +225,10 @@ def quadrant_spectra(
         eps_s = index_of(design.substrate, lam) ** 2
         layer = torch.tensor(eps_b + (eps_p - eps_b) * fine.T, dtype=dtype)  # torcwa: [x, y]
         for (theta, phi, _), weight in zip(directions, weights, strict=True):
-            sim = torcwa.rcwa(
-                freq=1.0 / um,
-                order=[order, order],
-                L=[period, period],
-                dtype=dtype,
-                device=torch.device("cpu"),
-            )
-            sim.add_input_layer(eps=complex(eps_b))
-            sim.add_output_layer(eps=complex(eps_s))
-            sim.set_incident_angle(theta, phi)
-            sim.add_layer(thickness=design.thickness, eps=layer)
-            sim.solve_global_smatrix()
+            sim = _stack(torcwa, um, order, period, (eps_b, eps_s), (theta, phi), design, layer)
+            # The incident flux of each source: through an empty stack of the background.
+            empty = _stack(torcwa, um, 0, period, (eps_b, eps_b), (theta, phi))
             for p, amplitude in enumerate(([1.0, 0.0], [0.0, 1.0])):
-                # The incident flux of this source: through an empty stack of the background.
-                empty = torcwa.rcwa(
-                    freq=1.0 / um,
-                    order=[0, 0],
-                    L=[period, period],
-                    dtype=dtype,
-                    device=torch.device("cpu"),
-                )
-                empty.add_input_layer(eps=complex(eps_b))
-                empty.add_output_layer(eps=complex(eps_b))
-                empty.set_incident_angle(theta, phi)
-                empty.solve_global_smatrix()
                 empty.source_planewave(amplitude=amplitude, direction="forward")
                 incident = float(_flux(empty.field_xy(-1, coords[:1], coords[:1])).mean())
                 sim.source_planewave(amplitude=amplitude, direction="forward")
@@ -265,6 +244,27 @@ def quadrant_spectra(
         "by_polarisation": by_pol,
         "reflection": reflection,
     }
+
+
+def _stack(torcwa, um, order, period, media, angles, design=None, layer=None):
+    """A torcwa solve of light from ``media[0]`` into ``media[1]`` (permittivities) at
+    ``angles`` (polar, azimuth), through the design's patterned ``layer`` if given."""
+    import torch
+
+    sim = torcwa.rcwa(
+        freq=1.0 / um,
+        order=[order, order],
+        L=[period, period],
+        dtype=torch.complex128,
+        device=torch.device("cpu"),
+    )
+    sim.add_input_layer(eps=complex(media[0]))
+    sim.add_output_layer(eps=complex(media[1]))
+    sim.set_incident_angle(*angles)
+    if layer is not None:
+        sim.add_layer(thickness=design.thickness, eps=layer)
+    sim.solve_global_smatrix()
+    return sim
 
 
 def _flux(fields) -> np.ndarray:
