@@ -153,3 +153,14 @@ def test_the_command_writes_spectra_a_chart_and_a_pattern_file(tmp_path, capsys)
     assert "densities in [0, 1]" in capsys.readouterr().err and not (tmp_path / "x").exists()
     assert main([*args[:3], "--out", str(tmp_path / "y"), "--wavelengths", "350,450"]) == 1
     assert "outside 380-780" in capsys.readouterr().err and not (tmp_path / "y").exists()
+
+
+def test_a_wavelength_where_an_order_grazes_is_solved():
+    """At 400 and 500 nm a 2 µm period in vacuum has a diffraction order exactly at grazing (a
+    Rayleigh anomaly); the solve divided by its zero normal wavevector and returned NaN."""
+    design = RouterDesign(np.eye(4), thickness=0.3, depth=0.5)
+    out = quadrant_spectra(design, [400.0, 500.0], order=3, samples=8)
+    assert np.all(np.isfinite(out["transmission"]))
+    np.testing.assert_allclose(
+        out["transmission"].sum(axis=(0, 1)) + out["reflection"], 1.0, atol=1e-6
+    )

@@ -128,6 +128,10 @@ def run(args: argparse.Namespace) -> int:
     t = result["transmission"]
     # A quadrant that receives almost nothing can come out a rounding error below zero; a
     # clearly negative net flux means the solve is not converged (raise --order).
+    if not np.all(np.isfinite(t)):
+        li = int(np.argwhere(~np.isfinite(t))[0][2])
+        _write_spectra(out, lams, result)
+        raise ValueError(f"the solve at {lams[li]:g} nm is not a number; spectra.csv written")
     lowest = float(t.min())
     if lowest < -1e-3:
         i, j, li = np.unravel_index(int(t.argmin()), t.shape)

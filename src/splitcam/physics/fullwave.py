@@ -219,7 +219,7 @@ def quadrant_spectra(
     reflection = np.zeros(len(wavelengths))
     dtype = torch.complex128
     for li, lam in enumerate(wavelengths):
-        um = lam / 1000.0
+        um = _off_grazing(lam, period, design) / 1000.0
         eps_p = index_of(design.pillar, lam) ** 2
         eps_b = index_of(design.background, lam) ** 2
         eps_s = index_of(design.substrate, lam) ** 2
@@ -244,6 +244,22 @@ def quadrant_spectra(
         "by_polarisation": by_pol,
         "reflection": reflection,
     }
+
+
+def _off_grazing(lam: float, period: float, design: RouterDesign) -> float:
+    """``lam`` (nm), moved by a millionth where a diffraction order grazes the background or the
+    substrate exactly (a Rayleigh anomaly: ``(n P / lam)^2 = m^2 + k^2`` for integers, as at
+    400 and 500 nm for a 2 µm period in vacuum). There the order's normal wavevector is 0 and the
+    solve divides by it; a millionth of the wavelength changes nothing else."""
+    for material in (design.background, design.substrate):
+        ratio = (index_of(material, lam) * period * 1000.0 / lam) ** 2
+        if abs(ratio - round(ratio)) < 1e-9 and _sum_of_two_squares(round(ratio)):
+            return lam * (1.0 + 1e-6)
+    return lam
+
+
+def _sum_of_two_squares(n: int) -> bool:
+    return any(math.isqrt(n - m * m) ** 2 == n - m * m for m in range(math.isqrt(n) + 1))
 
 
 def _stack(torcwa, um, order, period, media, angles, design=None, layer=None):
