@@ -20,6 +20,7 @@ def test_registry_names_and_case_insensitive_lookup():
         "quad",
         "router-zou",
         "router-best",
+        "router-zou-fullwave",
         "bayer-d5100",
         "rgbw-d5100",
         "bayer-sdmerrill",
