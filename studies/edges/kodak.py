@@ -2,7 +2,9 @@
 two columns narrower, so that every row ends one column into a period (width = 1 mod 3) or on a
 whole period (docs/results/edges/README.md). From the repository root:
 
-    SPLITCAM_DATA=../shared/data python studies/edges/kodak.py [MODEL...]   # default: C E
+    SPLITCAM_DATA=DIR python studies/edges/kodak.py [MODEL...]   # default: C E
+
+with Kodak24 under ``DIR/kodak24`` (``splitcam data download kodak24 --to DIR``).
 """
 
 import sys

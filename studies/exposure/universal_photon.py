@@ -7,8 +7,9 @@ against the closed-form linear LMMSE of each sensor.
 NETWORK is a shipped model, a run folder or a model file trained with ``data.domain = "linear"``
 and the photon model (``experiments/exposure/universal-photon.toml``), or one trained on a single
 sensor (``experiments/exposure/A-photon.toml``: name it with ``--sensors A``). The photos are the
-last ``--images`` of ``../shared/data/train`` (sorted by name; no run trains or selects on the
-last 24), whole (481x321: odd sides). Read noise 2 e⁻, no ADC; PSNR (dB) of the 8-bit sRGB encoding.
+last ``--images`` of the training photos (``$SPLITCAM_DATA/train``, ``splitcam data download
+train``; sorted by name; no run trains or selects on the last 24), whole (481x321: odd
+sides). Read noise 2 e⁻, no ADC; PSNR (dB) of the 8-bit sRGB encoding.
 """
 
 from __future__ import annotations
@@ -20,12 +21,13 @@ import torch
 
 from splitcam.data.images import read_image
 from splitcam.data.patches import list_images
+from splitcam.data.registry import training_folder
 from splitcam.evaluation.protocol import mean_psnr
 from splitcam.physics.noise import Exposure
 from splitcam.recon.registry import build_method
 
 SENSORS = ["bayer", "rgbw", "quad", "A", "D", "router-zou", "router-best"]
-DATA = Path(__file__).resolve().parents[3] / "shared" / "data" / "train"
+DATA = training_folder()
 
 
 def main() -> int:

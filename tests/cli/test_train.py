@@ -280,20 +280,6 @@ def test_train_with_a_pattern_file_starts_from_universal(image_folder, tmp_path)
     assert config["data"]["hard_patches"] == 0.5 and config["optim"]["lr"] == 3e-4
 
 
-def test_data_by_the_name_of_a_downloaded_dataset(tmp_path, monkeypatch):
-    from splitcam.cli._common import training_data
-
-    monkeypatch.setenv("SPLITCAM_DATA", str(tmp_path / "root"))
-    with pytest.raises(ValueError, match="splitcam data download train"):
-        training_data("train")
-    (tmp_path / "root" / "train").mkdir(parents=True)
-    assert training_data("train") == str(tmp_path / "root" / "train")
-    monkeypatch.chdir(tmp_path)
-    (tmp_path / "train").mkdir()  # a folder of that name here is the folder meant
-    assert training_data("train") == "train"
-    assert training_data("photos") == "photos"
-
-
 @pytest.mark.parametrize("period", [(2, 2), (3, 3), (4, 4), (2, 4)])
 def test_a_users_pattern_file_of_any_period_fine_tunes_and_reconstructs(
     tiny_universal, tmp_path, period

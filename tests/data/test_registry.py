@@ -155,3 +155,24 @@ def test_the_training_photos_are_found_under_the_data_root(monkeypatch, tmp_path
     monkeypatch.delenv(registry.DATA_ENV)
     assert registry.training_folder() == Path(registry.DEFAULT_ROOT).expanduser() / "train"
     assert registry.training_folder(tmp_path / "x") == tmp_path / "x" / "train"
+
+
+def test_data_by_the_name_of_a_downloaded_dataset(tmp_path, monkeypatch):
+    """``--data train`` (a flag, a config file, a sweep or a recipe: every reader lists images
+    through :func:`list_images`) finds the downloaded training photos under the data root."""
+    from PIL import Image
+
+    from splitcam.data.patches import list_images
+    from splitcam.data.registry import dataset_folder
+
+    monkeypatch.setenv("SPLITCAM_DATA", str(tmp_path / "root"))
+    with pytest.raises(FileNotFoundError, match="splitcam data download train"):
+        dataset_folder("train")
+    (tmp_path / "root" / "train").mkdir(parents=True)
+    assert dataset_folder("train") == tmp_path / "root" / "train"
+    Image.new("RGB", (4, 4)).save(tmp_path / "root" / "train" / "a.png")
+    assert list_images("train") == [tmp_path / "root" / "train" / "a.png"]
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "train").mkdir()  # a folder of that name here is the folder meant
+    assert dataset_folder("train") == Path("train")
+    assert dataset_folder("photos") == Path("photos")

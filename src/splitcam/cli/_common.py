@@ -61,22 +61,6 @@ def check_distinct(inputs: dict[str, str | None], outputs: dict[str, str | None]
         seen.append((flag, path))
 
 
-def training_data(spec: str) -> str:
-    """``--data``: a folder, or the name of a downloadable dataset (``train``: the training
-    photos) found under the data root (``SPLITCAM_DATA``; ``splitcam data download``)."""
-    from ..data.registry import data_root, dataset_names
-
-    if Path(spec).exists() or spec not in dataset_names():
-        return spec
-    folder = data_root() / spec
-    if not folder.is_dir():
-        raise ValueError(
-            f"--data {spec}: not downloaded to {folder}; splitcam data download {spec} (or set "
-            "SPLITCAM_DATA to the folder that holds it)"
-        )
-    return str(folder)
-
-
 def check_writable(path: str | os.PathLike[str], flag: str = "--out") -> None:
     """Refuse an output path that cannot be written, before any work: its folder is made (as
     the write would) and a file is created and removed there."""

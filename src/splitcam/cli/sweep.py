@@ -68,10 +68,7 @@ def run(args: argparse.Namespace) -> int:
         if not sep:
             raise ValueError(f"--set expects KEY=VALUE (e.g. optim.steps=2000), got {item!r}")
         overrides[key.strip()] = read_config_value(value)
-    from ._common import training_data
-
-    data = training_data(args.data) if args.data else None  # a folder, or a dataset's name
-    experiments = load_experiments(args.experiments, args.out, data=data, overrides=overrides)
+    experiments = load_experiments(args.experiments, args.out, data=args.data, overrides=overrides)
     if not args.retrain_shipped:
         experiments = without_shipped(experiments, args.snapshots)
     if args.dry_run:

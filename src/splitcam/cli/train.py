@@ -6,8 +6,6 @@ import argparse
 import os
 import sys
 
-from ._common import training_data
-
 #: Default budget (minutes) and peak learning rate of fine-tuning a network for any pattern to
 #: one pattern (docs/results/universal/README.md: 3e-4 against 1e-3 side by side), and its
 #: patches chosen by detail (docs/results/universal/levers.md: against uniform patches, against
@@ -137,8 +135,6 @@ def run(args: argparse.Namespace) -> int:
     if photon_only and model != "photon":
         flags = ", ".join("--" + k.split(".", 1)[1].replace("_", "-") for k in photon_only)
         raise ValueError(f"{flags}: settings of the photon model; add --noise photon")
-    if "data.train" in overrides:
-        overrides["data.train"] = training_data(overrides["data.train"])
     if not args.resume:
         overrides.update(own_pattern_start({**from_file, **overrides}))
     init_from = overrides.get("run.init_from", config.run.init_from)
@@ -187,8 +183,6 @@ def _run_recipe(args: argparse.Namespace) -> int:
         value = getattr(args, flag.name, None)
         if value is not None and flag.key != "run.out":
             overrides[flag.key] = value
-    if "data.train" in overrides:
-        overrides["data.train"] = training_data(overrides["data.train"])
     out = args.out or f"runs/{recipe.model}"
     print(f"recipe {recipe.model}: {len(recipe.stages)} stages into {out}")
     results = run_recipe(recipe, out, overrides, progress=not args.quiet)

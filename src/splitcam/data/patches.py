@@ -26,6 +26,7 @@ import numpy as np
 import torch
 
 from .images import IMAGE_SUFFIXES, ImageReadError, decode_image
+from .registry import dataset_folder
 from .scales import valid_scales
 
 __all__ = [
@@ -54,7 +55,8 @@ def list_images(folder: str | os.PathLike[str]) -> list[Path]:
     are not searched and hidden files (names starting with ``.``) are ignored.
 
     Args:
-        folder: The folder to list.
+        folder: The folder to list, or the name of a downloaded dataset
+            (:func:`~splitcam.data.registry.dataset_folder`: ``train`` is the training photos).
 
     Returns:
         Paths of the image files, sorted.
@@ -62,7 +64,7 @@ def list_images(folder: str | os.PathLike[str]) -> list[Path]:
     Raises:
         FileNotFoundError: The folder does not exist, is not a folder, or holds no image files.
     """
-    folder = Path(folder)
+    folder = dataset_folder(folder)
     accepted = " ".join(IMAGE_SUFFIXES)
     if not folder.exists():
         raise FileNotFoundError(f"image folder '{folder}' does not exist")

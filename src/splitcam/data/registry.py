@@ -28,6 +28,7 @@ __all__ = [
     "Dataset",
     "DatasetFile",
     "data_root",
+    "dataset_folder",
     "dataset_names",
     "datasets",
     "parse_registry",
@@ -206,6 +207,26 @@ def training_folder(root: str | os.PathLike[str] | None = None) -> Path:
     studies and scripts read by default (``SPLITCAM_DATA=DIR`` with the photos in ``DIR/train``).
     It need not exist."""
     return data_root(root) / TRAINING_FOLDER
+
+
+def dataset_folder(spec: str | os.PathLike[str]) -> Path:
+    """A folder of images named by path, or by the name of a downloadable dataset (``train``,
+    ``kodak24``, ...) that is not a folder here: then its folder under :func:`data_root`.
+
+    Raises:
+        FileNotFoundError: A dataset's name whose folder is not downloaded; the message gives
+            the download command.
+    """
+    path = Path(spec)
+    if path.exists() or str(spec) not in dataset_names():
+        return path
+    folder = data_root() / str(spec)
+    if not folder.is_dir():
+        raise FileNotFoundError(
+            f"dataset {spec} is not downloaded to {folder}: splitcam data download {spec} (or set "
+            f"{DATA_ENV} to the folder that holds it)"
+        )
+    return folder
 
 
 def data_root(root: str | os.PathLike[str] | None = None) -> Path:
