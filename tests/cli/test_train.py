@@ -230,6 +230,7 @@ def test_a_config_file_keeps_its_budget_and_rate_when_it_starts_from_a_universal
     saved = json.loads((run / "config.json").read_text())
     assert saved["network"]["arch"] == "universal"  # still implied by the model
     assert saved["run"]["time_limit"] == 0.004 and saved["optim"]["lr"] == 1e-3
+    assert saved["run"]["config_file"] == str(config)  # what the provenance names
 
 
 def test_a_run_that_diverges_says_so_and_fails(tmp_path, capsys):

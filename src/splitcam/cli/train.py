@@ -119,11 +119,10 @@ def run(args: argparse.Namespace) -> int:
         from_file = {}
     else:
         data = read_config_file(args.config) if args.config else {}
+        if args.config:  # recorded in the provenance (a file may say otherwise)
+            data.setdefault("run", {}).setdefault("config_file", args.config)
         config = TrainConfig.from_dict(data, source=args.config or "the defaults")
         from_file = dotted(data)  # the keys the file sets
-        if args.config and "run.config_file" not in from_file:
-            from_file["run.config_file"] = args.config
-            config = config.override({"run.config_file": args.config})
     # Flags left out keep the config file's (or the default) value.
     overrides = {}
     for flag in train_flags():

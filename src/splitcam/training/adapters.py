@@ -114,19 +114,20 @@ def folded_state(system: nn.Module) -> tuple[dict[str, torch.Tensor], dict[str, 
     adapter = getattr(system, "adapter", None)
     if not isinstance(adapter, ChannelAdapter):
         return state, {}
-    base = {}
-    for name in adapter.names:
-        for kind in ("weight", "bias"):
-            key = f"network.{name}.{kind}"
-            base[key] = state[key]
+    base = {key: state[key] for key in _base_keys(adapter)}
     return adapter.folded(state, prefix="network."), base
+
+
+def _base_keys(adapter: ChannelAdapter) -> list[str]:
+    """The system's state keys of the convolutions ``adapter`` scales."""
+    return [f"network.{name}.{kind}" for name in adapter.names for kind in ("weight", "bias")]
 
 
 def restore_base(system: nn.Module, base: dict[str, torch.Tensor]) -> None:
     """Put the unfolded convolution tensors ``base`` (from :func:`folded_state`) back into the
     network, after the checkpoint's folded ones were loaded."""
     adapter = getattr(system, "adapter", None)
-    expected = set(folded_state(system)[1]) if isinstance(adapter, ChannelAdapter) else set()
+    expected = set(_base_keys(adapter)) if isinstance(adapter, ChannelAdapter) else set()
     if set(base) != expected:
         raise ValueError("the checkpoint's adapter does not match this run's optim.adapter")
     own = system.state_dict()

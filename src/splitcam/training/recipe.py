@@ -18,7 +18,6 @@ exported from the last stage names every file of the chain.
 
 from __future__ import annotations
 
-import json
 import logging
 import sys
 from dataclasses import dataclass
@@ -88,26 +87,13 @@ def stage_folder(out: Path, index: int, stage: Path) -> Path:
     return out / f"{index + 1}-{label}"
 
 
-def _finished(folder: Path) -> bool:
-    """Whether the stage in ``folder`` ran to its end (its step budget or its time limit)."""
-    meta_file = folder / "checkpoint.json"
-    if not meta_file.is_file():
-        return False
-    meta = json.loads(meta_file.read_text(encoding="utf-8"))
-    config = meta.get("config") or {}
-    steps = int((config.get("optim") or {}).get("steps") or 0)
-    limit = (config.get("run") or {}).get("time_limit")
-    if int(meta.get("step", 0)) >= steps:
-        return True
-    return bool(limit) and float(meta.get("train_seconds", 0.0)) >= 60.0 * float(limit) * 0.999
-
-
 def run_recipe(
     recipe: Recipe, out: str | Path, overrides: dict[str, Any], *, progress: bool = True
 ) -> list[Any]:
     """Train every stage of ``recipe`` under ``out`` (see the module), skipping finished ones
     and resuming an interrupted one. Returns each trained stage's
     :class:`~splitcam.training.trainer.TrainResult`; stops at the first that did not finish."""
+    from .sweep import Experiment, status
     from .trainer import train
 
     out = Path(out)
@@ -124,10 +110,11 @@ def run_recipe(
             }
         )
         previous = folder
-        if _finished(folder):
+        state = status(Experiment(folder.name, stage, config, folder))  # as a sweep decides
+        if state == "done":
             logger.info(f"recipe {recipe.model}: stage {index + 1} ({folder.name}) done, skipped")
             continue
-        resume = (folder / "checkpoint.json").is_file()
+        resume = state == "partial"
         logger.info(
             f"recipe {recipe.model}: stage {index + 1} of {len(recipe.stages)}, {_shown(stage)}"
             + (" (resumed)" if resume else "")
