@@ -62,18 +62,15 @@ def check_distinct(inputs: dict[str, str | None], outputs: dict[str, str | None]
 
 
 def check_writable(path: str | os.PathLike[str], flag: str = "--out") -> None:
-    """Refuse an output path that cannot be written, before any work: its folder is made (as
-    the write would) and a file is created and removed there."""
-    import tempfile
-
-    folder = Path(path).expanduser().resolve().parent
-    try:
-        folder.mkdir(parents=True, exist_ok=True)
-        with tempfile.NamedTemporaryFile(dir=folder, prefix=".splitcam-check-"):
-            pass
-    except OSError as exc:
-        reason = exc.strerror or str(exc)
-        raise ValueError(f"{flag} {path}: cannot write there ({reason})") from None
+    """Refuse an output path that cannot be written, before any work and without making
+    anything: the nearest folder that exists on the way to it must be a writable folder."""
+    probe = Path(path).expanduser().resolve().parent
+    while not probe.exists():
+        probe = probe.parent
+    if not probe.is_dir():
+        raise ValueError(f"{flag} {path}: cannot write there ({probe} is a file, not a folder)")
+    if not os.access(probe, os.W_OK | os.X_OK):
+        raise ValueError(f"{flag} {path}: cannot write there ({probe} is not writable)")
 
 
 def warn_failed_runs(specs) -> None:

@@ -73,11 +73,12 @@ class Teachers:
 
         self._hook = network.register_forward_pre_hook(keep)
 
-    def estimate(self, pattern: Pattern) -> torch.Tensor | None:
+    def estimate(self, pattern: Pattern | None = None) -> torch.Tensor | None:
         """The teacher of ``pattern``'s estimate from the student's latest raw image and noise
-        level, or None where ``pattern`` has no teacher."""
+        level, or None where ``pattern`` has no teacher. ``None``: a run of one pattern, whose
+        teachers are that pattern's own (at most one)."""
         for own, network in self.pairs:
-            if own.equals(pattern):
+            if pattern is None or own.equals(pattern):
                 if self._inputs is None:
                     raise RuntimeError("no input seen yet: call watch() and run the student")
                 raw, sigma, kernels = self._inputs[:3]

@@ -334,8 +334,7 @@ def _forward_backward(
     loss = F.mse_loss(pred, batch)
     objective = training_loss(run.config.optim.loss, pred, batch, mse=loss)
     if state.teachers is not None:
-        pattern = run.mix.pattern(state.step) if run.mix is not None else state.system.sensor._meta
-        teacher = state.teachers.estimate(pattern)
+        teacher = state.teachers.estimate(run.mix.pattern(state.step) if run.mix else None)
         if teacher is not None:
             weight = run.config.optim.teacher_weight
             objective = objective + weight * training_loss(run.config.optim.loss, pred, teacher)
