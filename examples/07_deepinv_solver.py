@@ -32,13 +32,13 @@ def main() -> None:
     parser.add_argument("--tiny", action="store_true", help="1 small image, 10 iterations")
     args = parser.parse_args()
     try:
-        # splitcam's module first: it lets torchvision, which deepinv imports, load beside a
-        # CPU-only torch
+        # splitcam's module first: where deepinv is missing, or torchvision was built for another
+        # torch, it says so in one line, with the command that fixes it
         from splitcam.integrations.deepinv import DeepinvReconstructor, SplitterPhysics  # noqa: I001
 
         import deepinv as dinv
     except ImportError as exc:
-        print(f"skipped: deepinv is not installed ({exc}); pip install 'splitcam[deepinv]'")
+        print(f"skipped: {exc}")
         sys.exit(0)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)

@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import ast
 import importlib
+import importlib.util
+import re
 import sys
 from pathlib import Path
 
@@ -55,3 +57,24 @@ def test_nothing_in_the_library_imports_the_integrations():
         and any(m.startswith("splitcam.integrations") for m in _imported_modules(path))
     ]
     assert not wrong, f"modules that import splitcam.integrations: {wrong}"
+
+
+def test_with_deepinv_beside_a_torchvision_for_another_torch_the_error_names_the_fix(monkeypatch):
+    """deepinv installed, torchvision built for another torch: the one line of the check, before
+    deepinv (which imports torchvision) is imported."""
+    from importlib.machinery import ModuleSpec
+
+    import splitcam.integrations._torchvision as check
+
+    real_find_spec = importlib.util.find_spec
+    monkeypatch.setattr(
+        importlib.util,
+        "find_spec",
+        lambda name, *a: ModuleSpec(name, None) if name == "deepinv" else real_find_spec(name, *a),
+    )
+    line = "torchvision 9.9 cannot load its operators beside torch X; install: pip install Y"
+    monkeypatch.setattr(check, "torchvision_mismatch", lambda: line)
+    monkeypatch.setitem(sys.modules, "deepinv", None)  # importing it would be a bug here
+    monkeypatch.delitem(sys.modules, "splitcam.integrations.deepinv", raising=False)
+    with pytest.raises(ImportError, match=re.escape(line)):
+        importlib.import_module("splitcam.integrations.deepinv")

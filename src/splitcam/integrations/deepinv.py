@@ -33,6 +33,7 @@ one ImportError naming the two versions and the install command of the matching 
 
 from __future__ import annotations
 
+import importlib.util
 import logging
 from collections.abc import Callable
 from typing import Any
@@ -51,15 +52,23 @@ INSTALL_HINT = "pip install 'splitcam[deepinv]'"
 
 
 def _import_deepinv() -> Any:
+    """deepinv, or one line saying why not: not installed (with the extra that installs it), or
+    installed beside a torchvision built for another torch (with the command that installs the
+    matching one). Whether deepinv is there is asked first, without importing it (importing it
+    imports torchvision)."""
+    try:
+        installed = importlib.util.find_spec("deepinv") is not None
+    except ValueError:  # in sys.modules as None: import blocked
+        installed = False
+    if not installed:
+        raise ImportError(
+            f"splitcam.integrations.deepinv needs deepinv, an optional dependency: {INSTALL_HINT}"
+        )
     problem = torchvision_mismatch()
     if problem is not None:
         raise ImportError(problem)
-    try:
-        import deepinv
-    except ImportError as err:
-        raise ImportError(
-            f"splitcam.integrations.deepinv needs deepinv, an optional dependency: {INSTALL_HINT}"
-        ) from err
+    import deepinv
+
     return deepinv
 
 
