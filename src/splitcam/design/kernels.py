@@ -22,6 +22,7 @@ from typing import Any
 
 import torch
 
+from ..checks import check_count
 from ..patterns import Pattern, get
 from ..physics.sensor import LearnableSplitterSensor
 from ..recon.closed_form import ImageStatistics, closed_form_mse, shipped_image_statistics
@@ -215,24 +216,20 @@ def design_pattern(
     """
     start = get(start)
     sigma_list = check_sigmas(sigmas)
-    if isinstance(steps, bool) or not isinstance(steps, int) or steps < 1:
-        raise ValueError(f"expected steps as an integer >= 1, got {steps!r}")
+    check_count(steps, "steps", 1)
     if (
         isinstance(lr, bool)
         or not isinstance(lr, (int, float))
         or not (math.isfinite(lr) and lr > 0)
     ):
         raise ValueError(f"expected lr as a finite number > 0, got {lr!r}")
-    if isinstance(radius, bool) or not isinstance(radius, int) or radius < 0:
-        raise ValueError(f"expected radius as an integer >= 0, got {radius!r}")
+    check_count(radius, "radius", 0)
     if objective not in OBJECTIVES:
         raise ValueError(
             f"expected objective to be one of {', '.join(OBJECTIVES)}, got {objective!r}"
         )
-    if threads is not None and (
-        isinstance(threads, bool) or not isinstance(threads, int) or threads < 1
-    ):
-        raise ValueError(f"expected threads as an integer >= 1 or None, got {threads!r}")
+    if threads is not None:
+        check_count(threads, "threads", 1)
     if objective == "network" and (network is None or patches is None):
         raise ValueError("objective 'network' needs a network and training patches")
     stats = statistics if statistics is not None else shipped_image_statistics()

@@ -43,6 +43,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from ..checks import check_count
 from .defaults import DEFAULT_LR, DEFAULT_STEPS
 
 logger = logging.getLogger(__name__)
@@ -670,8 +671,7 @@ def search_metasurfaces(
     from .defaults import DEFAULT_SIGMAS
 
     _check_trials(trials, 0, metric)
-    if isinstance(steps, bool) or not isinstance(steps, int) or steps < 1:
-        raise ValueError(f"expected steps as an integer >= 1, got {steps!r}")
+    check_count(steps, "steps", 1)
     period = (int(period[0]), int(period[1]))
     optics = Optics() if optics is None else optics
     full = _space(METASURFACE_SPACE, space)

@@ -28,7 +28,7 @@ import json
 import os
 import shutil
 from collections.abc import Iterator, Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -39,7 +39,7 @@ from ..io import write_text
 from ..io.domains import SRGB
 from ..patterns import Pattern, save
 from ..physics.light import check_domain, decode_scene, encode_estimate
-from ..physics.noise import Exposure, check_level, level_label
+from ..physics.noise import NoiseModel, as_noise, check_level, level_heading, level_label
 from ..physics.sensor import SplitterSensor
 from ..physics.system import simulate
 from ..recon.base import Reconstructor, method_domain
@@ -84,7 +84,7 @@ def simulate_and_reconstruct(
     sensor: SplitterSensor,
     image_name: str,
     rgb: torch.Tensor,
-    sigma: float | Exposure,
+    sigma: float | NoiseModel,
     *,
     domain: str = SRGB,
 ) -> torch.Tensor:
@@ -208,10 +208,10 @@ def _check_zooms(
     return out
 
 
-def _zoom_at(zooms: list[Zoom], sigma: float | Exposure) -> Zoom | None:
+def _zoom_at(zooms: list[Zoom], sigma: float | NoiseModel) -> Zoom | None:
     """The zoom of an image at one noise level: one naming that level, else one naming none."""
-    level = None if isinstance(sigma, Exposure) else float(sigma)
-    exact = [z for z in zooms if z.sigma is not None and level is not None and z.sigma == level]
+    level = as_noise(sigma)
+    exact = [z for z in zooms if z.sigma is not None and as_noise(z.sigma) == level]
     return (exact or [z for z in zooms if z.sigma is None] or [None])[0]
 
 
@@ -238,7 +238,7 @@ def _fingerprint(method: Reconstructor, crop: int, domain: str = SRGB) -> str:
 def evaluate(
     methods: Sequence[Reconstructor],
     datasets: Sequence[tuple[str, Images]],
-    sigmas: Sequence[float | Exposure],
+    sigmas: Sequence[float | NoiseModel],
     out: str | os.PathLike | None = None,
     *,
     save_images: bool = False,
@@ -346,10 +346,10 @@ def _no_empty_folder(out_dir: Path | None) -> Iterator[None]:
 
 def _check_settings(
     methods: Sequence[Reconstructor],
-    sigmas: Sequence[float | Exposure],
+    sigmas: Sequence[float | NoiseModel],
     crop: int,
     domain: str,
-) -> tuple[str, list[float | Exposure], dict | None]:
+) -> tuple[str, list[float | NoiseModel], dict | None]:
     """The domain, noise levels and photon sensor settings of an evaluation, checked with its
     methods and crop.
 
@@ -469,7 +469,7 @@ class _Run:
 
 
 def _evaluate_job(
-    run: _Run, dataset: str, image_name: str, rgb: torch.Tensor, sigma: float | Exposure
+    run: _Run, dataset: str, image_name: str, rgb: torch.Tensor, sigma: float | NoiseModel
 ) -> None:
     """Every method on one image at one noise level: rows reused where the run has them (and
     no zoom needs the reconstruction), else computed; then the images and zoom written."""
@@ -501,7 +501,7 @@ def _evaluate_job(
 
 
 def _evaluate_method(
-    run: _Run, method: Reconstructor, key: tuple, rgb: torch.Tensor, sigma: float | Exposure
+    run: _Run, method: Reconstructor, key: tuple, rgb: torch.Tensor, sigma: float | NoiseModel
 ) -> tuple[torch.Tensor, dict[str, float]]:
     """One method's reconstruction and scores of the job ``key`` (method, dataset, image,
     level, domain): its row added to the run and, if new, to ``per_image.csv`` and the
@@ -511,16 +511,9 @@ def _evaluate_method(
         method, run.sensors[method.name], image_name, rgb, sigma, domain=domain
     )
     scores = score(pred, rgb, crop=run.crop)
-    photons = sigma.photons if isinstance(sigma, Exposure) else 0.0
+    fields = {"sigma": 0.0, **as_noise(sigma).row_fields()}
     row = EvalRow(
-        method.name,
-        method.pattern.name,
-        dataset,
-        image_name,
-        0.0 if photons else sigma,
-        **scores,
-        photons=photons,
-        domain=domain,
+        method.name, method.pattern.name, dataset, image_name, **fields, **scores, domain=domain
     )
     run.rows.append(row)
     new = key not in run.done
@@ -530,7 +523,7 @@ def _evaluate_method(
         if new:
             run.bar.update(1)
         run.bar.set_postfix_str(
-            f"{dataset}/{image_name} {'' if photons else 's'}{level} "
+            f"{dataset}/{image_name} {level_heading(level)} "
             f"{result_label(method.name, domain)} "
             f"{scores['psnr']:.2f} dB",
             refresh=False,
@@ -538,7 +531,7 @@ def _evaluate_method(
     return pred, scores
 
 
-def _sensor_settings(levels: Sequence[float | Exposure]) -> dict | None:
+def _sensor_settings(levels: Sequence[float | NoiseModel]) -> dict | None:
     """The photon-model sensor settings shared by the exposures among ``levels`` (everything
     but the exposure itself), or None without exposures.
 
@@ -546,9 +539,9 @@ def _sensor_settings(levels: Sequence[float | Exposure]) -> dict | None:
         ValueError: Exposures with different settings (their rows could not be told apart).
     """
     settings = {
-        json.dumps({k: v for k, v in asdict(e).items() if k != "photons"}, sort_keys=True)
-        for e in levels
-        if isinstance(e, Exposure)
+        json.dumps(shared, sort_keys=True)
+        for shared in (as_noise(e).sensor_settings() for e in levels)
+        if shared is not None
     }
     if len(settings) > 1:
         raise ValueError(
@@ -625,7 +618,7 @@ def _save_images(
     out_dir: Path,
     dataset: str,
     image: str,
-    sigma: float | Exposure,
+    sigma: float | NoiseModel,
     rgb: torch.Tensor,
     outputs: dict,
     zoom: Zoom | None,
@@ -636,10 +629,8 @@ def _save_images(
     ``zoom_outputs`` (default: ``outputs``); file names of the linear domain end in
     ``_linear``."""
     safe = image.replace("/", "_")
-    if isinstance(sigma, Exposure):
-        suffix, title = level_label(sigma), f"{sigma.photons:g} photo-electrons"
-    else:
-        suffix, title = f"sigma{sigma:g}", f"sigma {sigma:g}"
+    noise = as_noise(sigma)
+    suffix, title = noise.file_label(), noise.describe()
     if domain != SRGB:
         suffix, title = f"{suffix}_{domain}", f"{title}, {domain} light"
     for name, (pred, _) in outputs.items():

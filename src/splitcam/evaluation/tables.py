@@ -72,6 +72,8 @@ class EvalRow:
     the photon model's exposure ``photons`` (full-light photo-electrons; ``sigma`` is 0 and the
     sensor's other settings are the evaluation's, in its ``evaluation.json``). ``domain``: the
     light domain the scene was simulated and reconstructed in (scores are always of 8-bit sRGB).
+    ``noise``: the label of a level of another :class:`~splitcam.physics.noise.NoiseModel`
+    (empty for the Gaussian and photon models, which ``sigma`` and ``photons`` identify).
     """
 
     method: str
@@ -84,6 +86,7 @@ class EvalRow:
     ciede2000: float
     photons: float = 0.0
     domain: str = SRGB
+    noise: str = ""
 
     @property
     def key(self) -> tuple[str, str, str, str, str]:
@@ -100,6 +103,8 @@ class EvalRow:
     def level(self) -> str:
         """The noise level as it labels tables and summaries: ``"15"`` (sigma) or ``"N1000"``
         (photo-electrons)."""
+        if self.noise:
+            return self.noise
         return level_label(Exposure(self.photons) if self.photons else self.sigma)
 
     def cells(self) -> list[str]:
@@ -110,13 +115,24 @@ class EvalRow:
 
 
 def append_rows(path: str | os.PathLike, rows: Iterable[EvalRow]) -> None:
-    """Append rows to a CSV file (header first if the file is new), flushed to disk."""
+    """Append rows to a CSV file (header first if the file is new), flushed to disk. A file
+    written before a column was added is rewritten whole, with today's header, first."""
     path = Path(path)
+    rows = list(rows)
     new = not path.is_file() or path.stat().st_size == 0
+    names = [f.name for f in fields(EvalRow)]
+    if not new:
+        with open(path, newline="", encoding="utf-8") as fh:
+            header = next(csv.reader(fh), None)
+        if header != names:
+            rows = read_rows(path) + rows
+            with atomic_path(path) as tmp:
+                append_rows(tmp, rows)
+            return
     with appending(path, newline="") as fh:
         writer = csv.writer(fh)
         if new:
-            writer.writerow([f.name for f in fields(EvalRow)])
+            writer.writerow(names)
         for row in rows:
             writer.writerow(row.cells())
         fh.flush()
@@ -125,8 +141,8 @@ def append_rows(path: str | os.PathLike, rows: Iterable[EvalRow]) -> None:
 
 def read_rows(path: str | os.PathLike) -> list[EvalRow]:
     """Rows of a ``per_image.csv``; a last line cut short by a kill is dropped. Files without
-    the ``domain`` column read as rows of the ``srgb`` domain; without the ``photons`` column
-    also, as Gaussian rows.
+    the ``noise`` column read as rows of the Gaussian or photon model; without ``domain`` also,
+    as rows of the ``srgb`` domain; without ``photons`` also, as Gaussian rows.
 
     Raises:
         ValueError: The file is not a per-image results file (the message names it).
@@ -137,7 +153,7 @@ def read_rows(path: str | os.PathLike) -> list[EvalRow]:
         lines = list(csv.reader(fh))
     if not lines:
         return []
-    if lines[0] not in (names, names[:-1], names[:-2]):
+    if lines[0] not in (names, names[:-1], names[:-2], names[:-3]):
         raise ValueError(f"{str(path)!r} is not a splitcam per-image results file")
     numbers = slice(4, min(len(lines[0]), 9))  # sigma ... photons
     rows = []

@@ -42,7 +42,7 @@ import torch
 
 from ..io.domains import SRGB
 from ..patterns import Pattern
-from ..physics.noise import Exposure, GaussianNoise, check_level, check_sigma
+from ..physics.noise import Exposure, GaussianNoise, NoiseModel, check_level, check_sigma
 from ..physics.sensor import SplitterSensor
 from ._torchvision import torchvision_mismatch
 
@@ -78,12 +78,13 @@ __all__ = [
     "INSTALL_HINT",
     "DeepinvReconstructor",
     "SplitcamGaussianNoise",
+    "SplitcamNoise",
     "SplitcamPhotonNoise",
     "SplitterPhysics",
     "noise_model",
 ]
 
-NoiseLevel = float | Exposure | dinv.physics.NoiseModel | None
+NoiseLevel = float | NoiseModel | dinv.physics.NoiseModel | None
 
 
 class SplitcamGaussianNoise(dinv.physics.NoiseModel):
@@ -157,8 +158,11 @@ class SplitcamGaussianNoise(dinv.physics.NoiseModel):
         return f"sigma_8bit={self.sigma_8bit:g}"
 
 
-class SplitcamPhotonNoise(dinv.physics.NoiseModel):
-    """splitcam's photon model at one exposure (model.md §11) as a deepinv noise model.
+class SplitcamNoise(dinv.physics.NoiseModel):
+    """A splitcam :class:`~splitcam.physics.noise.NoiseModel` as a deepinv noise model: the
+    photon model at one exposure (model.md §11), or any other level of that interface.
+
+    For the photon model:
 
     The measurement ``z`` (raw units, model.md §1) becomes ``e = z N / 3`` photo-electrons;
     shot noise, read noise, full well and ADC follow as :meth:`Exposure.apply
@@ -168,19 +172,21 @@ class SplitcamPhotonNoise(dinv.physics.NoiseModel):
 
     :attr:`gain` and :attr:`sigma` are the raw-scale noise variance ``gain * z + sigma^2``
     (shot, read and quantisation noise, saturation ignored), deepinv's Poisson-Gaussian
-    convention: ``gain = 3 / N`` (0 without shot noise).
+    convention: ``gain = 3 / N`` (0 without shot noise); for any level, its
+    :meth:`~splitcam.physics.noise.NoiseModel.variance_coefficients`.
 
     Args:
-        exposure: An :class:`~splitcam.physics.noise.Exposure`, or the photo-electrons ``N`` of
-            one with the settings in ``sensor``.
+        exposure: A :class:`~splitcam.physics.noise.NoiseModel` (an
+            :class:`~splitcam.physics.noise.Exposure`, for example), or the photo-electrons
+            ``N`` of an Exposure with the settings in ``sensor``.
         seed: Seed of the generator (CPU).
         **sensor: ``read_noise``, ``full_well``, ``gain``, ``bits``, ``shot`` of
             :class:`~splitcam.physics.noise.Exposure` when ``exposure`` is a number.
     """
 
-    def __init__(self, exposure: Exposure | float, *, seed: int = 0, **sensor: Any) -> None:
+    def __init__(self, exposure: NoiseModel | float, *, seed: int = 0, **sensor: Any) -> None:
         super().__init__()
-        if not isinstance(exposure, Exposure):
+        if not isinstance(exposure, NoiseModel):
             exposure = Exposure(exposure, **sensor)
         elif sensor:
             raise ValueError("give the sensor settings in the Exposure, not beside it")
@@ -211,12 +217,17 @@ class SplitcamPhotonNoise(dinv.physics.NoiseModel):
         return f"exposure={self.exposure}"
 
 
+#: The name under which the photon model's deepinv noise was first offered.
+SplitcamPhotonNoise = SplitcamNoise
+
+
 def noise_model(level: NoiseLevel, *, seed: int = 0) -> dinv.physics.NoiseModel:
     """The deepinv noise model of a splitcam noise level.
 
     ``None`` gives no noise (:class:`deepinv.physics.ZeroNoise`), a number a
-    :class:`SplitcamGaussianNoise` of that sigma (8-bit units), an
-    :class:`~splitcam.physics.noise.Exposure` a :class:`SplitcamPhotonNoise`; a deepinv
+    :class:`SplitcamGaussianNoise` of that sigma (8-bit units), a splitcam
+    :class:`~splitcam.physics.noise.NoiseModel` (an
+    :class:`~splitcam.physics.noise.Exposure`, say) a :class:`SplitcamNoise`; a deepinv
     :class:`~deepinv.physics.NoiseModel` is returned as it is.
 
     Raises:
@@ -229,8 +240,8 @@ def noise_model(level: NoiseLevel, *, seed: int = 0) -> dinv.physics.NoiseModel:
     if isinstance(level, dinv.physics.NoiseModel):
         return level
     level = check_level(level)
-    if isinstance(level, Exposure):
-        return SplitcamPhotonNoise(level, seed=seed)
+    if isinstance(level, NoiseModel):
+        return SplitcamNoise(level, seed=seed)
     return SplitcamGaussianNoise(level, seed=seed)
 
 
@@ -333,7 +344,7 @@ class DeepinvReconstructor:
         """The pattern the physics' sensor holds now (learned kernels included)."""
         return self.physics.pattern
 
-    def reconstruct(self, raw: torch.Tensor, sigma: float | Exposure) -> torch.Tensor:
+    def reconstruct(self, raw: torch.Tensor, sigma: float | NoiseModel) -> torch.Tensor:
         self.physics.set_noise_model(check_level(sigma))
         with torch.no_grad():
             return self.model(raw, self.physics).to(raw.dtype)

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..checks import check_count
 from .core import Pattern
 
 __all__ = ["FAMILIES", "MIN_COLOUR_SHARE", "PatternMix", "random_pattern"]
@@ -134,8 +135,7 @@ def random_pattern(
     Raises:
         ValueError: ``max_period < 1``, ``max_kernel`` not an odd number >= 1, or an unknown family.
     """
-    if max_period < 1:
-        raise ValueError(f"max_period must be >= 1, got {max_period}")
+    check_count(max_period, "max_period", 1)
     if max_kernel < 1 or max_kernel % 2 == 0:
         raise ValueError(f"max_kernel must be an odd number >= 1, got {max_kernel}")
     unknown = sorted(set(families) - set(FAMILIES))

@@ -2,6 +2,14 @@
 raw image's scale. The physical model at equal exposure (model.md §11): :class:`Exposure`
 (photo-electrons, shot and read noise, full well, ADC) and :class:`PhotonNoise` for training.
 
+One interface, :class:`NoiseModel`, is all the rest of splitcam asks of noise at one level: the
+sensor's simulation draws it (:meth:`NoiseModel.apply`, :meth:`NoiseModel.add`), the LMMSE
+takes its covariance from :meth:`NoiseModel.variance_coefficients`, the networks their
+noise-level input from :meth:`NoiseModel.level_map`, tables their label from
+:meth:`NoiseModel.label`. :class:`Gaussian` (the paper's) and :class:`Exposure` (the photon
+model) implement it; a plain number is shorthand for :class:`Gaussian` (:func:`as_noise`). A new
+noise model (dark current, a measured read-noise curve) is a new subclass here and nothing else.
+
 Training noise comes from :class:`GaussianNoise` and :class:`PhotonNoise`, which own seeded
 generators (so a resumed run draws the same noise as an uninterrupted one): the noise levels on
 the CPU, the noise itself on the device of the raw images (:class:`_TrainingDraws`). Evaluation
@@ -15,13 +23,19 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import math
+from abc import ABC, abstractmethod
 from dataclasses import dataclass
 from numbers import Real
 from typing import Any
 
 import torch
 
+from ..checks import check_count
+
 __all__ = [
+    "NoiseModel",
+    "Gaussian",
+    "as_noise",
     "level_heading",
     "level_key",
     "level_label",
@@ -138,10 +152,124 @@ class GaussianNoise(_TrainingDraws):
         return raw + scale * noise, sigma.float()
 
 
-def check_level(level: Any) -> float | Exposure:
-    """A noise level: a photon-model :class:`Exposure` as it is, anything else through
+class NoiseModel(ABC):
+    """Sensor noise at one level: what the simulation adds, the LMMSE assumes and the networks
+    are told.
+
+    Subclasses are frozen dataclasses (hashable: methods cache their filters per level) and
+    implement :meth:`apply`, :meth:`variance_coefficients` and :meth:`label`. The raw values are
+    in the units of model.md §1.
+    """
+
+    @abstractmethod
+    def apply(self, raw: torch.Tensor, generator: torch.Generator) -> torch.Tensor:
+        """The noisy raw image of a clean one, drawn from ``generator`` (a CPU generator)."""
+
+    @abstractmethod
+    def variance_coefficients(self) -> tuple[float, float]:
+        """``(a, b)``: the noise variance of a raw pixel of expected value ``g`` is ``a g + b``
+        in raw units (what the LMMSE's noise covariance is built from)."""
+
+    @abstractmethod
+    def label(self) -> str:
+        """The level's label in tables, metrics keys and file names (``"15"``, ``"N1000"``)."""
+
+    def describe(self) -> str:
+        """The level in words, for figure titles."""
+        return f"noise {self.label()}"
+
+    def file_label(self) -> str:
+        """The level in the names of the files written for it."""
+        return self.label()
+
+    def seed(self, image_name: str) -> int:
+        """The seed of this level's evaluation noise on one image: stable across runs, machines
+        and methods, so every method is scored on the same draw."""
+        digest = hashlib.sha256(f"splitcam-noise|{image_name}|{self.label()}".encode()).digest()
+        return int.from_bytes(digest[:8], "little") & ((1 << 63) - 1)
+
+    def add(self, raw: torch.Tensor, image_name: str) -> torch.Tensor:
+        """The deterministic evaluation noise of one image (:meth:`apply` on :meth:`seed`)."""
+        return self.apply(raw, torch.Generator().manual_seed(self.seed(image_name)))
+
+    def level_map(self, cells: torch.Tensor) -> torch.Tensor:
+        """The noise standard deviation (8-bit units) a network is told, ``(N, 1, h, w)``, from
+        the raw image's period cells ``(N, P, h, w)``: ``255 sqrt(a g + b)`` with the raw value
+        ``g`` (clamped at 0) as each pixel's signal, averaged over the cell."""
+        a, b = self.variance_coefficients()
+        return (255.0 * (a * cells.clamp_min(0) + b).sqrt()).mean(1, keepdim=True)
+
+    def row_fields(self) -> dict[str, Any]:
+        """The fields that identify this level in a results row
+        (:class:`~splitcam.evaluation.tables.EvalRow`)."""
+        return {"noise": self.label()}
+
+    def sensor_settings(self) -> dict[str, Any] | None:
+        """Settings every level of one evaluation must share (recorded in its
+        ``evaluation.json``), or None."""
+        return None
+
+
+@dataclass(frozen=True)
+class Gaussian(NoiseModel):
+    """The paper's noise (model.md §3): ``raw + n``, ``n ~ N(0, (sigma / 255)^2)``, sigma in
+    8-bit units. A plain number given as a noise level means this.
+
+    >>> Gaussian(15).label(), Gaussian(15).variance_coefficients() == (0.0, (15 / 255) ** 2)
+    ('15', True)
+    """
+
+    sigma: float
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "sigma", check_sigma(self.sigma))
+
+    def apply(self, raw: torch.Tensor, generator: torch.Generator) -> torch.Tensor:
+        if self.sigma == 0:
+            return raw
+        noise = torch.randn(tuple(raw.shape), generator=generator, dtype=torch.float64)
+        return raw + (noise * (self.sigma / 255.0)).to(device=raw.device, dtype=raw.dtype)
+
+    def variance_coefficients(self) -> tuple[float, float]:
+        return 0.0, (self.sigma / 255.0) ** 2
+
+    def label(self) -> str:
+        return f"{self.sigma:g}"
+
+    def describe(self) -> str:
+        return f"sigma {self.sigma:g}"
+
+    def file_label(self) -> str:
+        return f"sigma{self.sigma:g}"
+
+    def seed(self, image_name: str) -> int:
+        return evaluation_seed(image_name, self.sigma)
+
+    def level_map(self, cells: torch.Tensor) -> torch.Tensor:
+        return torch.full(
+            (cells.shape[0], 1, *cells.shape[-2:]),
+            self.sigma,
+            dtype=cells.dtype,
+            device=cells.device,
+        )
+
+    def row_fields(self) -> dict[str, Any]:
+        return {"sigma": self.sigma}
+
+
+def as_noise(level: Any) -> NoiseModel:
+    """A noise level as a :class:`NoiseModel`: one as it is, a number as :class:`Gaussian`.
+
+    Raises:
+        TypeError, ValueError: Neither a noise model nor a valid sigma (:func:`check_sigma`).
+    """
+    return level if isinstance(level, NoiseModel) else Gaussian(check_sigma(level))
+
+
+def check_level(level: Any) -> float | NoiseModel:
+    """A noise level: a :class:`NoiseModel` as it is, anything else through
     :func:`check_sigma` (a Gaussian sigma in 8-bit units)."""
-    return level if isinstance(level, Exposure) else check_sigma(level)
+    return level if isinstance(level, NoiseModel) else check_sigma(level)
 
 
 def evaluation_seed(image_name: str, sigma: float) -> int:
@@ -170,19 +298,16 @@ def evaluation_noise(
 
 
 def add_evaluation_noise(raw: torch.Tensor, image_name: str, sigma: float) -> torch.Tensor:
-    """``raw`` plus :func:`evaluation_noise` (returned unchanged for ``sigma == 0``)."""
-    if check_sigma(sigma) == 0:
-        return raw
-    return raw + evaluation_noise(
-        tuple(raw.shape), image_name, sigma, dtype=raw.dtype, device=raw.device
-    )
+    """``raw`` plus :func:`evaluation_noise` (returned unchanged for ``sigma == 0``):
+    :meth:`Gaussian.add`."""
+    return Gaussian(sigma).add(raw, image_name)
 
 
 # --- photon-limited sensing (model.md §11) ---------------------------------------------------
 
 
 @dataclass(frozen=True)
-class Exposure:
+class Exposure(NoiseModel):
     """The physical sensor at one exposure: photo-electrons, shot and read noise, full well, ADC.
 
     Exposure is stated by ``photons`` (``N``): the mean photo-electrons that a lossless pixel
@@ -228,8 +353,7 @@ class Exposure:
             positive("full_well (electrons)", self.full_well)
         if self.gain is not None:
             positive("gain (electrons per DN)", self.gain)
-        if isinstance(self.bits, bool) or not isinstance(self.bits, int) or self.bits < 1:
-            raise ValueError(f"expected bits as an integer >= 1, got {self.bits!r}")
+        check_count(self.bits, "bits", 1)
 
     @property
     def electrons_per_unit(self) -> float:
@@ -268,13 +392,28 @@ class Exposure:
             f"|b{self.bits}|s{int(self.shot)}"
         )
 
+    def label(self) -> str:
+        return f"N{self.photons:g}"
+
+    def describe(self) -> str:
+        return f"{self.photons:g} photo-electrons"
+
+    def seed(self, image_name: str) -> int:
+        digest = hashlib.sha256(f"splitcam-photon|{image_name}|{self.key()}".encode()).digest()
+        return int.from_bytes(digest[:8], "little") & ((1 << 63) - 1)
+
+    def row_fields(self) -> dict[str, Any]:
+        return {"photons": self.photons}
+
+    def sensor_settings(self) -> dict[str, Any]:
+        return {k: v for k, v in dataclasses.asdict(self).items() if k != "photons"}
+
 
 def add_exposure_noise(raw: torch.Tensor, image_name: str, exposure: Exposure) -> torch.Tensor:
     """The deterministic photon-model noise of one image at one exposure (evaluation): the same
-    draw for every method of one pattern, seeded from the image name and the exposure."""
-    digest = hashlib.sha256(f"splitcam-photon|{image_name}|{exposure.key()}".encode()).digest()
-    gen = torch.Generator().manual_seed(int.from_bytes(digest[:8], "little") & ((1 << 63) - 1))
-    return exposure.apply(raw, gen)
+    draw for every method of one pattern, seeded from the image name and the exposure
+    (:meth:`Exposure.add`)."""
+    return exposure.add(raw, image_name)
 
 
 class PhotonNoise(_TrainingDraws):
@@ -366,7 +505,7 @@ def photon_noise(
 # photo-electrons. Everything that writes or reads such a label goes through these functions.
 
 
-def level_label(level: float | Exposure) -> str:
+def level_label(level: float | NoiseModel) -> str:
     """``"15"`` for a Gaussian sigma, ``"N1000"`` for an :class:`Exposure` of 1000
     photo-electrons (in ``metrics.jsonl`` keys ``val_psnr_<label>`` and result tables).
 
@@ -375,33 +514,38 @@ def level_label(level: float | Exposure) -> str:
     >>> parse_level_label("val_psnr_N1000")  # and back
     ('photons', 1000.0)
     """
-    if isinstance(level, Exposure):
-        return f"N{level.photons:g}"
-    return f"{float(level):g}"
+    return as_noise(level).label()
 
 
 def parse_level_label(label: str) -> tuple[str, float]:
     """``("sigma", 15.0)`` for ``"15"``, ``("photons", 1000.0)`` for ``"N1000"``; also accepts
-    a metrics key such as ``"val_psnr_N1000"`` (the part after the last underscore).
+    a metrics key such as ``"val_psnr_N1000"`` (the part after the last underscore). The label
+    of another :class:`NoiseModel` reads as ``("other", nan)``.
 
     Raises:
-        ValueError: Not a level label.
+        ValueError: Not a level label (empty).
     """
     text = str(label).rsplit("_", 1)[-1]
+    if not text:
+        raise ValueError(f"not a noise-level label (15 or N1000): {label!r}")
     kind, number = ("photons", text[1:]) if text.startswith("N") else ("sigma", text)
     try:
         return kind, float(number)
     except ValueError:
-        raise ValueError(f"not a noise-level label (15 or N1000): {label!r}") from None
+        return "other", math.nan
 
 
-def level_key(label: str) -> tuple[int, float]:
-    """Sort key: Gaussian levels first by sigma, then exposures by photo-electrons."""
+def level_key(label: str) -> tuple[int, float, str]:
+    """Sort key: Gaussian levels first by sigma, then exposures by photo-electrons, then the
+    labels of other noise models."""
     kind, value = parse_level_label(label)
-    return (kind == "photons", value)
+    rank = {"sigma": 0, "photons": 1}.get(kind, 2)
+    return (rank, 0.0 if rank == 2 else value, str(label))
 
 
 def level_heading(label: str) -> str:
-    """A table heading or legend entry: ``σ=15`` or ``N=1000 e⁻``."""
+    """A table heading or legend entry: ``σ=15``, ``N=1000 e⁻``, or another model's label."""
     kind, value = parse_level_label(label)
+    if kind == "other":
+        return str(label).rsplit("_", 1)[-1]
     return f"N={value:g} e⁻" if kind == "photons" else f"σ={value:g}"

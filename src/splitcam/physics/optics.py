@@ -34,6 +34,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import torch
 
+from ..checks import check_count
 from ..patterns import Pattern
 from ..physics.sensor import SplitterSensor
 
@@ -115,8 +116,7 @@ class Optics:
             )
         if not (self.max_height > 0):
             raise ValueError(f"max_height must be > 0 µm, got {self.max_height}")
-        if isinstance(self.samples, bool) or not isinstance(self.samples, int) or self.samples < 1:
-            raise ValueError(f"samples per pixel must be an integer >= 1, got {self.samples}")
+        check_count(self.samples, "samples per pixel", 1)
         self.wavelengths = np.asarray(self.wavelengths, dtype=np.float64).reshape(-1)
         if self.wavelengths.size == 0 or self.wavelengths.min() <= 0:
             raise ValueError("wavelengths must be positive (nm)")

@@ -8,7 +8,7 @@ from collections.abc import Callable
 import torch
 from torch import nn
 
-from .noise import Exposure, add_evaluation_noise, add_exposure_noise, check_sigma
+from .noise import NoiseModel, as_noise
 from .sensor import SplitterSensor
 
 __all__ = ["ImagingSystem", "simulate"]
@@ -79,7 +79,7 @@ def simulate(
     sensor: SplitterSensor,
     rgb: torch.Tensor,
     image_name: str,
-    sigma: float | Exposure,
+    sigma: float | NoiseModel,
     *,
     strip: int = SIMULATE_STRIP,
 ) -> torch.Tensor:
@@ -89,10 +89,10 @@ def simulate(
     The sensor runs in float64 (the raw image is then float32), in strips of ``strip`` rows so
     that a large scene never exists in float64 at once; the strips overlap by the kernel's reach
     rounded up to whole periods, so the result equals the sensor on the whole image exactly.
-    Noise is the deterministic evaluation noise of ``image_name`` and ``sigma``
-    (:func:`~splitcam.physics.noise.add_evaluation_noise`), the same for every method; with an
-    :class:`~splitcam.physics.noise.Exposure` in place of ``sigma``, the photon model's
-    (:func:`~splitcam.physics.noise.add_exposure_noise`).
+    Noise is the deterministic evaluation noise of ``image_name`` at the level ``sigma``, the
+    same for every method: a :class:`~splitcam.physics.noise.NoiseModel`'s
+    :meth:`~splitcam.physics.noise.NoiseModel.add` (a number is a Gaussian sigma; an
+    :class:`~splitcam.physics.noise.Exposure` is the photon model).
 
     Shape:
         - rgb: ``(N, 3, H, W)``; output ``(N, 1, H, W)`` float32 on ``rgb``'s device.
@@ -109,8 +109,7 @@ def simulate(
     >>> torch.equal(noisy, simulate(sensor, grey, "other", 10.0))  # each image its own
     False
     """
-    if not isinstance(sigma, Exposure):
-        sigma = check_sigma(sigma)
+    noise = as_noise(sigma)
     ph = sensor.period[0]
     kh = sensor.kernels.shape[-2] if hasattr(sensor, "kernels") else sensor.weights().shape[-2]
     halo = -(-(kh // 2) // ph) * ph
@@ -122,6 +121,4 @@ def simulate(
             lo, hi = max(0, top - halo), min(h, top + step + halo)
             raw = sensor(rgb[:, :, lo:hi].double())
             out[:, :, top : min(h, top + step)] = raw[:, :, top - lo : top - lo + step].float()
-        if isinstance(sigma, Exposure):
-            return add_exposure_noise(out, image_name, sigma)
-        return add_evaluation_noise(out, image_name, sigma)
+        return noise.add(out, image_name)

@@ -132,6 +132,10 @@ class NetworkReconstructor:
             :func:`fast_precision`; about 3x faster on such CPUs), ``fp32`` (bit-exact float32)
             or ``bf16``. Resolved for the device of each raw image.
         domain: The light domain the network was trained in (``srgb`` or ``linear``).
+        any_pattern: The network reconstructs whatever pattern it is told (a network of any
+            pattern not fine-tuned on one): :meth:`for_pattern` gives it another.
+        fingerprint: What, beyond the weights, identifies its results (the model file, the
+            pattern's values; :mod:`splitcam.evaluation.protocol`).
     """
 
     def __init__(
@@ -143,6 +147,8 @@ class NetworkReconstructor:
         tile: int | None = 512,
         precision: str = "auto",
         domain: str = SRGB,
+        any_pattern: bool = False,
+        fingerprint: str | None = None,
     ) -> None:
         fast_precision(precision, "cpu")  # an unknown precision fails here, not at first use
         self.domain = check_domain(domain)
@@ -153,9 +159,8 @@ class NetworkReconstructor:
         self.precision = precision
         #: Show a progress bar over the tiles (what the CLI turns on for large images).
         self.progress = False
-        #: Whether the network reconstructs whatever pattern it is told (a network of any
-        #: pattern, not one fine-tuned on one): then :meth:`for_pattern` gives it another.
-        self.any_pattern = False
+        self.any_pattern = any_pattern
+        self.fingerprint = fingerprint
         self._kernels = pattern_pixel_kernels(pattern)
 
     def for_pattern(self, pattern: Pattern) -> NetworkReconstructor:

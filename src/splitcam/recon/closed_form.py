@@ -43,7 +43,7 @@ from ..io.tensorfiles import load_pair, save_pair
 from ..io.weights import IMAGE_STATISTICS, IMAGE_STATISTICS_LINEAR
 from ..patterns import Pattern, get
 from ..physics.light import check_domain, srgb_to_linear
-from ..physics.noise import Exposure, check_sigma
+from ..physics.noise import NoiseModel, as_noise, check_level
 from ..physics.sensor import pattern_pixel_kernels
 from .lmmse import DEFAULT_RADIUS, LMMSE, LMMSEFileError, apply_filters
 
@@ -362,19 +362,19 @@ def _as_kernels(pattern_or_kernels: Pattern | str | torch.Tensor) -> torch.Tenso
 
 
 def _as_sigmas(sigma: Any) -> tuple[torch.Tensor, bool]:
-    """Noise level(s) → ``((S, 2) variance coefficients, several?)``: a sigma (8-bit units), a
-    1-D tensor of sigmas, an :class:`~splitcam.physics.noise.Exposure`, or a list of them."""
-    if isinstance(sigma, Exposure):
-        return torch.tensor([sigma.variance_coefficients()], dtype=torch.float64), False
-    if isinstance(sigma, (list, tuple)) and sigma and isinstance(sigma[0], Exposure):
-        return torch.tensor([e.variance_coefficients() for e in sigma], dtype=torch.float64), True
+    """Noise level(s) → ``((S, 2) variance coefficients, several?)``: a sigma (8-bit units) or
+    a :class:`~splitcam.physics.noise.NoiseModel`, a 1-D tensor of sigmas, or a list of
+    levels."""
+    if isinstance(sigma, (list, tuple)) and sigma:
+        coefficients = [as_noise(s).variance_coefficients() for s in sigma]
+        return torch.tensor(coefficients, dtype=torch.float64), True
     if isinstance(sigma, torch.Tensor) and sigma.ndim == 1:
         if not torch.isfinite(sigma).all() or bool((sigma < 0).any()):
             raise ValueError("expected finite sigmas >= 0")
         s = sigma.detach().to(torch.float64)
         return torch.stack([torch.zeros_like(s), (s / 255.0) ** 2], 1), True
-    s = check_sigma(float(sigma))
-    return torch.tensor([[0.0, (s / 255.0) ** 2]], dtype=torch.float64), False
+    level = as_noise(sigma.item() if isinstance(sigma, torch.Tensor) else sigma)
+    return torch.tensor([level.variance_coefficients()], dtype=torch.float64), False
 
 
 def closed_form_filters(
@@ -452,16 +452,17 @@ class ClosedFormFilters:
         self._kernels = _as_kernels(self.pattern)
         self._cache: dict[float, tuple[torch.Tensor, torch.Tensor]] = {}
 
-    def filters(self, sigma: float | Exposure) -> tuple[torch.Tensor, torch.Tensor]:
-        """Filters for a Gaussian sigma (8-bit units) or a photon-model :class:`Exposure`."""
-        sigma = sigma if isinstance(sigma, Exposure) else check_sigma(sigma)
+    def filters(self, sigma: float | NoiseModel) -> tuple[torch.Tensor, torch.Tensor]:
+        """Filters for a Gaussian sigma (8-bit units) or a
+        :class:`~splitcam.physics.noise.NoiseModel`."""
+        sigma = check_level(sigma)
         if sigma not in self._cache:
             self._cache[sigma] = closed_form_filters(
                 self._kernels, sigma, statistics=self.statistics, radius=self.radius
             )
         return self._cache[sigma]
 
-    def expected_mse(self, sigma: float | Exposure) -> float:
+    def expected_mse(self, sigma: float | NoiseModel) -> float:
         return float(
             closed_form_mse(self._kernels, sigma, statistics=self.statistics, radius=self.radius)
         )
@@ -495,11 +496,16 @@ def closed_form_lmmse(
             f"image statistics of the {statistics.domain} domain cannot make an LMMSE of the "
             f"{check_domain(domain)} domain"
         )
-    lmmse = LMMSE(ClosedFormFilters(pattern, statistics, radius), name=name)  # type: ignore[arg-type]
-    lmmse.domain = statistics.domain
-    if statistics.domain != SRGB:  # what tells its results apart from the sRGB LMMSE's
-        lmmse.fingerprint = f":statistics:{statistics.domain}:{statistics.count}"
-    return lmmse
+    filters = ClosedFormFilters(pattern, statistics, radius)
+    # Image statistics of another domain tell its results apart from the sRGB LMMSE's.
+    other = statistics.domain != SRGB
+    return LMMSE(
+        filters,  # type: ignore[arg-type]
+        name,
+        pattern=filters.pattern,
+        domain=statistics.domain,
+        fingerprint=f":statistics:{statistics.domain}:{statistics.count}" if other else None,
+    )
 
 
 def lmmse_estimate(

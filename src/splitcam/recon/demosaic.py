@@ -14,7 +14,9 @@ import numpy as np
 import torch
 
 from ..checks import check_raw
+from ..io.domains import SRGB
 from ..patterns import get
+from ..physics.light import check_domain
 from ..physics.noise import check_level
 from .tiling import DEFAULT_TILE, tiled
 
@@ -48,9 +50,11 @@ class ClassicalDemosaic:
     Args:
         method: One of ``bilinear``, ``malvar2004``, ``menon2007`` (case-insensitive).
         tile: Tile size in pixels; ``None`` demosaics whole images at once.
+        name: Label in tables (default: the method's name).
+        domain: The light domain of the raw images (fixed interpolation works in either).
 
     Raises:
-        ValueError: Unknown method; the message lists the valid names.
+        ValueError: Unknown method (the message lists the valid names) or domain.
     """
 
     METHODS = ("bilinear", "malvar2004", "menon2007")
@@ -64,13 +68,21 @@ class ClassicalDemosaic:
     #: changing one mosaic pixel of random mosaics never changes an output farther away.
     RADIUS = {"bilinear": 1, "malvar2004": 2, "menon2007": 8}
 
-    def __init__(self, method: str, *, tile: int | None = DEFAULT_TILE) -> None:
+    def __init__(
+        self,
+        method: str,
+        *,
+        tile: int | None = DEFAULT_TILE,
+        name: str | None = None,
+        domain: str = SRGB,
+    ) -> None:
         key = str(method).strip().lower()
         if key not in self.METHODS:
             raise ValueError(
                 f"expected a demosaicking method among {', '.join(self.METHODS)}, got {method!r}"
             )
-        self.name = key
+        self.name = name or key
+        self.domain = check_domain(domain)
         self.pattern = get("bayer")
         self.radius = self.RADIUS[key]
         self.tile = tile

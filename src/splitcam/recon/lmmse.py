@@ -22,10 +22,12 @@ import torch.nn.functional as F
 
 from ..checks import check_raw
 from ..data.patches import ImageCache, PatchSampler
+from ..io.domains import SRGB
 from ..io.tensorfiles import load_pair, save_pair
 from ..io.weights import LMMSE_DIR
 from ..patterns import Pattern, PatternError, get
-from ..physics.noise import Exposure, check_level
+from ..physics.light import check_domain
+from ..physics.noise import NoiseModel, as_noise, check_level
 from ..physics.periodic import phase_conv, phase_map
 from ..physics.sensor import SplitterSensor
 from .tiling import DEFAULT_TILE, tiled
@@ -100,7 +102,7 @@ class LMMSEStatistics:
     yy: torch.Tensor
     counts: torch.Tensor
     info: dict[str, Any] = field(default_factory=dict)
-    _cache: dict[float | Exposure, tuple[torch.Tensor, torch.Tensor]] = field(
+    _cache: dict[float | NoiseModel, tuple[torch.Tensor, torch.Tensor]] = field(
         default_factory=dict, init=False, repr=False
     )
 
@@ -142,7 +144,7 @@ class LMMSEStatistics:
             {"pooled": [self.info, other.info]},
         )
 
-    def _solve(self, sigma: float | Exposure) -> torch.Tensor:
+    def _solve(self, sigma: float | NoiseModel) -> torch.Tensor:
         """The ``(P, d + 1, 3)`` LMMSE solution (filters and bias) at ``sigma``, float64."""
         if bool((self.counts == 0).any()):
             raise ValueError("expected statistics with at least one sample per phase, got none")
@@ -151,10 +153,7 @@ class LMMSEStatistics:
         mxy = self.xy / n
         d = mxx.shape[-1] - 1
         trace = torch.diagonal(mxx[:, :d, :d], dim1=-2, dim2=-1).sum(-1)
-        if isinstance(sigma, Exposure):
-            a, b = sigma.variance_coefficients()
-        else:
-            a, b = 0.0, (sigma / 255.0) ** 2
+        a, b = as_noise(sigma).variance_coefficients()
         if a == 0 and b == 0 and bool((trace == 0).any()):
             dark = int((trace == 0).nonzero()[0, 0])
             raise ValueError(
@@ -172,7 +171,7 @@ class LMMSEStatistics:
         mxx = mxx + torch.diag_embed(torch.cat([var, torch.zeros_like(var[:, :1])], 1))
         return torch.linalg.solve(mxx, mxy)
 
-    def filters(self, sigma: float | Exposure) -> tuple[torch.Tensor, torch.Tensor]:
+    def filters(self, sigma: float | NoiseModel) -> tuple[torch.Tensor, torch.Tensor]:
         """The LMMSE filters and biases for noise level ``sigma`` (cached per sigma), a Gaussian
         sigma or a photon-model :class:`~splitcam.physics.noise.Exposure` (signal-dependent
         noise, its variance at each window position's mean signal).
@@ -199,7 +198,7 @@ class LMMSEStatistics:
             self._cache[sigma] = (weights, w[:, -1, :].contiguous())
         return self._cache[sigma]
 
-    def expected_mse(self, sigma: float | Exposure) -> float:
+    def expected_mse(self, sigma: float | NoiseModel) -> float:
         """Mean squared error of the LMMSE filters on the training neighbourhoods themselves.
 
         ``E|y - W^T x|^2 = tr(E[y y^T] - E[x y^T]^T W)`` at the optimum ``W``, averaged over the 3
@@ -444,22 +443,38 @@ class LMMSE:
     Args:
         statistics: The fitted statistics (see :func:`fit_lmmse`, :meth:`LMMSEStatistics.load`).
         name: Label for tables.
+        pattern: The pattern it is labelled with (default: that of ``statistics``; a pattern
+            file with the same kernels as a shipped fit's keeps its own name this way).
+        domain: The light domain of its raw images and estimates.
+        fingerprint: What, beyond the pattern, tells its results apart (image statistics of
+            another domain); see :mod:`splitcam.evaluation.protocol`.
     """
 
-    def __init__(self, statistics: LMMSEStatistics, name: str = "lmmse") -> None:
+    def __init__(
+        self,
+        statistics: LMMSEStatistics,
+        name: str = "lmmse",
+        *,
+        pattern: Pattern | None = None,
+        domain: str = SRGB,
+        fingerprint: str | None = None,
+    ) -> None:
         self.statistics = statistics
-        self.pattern = statistics.pattern
+        self.pattern = pattern if pattern is not None else statistics.pattern
         self.name = name
+        self.domain = check_domain(domain)
+        self.fingerprint = fingerprint
 
     @classmethod
     def fit(
         cls,
         pattern: Pattern | str,
         source: torch.Tensor | PatchSampler | ImageCache | str | os.PathLike[str],
+        name: str = "lmmse",
         **kwargs: Any,
     ) -> LMMSE:
-        """``LMMSE(fit_lmmse(pattern, source, **kwargs))``."""
-        return cls(fit_lmmse(pattern, source, **kwargs))
+        """``LMMSE(fit_lmmse(pattern, source, **kwargs), name)``."""
+        return cls(fit_lmmse(pattern, source, **kwargs), name)
 
     @classmethod
     def load(cls, path: str | os.PathLike[str]) -> LMMSE:
@@ -470,7 +485,7 @@ class LMMSE:
         """Save the statistics (see :meth:`LMMSEStatistics.save`)."""
         return self.statistics.save(path)
 
-    def reconstruct(self, raw: torch.Tensor, sigma: float | Exposure) -> torch.Tensor:
+    def reconstruct(self, raw: torch.Tensor, sigma: float | NoiseModel) -> torch.Tensor:
         """Apply the phase filters for ``sigma``: one convolution, then a per-pixel phase pick.
 
         Runs in tiles of :data:`splitcam.recon.tiling.DEFAULT_TILE` pixels
@@ -512,8 +527,8 @@ class LMMSE:
 SHIPPED_DIR = LMMSE_DIR
 
 
-def shipped_lmmse(pattern: Pattern | str) -> LMMSE:
-    """The shipped LMMSE fit of a built-in pattern (fitted on CBSD432).
+def shipped_lmmse(pattern: Pattern | str, name: str = "lmmse") -> LMMSE:
+    """The shipped LMMSE fit of a built-in pattern (fitted on CBSD432), labelled ``name``.
 
     A pattern file whose kernels differ from the built-in pattern of the same name gets no
     shipped fit: its raw images are not the built-in's.
@@ -524,9 +539,9 @@ def shipped_lmmse(pattern: Pattern | str) -> LMMSE:
     pattern = get(pattern)
     path = SHIPPED_DIR / f"{pattern.name}.json"
     if path.is_file():
-        lmmse = LMMSE.load(path)
-        if lmmse.pattern.equals(pattern):
-            return lmmse
+        statistics = LMMSEStatistics.load(path)
+        if statistics.pattern.equals(pattern):
+            return LMMSE(statistics, name, pattern=pattern)
         raise FileNotFoundError(
             f"pattern {pattern.name!r} has other kernels than the built-in {pattern.name!r}, "
             f"so the shipped LMMSE fit does not apply; fit one with --lmmse-train DIR"

@@ -31,7 +31,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from ..checks import check_count, check_period, check_raw
-from ..physics.noise import Exposure
+from ..physics.noise import NoiseModel, as_noise
 from ..physics.periodic import period_shuffle, period_unshuffle, phase_conv, phase_map
 from .closed_form import ImageStatistics, lmmse_estimate, shipped_image_statistics
 from .lmmse import DEFAULT_RADIUS
@@ -514,30 +514,28 @@ def serves_any_pattern(network: nn.Module) -> bool:
 
 
 def noise_level_map(
-    raw: torch.Tensor, sigma: float | torch.Tensor | Exposure | list[Exposure], period
+    raw: torch.Tensor, sigma: float | torch.Tensor | NoiseModel | list[NoiseModel], period
 ) -> torch.Tensor:
     """The noise standard deviation (8-bit units) at cell resolution, ``(N, 1, H/Ph, W/Pw)``.
 
-    Gaussian noise (a sigma, or one per image): that constant. The photon model (an
-    :class:`~splitcam.physics.noise.Exposure`, or one per image): ``255 sqrt(a g + b)`` with the
-    raw value ``g`` (clamped at 0) as the estimate of each pixel's signal, averaged over each
-    period cell: the per-pixel noise the exposure implies, in the same units.
+    Gaussian noise (a sigma, or a tensor of one per image): that constant. A
+    :class:`~splitcam.physics.noise.NoiseModel`, or a list of one per image: each level's
+    :meth:`~splitcam.physics.noise.NoiseModel.level_map` (the photon model's ``255 sqrt(a g +
+    b)``, with the raw value as each pixel's signal, averaged over each period cell).
     """
     n = raw.shape[0]
     cells = period_unshuffle(raw, period)
     shape = (n, 1, *cells.shape[-2:])
-    exposures = [sigma] if isinstance(sigma, Exposure) else sigma
-    if isinstance(exposures, (list, tuple)) and exposures and isinstance(exposures[0], Exposure):
-        if len(exposures) == 1:
-            exposures = list(exposures) * n
-        coef = torch.tensor(
-            [e.variance_coefficients() for e in exposures], dtype=raw.dtype, device=raw.device
-        )
-        var = coef[:, 0, None, None, None] * cells.clamp_min(0) + coef[:, 1, None, None, None]
-        return (255.0 * var.sqrt()).mean(1, keepdim=True)
-    sig = torch.as_tensor(sigma, dtype=raw.dtype, device=raw.device).reshape(-1)
-    sig = sig.expand(n) if sig.numel() == 1 else sig
-    return sig.view(n, 1, 1, 1).expand(shape)
+    if isinstance(sigma, torch.Tensor):
+        sig = sigma.to(dtype=raw.dtype, device=raw.device).reshape(-1)
+        sig = sig.expand(n) if sig.numel() == 1 else sig
+        return sig.view(n, 1, 1, 1).expand(shape)
+    levels = [as_noise(s) for s in sigma] if isinstance(sigma, (list, tuple)) else [sigma]
+    if len(levels) == 1:
+        return as_noise(levels[0]).level_map(cells)
+    if len(levels) != n:
+        raise ValueError(f"expected 1 or {n} noise levels, got {len(levels)}")
+    return torch.cat([lv.level_map(cells[i : i + 1]) for i, lv in enumerate(levels)])
 
 
 #: Network classes by their ``config()["arch"]`` name.

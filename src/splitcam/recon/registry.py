@@ -29,7 +29,8 @@ from __future__ import annotations
 
 import json
 import os
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 from .. import patterns
@@ -40,7 +41,7 @@ from ..physics.light import check_domain
 from .base import NetworkReconstructor, Reconstructor
 from .closed_form import closed_form_lmmse
 from .demosaic import ClassicalDemosaic
-from .lmmse import LMMSE, shipped_lmmse
+from .lmmse import LMMSE, fit_lmmse, shipped_lmmse
 from .loading import (
     LoadedNetwork,
     ModelError,
@@ -53,6 +54,7 @@ from .loading import (
 from .networks import serves_any_pattern
 
 __all__ = [
+    "BUILDERS",
     "DEMOSAICKING",
     "build_method",
     "build_methods",
@@ -68,8 +70,9 @@ DEMOSAICKING = ClassicalDemosaic.METHODS
 
 
 def method_names() -> list[str]:
-    """The method names :func:`build_method` knows (besides run folders and checkpoints)."""
-    return ["lmmse", *DEMOSAICKING]
+    """The method names :func:`build_method` knows (besides shipped models, run folders and
+    checkpoints): the keys of :data:`BUILDERS`."""
+    return list(BUILDERS)
 
 
 def build_model(
@@ -100,13 +103,17 @@ def build_model(
     loaded = load_model(spec)
     meta = loaded.meta
     name = meta.get("name") or Path(str(spec)).stem
-    own = _trained_on_one_pattern(meta.get("config"))
-    method = _network_method(loaded, f"net-{name}", pattern, tile, precision, own)
-    method.domain = _check_network_domain(f"net-{name}", meta.get("config"), domain)
+    trained_in = _check_network_domain(f"net-{name}", meta.get("config"), domain)
     # Files written before their fields had a checksum: the fields themselves identify them.
     fields = "" if "meta_sha256" in meta else f":{meta_checksum(meta)}"
-    method.fingerprint = f"model:{name}:{meta.get('sha256', '')}{fields}{method.fingerprint}"
-    return method
+    return _network_method(
+        loaded,
+        f"net-{name}",
+        pattern,
+        _Inference(tile, precision, trained_in),
+        own_pattern=_trained_on_one_pattern(meta.get("config")),
+        identity=f"model:{name}:{meta.get('sha256', '')}{fields}",
+    )
 
 
 def trained_domain(config: dict | None) -> str:
@@ -150,13 +157,29 @@ def _trained_on_one_pattern(config: dict | None) -> bool:
     return str(name).strip().lower() != "random"
 
 
+@dataclass(frozen=True)
+class _Inference:
+    """How a network method runs: tile size, precision, and the domain it was trained in."""
+
+    tile: int | None
+    precision: str
+    domain: str
+
+
 def _network_method(
-    loaded: LoadedNetwork, label: str, pattern, tile: int | None, precision: str, own_pattern: bool
+    loaded: LoadedNetwork,
+    label: str,
+    pattern,
+    inference: _Inference,
+    *,
+    own_pattern: bool,
+    identity: str,
 ) -> NetworkReconstructor:
     """A trained network as a method: with its own pattern, or for a network of any pattern
-    (``period`` None) with ``pattern``, labelled ``<label>-<pattern>``; ``fingerprint`` holds
-    what, beyond the weights, identifies its results (the pattern's values). A network of any
-    pattern fine-tuned on one (``own_pattern``) reconstructs that one unless told another."""
+    (``period`` None) with ``pattern``, labelled ``<label>-<pattern>``. Its fingerprint is
+    ``identity`` (the file) followed by what else identifies its results (the pattern's values).
+    A network of any pattern fine-tuned on one (``own_pattern``) reconstructs that one unless
+    told another."""
     if not serves_any_pattern(loaded.network) and pattern is not None:
         given = patterns.get(pattern)
         if not given.equals(loaded.pattern):
@@ -165,12 +188,15 @@ def _network_method(
                 f"of {_pattern_label(pattern, given)}: use a network of that pattern, the "
                 f"universal network or lmmse"
             )
+    options = {
+        "tile": inference.tile,
+        "precision": inference.precision,
+        "domain": inference.domain,
+    }
     if not serves_any_pattern(loaded.network) or (own_pattern and pattern is None):
-        method = NetworkReconstructor(
-            loaded.network, loaded.pattern, label, tile=tile, precision=precision
+        return NetworkReconstructor(
+            loaded.network, loaded.pattern, label, fingerprint=identity, **options
         )
-        method.fingerprint = ""
-        return method
     if pattern is None:
         raise ValueError(
             f"{label} reconstructs any pattern: name the pattern of the raw images "
@@ -178,14 +204,16 @@ def _network_method(
         )
     resolved = patterns.get(pattern)
     name = _pattern_label(pattern, resolved)
-    method = NetworkReconstructor(
-        loaded.network, resolved, f"{label}-{name}", tile=tile, precision=precision
-    )
-    method.any_pattern = not own_pattern
     values = ",".join(f"{v:.9g}" for v in resolved.kernels.reshape(-1))
     layout = ",".join(str(v) for v in resolved.layout.reshape(-1))
-    method.fingerprint = f":{name}:{resolved.kernels.shape}:{layout}:{values}"
-    return method
+    return NetworkReconstructor(
+        loaded.network,
+        resolved,
+        f"{label}-{name}",
+        any_pattern=not own_pattern,
+        fingerprint=f"{identity}:{name}:{resolved.kernels.shape}:{layout}:{values}",
+        **options,
+    )
 
 
 def network_kind(label: str, pattern: str) -> str:
@@ -229,6 +257,71 @@ def _pattern_label(
     return pattern.name
 
 
+@dataclass(frozen=True)
+class _Request:
+    """What :func:`build_method` was asked, besides the method's name."""
+
+    pattern: str | os.PathLike | patterns.Pattern | None
+    lmmse_train: str | os.PathLike | None
+    tile: int | None
+    precision: str
+    progress: bool
+    domain: str | None
+
+
+def _build_demosaic(key: str, request: _Request) -> Reconstructor:
+    return ClassicalDemosaic(key, name=f"bayer+{key}", domain=request.domain or SRGB)
+
+
+def _build_lmmse(key: str, request: _Request) -> Reconstructor:
+    if request.pattern is None:
+        raise ValueError("method 'lmmse' needs a pattern (a name such as D, or a file)")
+    resolved = patterns.get(request.pattern)
+    name = f"lmmse-{_pattern_label(request.pattern, resolved)}"
+    if request.domain == LINEAR:
+        if request.lmmse_train is not None:
+            raise ValueError(
+                "the LMMSE fitted on training images (--lmmse-train) is of sRGB values; in "
+                "the linear domain the LMMSE is the closed form from the shipped linear "
+                "image statistics: leave --lmmse-train out"
+            )
+        return closed_form_lmmse(resolved, name=name, domain=LINEAR)
+    if request.lmmse_train is not None:
+        statistics = fit_lmmse(resolved, request.lmmse_train, progress=request.progress)
+        return LMMSE(statistics, name, pattern=resolved)
+    try:
+        return shipped_lmmse(resolved, name)
+    except FileNotFoundError:  # not a built-in's kernels: solve its filters in closed form
+        return closed_form_lmmse(resolved, name=name)
+
+
+def _build_network_file(spec: str | os.PathLike, request: _Request) -> Reconstructor:
+    """A run folder or checkpoint file: the network with the pattern it was trained for."""
+    path = resolve(spec)
+    config = read_meta(path).get("config")
+    folder = run_folder_of(path)
+    label = folder.name if folder is not None else path.stem
+    stat = path.stat()
+    return _network_method(
+        load_network(path),
+        label,
+        request.pattern,
+        _Inference(
+            request.tile, request.precision, _check_network_domain(label, config, request.domain)
+        ),
+        own_pattern=_trained_on_one_pattern(config),
+        identity=f"{path.resolve()}:{stat.st_size}:{stat.st_mtime_ns}",
+    )
+
+
+#: Method names and their builders. Shipped models (:func:`build_model`), model files, run
+#: folders and checkpoints are found after these, by what the name or path is.
+BUILDERS: dict[str, Callable[[str, _Request], Reconstructor]] = {
+    "lmmse": _build_lmmse,
+    **{key: _build_demosaic for key in ClassicalDemosaic.METHODS},
+}
+
+
 def build_method(
     spec: str | os.PathLike,
     *,
@@ -242,8 +335,8 @@ def build_method(
     """One reconstruction method from its name or a run folder / checkpoint file.
 
     Args:
-        spec: ``lmmse``, ``bilinear``, ``malvar2004``, ``menon2007``, a shipped model's name or
-            model file, or the path of a run folder or checkpoint.
+        spec: ``lmmse``, ``bilinear``, ``malvar2004``, ``menon2007`` (:data:`BUILDERS`), a
+            shipped model's name or model file, or the path of a run folder or checkpoint.
         pattern: The pattern (name, file or :class:`~splitcam.patterns.Pattern`) for ``lmmse``
             and for a network of any pattern (``universal``).
         lmmse_train: Fit the LMMSE on this folder of training images instead of using the
@@ -272,56 +365,25 @@ def build_method(
     'net-D'
     """
     key = str(spec).strip().lower()
-    if domain is not None:
-        domain = check_domain(domain)
-    if key in DEMOSAICKING:
-        method = ClassicalDemosaic(key)
-        method.name = f"bayer+{key}"
-        method.domain = domain or SRGB
-        return method
-    if key == "lmmse":
-        if pattern is None:
-            raise ValueError("method 'lmmse' needs a pattern (a name such as D, or a file)")
-        resolved = patterns.get(pattern)
-        if domain == LINEAR:
-            if lmmse_train is not None:
-                raise ValueError(
-                    "the LMMSE fitted on training images (--lmmse-train) is of sRGB values; in "
-                    "the linear domain the LMMSE is the closed form from the shipped linear "
-                    "image statistics: leave --lmmse-train out"
-                )
-            lmmse = closed_form_lmmse(resolved, domain=LINEAR)
-        elif lmmse_train is not None:
-            lmmse = LMMSE.fit(resolved, lmmse_train, progress=progress)
-        else:
-            try:
-                lmmse = shipped_lmmse(resolved)
-            except FileNotFoundError:  # not a built-in's kernels: solve its filters in closed form
-                lmmse = closed_form_lmmse(resolved)
-        lmmse.pattern = resolved
-        lmmse.name = f"lmmse-{_pattern_label(pattern, resolved)}"
-        lmmse.domain = domain or SRGB
-        return lmmse
+    request = _Request(
+        pattern,
+        lmmse_train,
+        tile,
+        precision,
+        progress,
+        check_domain(domain) if domain is not None else None,
+    )
+    if key in BUILDERS:
+        return BUILDERS[key](key, request)
     check_unambiguous(spec, "method")
-    options = {"pattern": pattern, "tile": tile, "precision": precision, "domain": domain}
     if isinstance(spec, str) and spec.strip() in model_names():
-        return build_model(spec.strip(), **options)
-    if _is_path(spec) and str(spec).endswith(".json") and Path(spec).is_file():
-        return build_model(spec, **options)
+        spec = spec.strip()
+    if (isinstance(spec, str) and spec in model_names()) or (
+        _is_path(spec) and str(spec).endswith(".json") and Path(spec).is_file()
+    ):
+        return build_model(spec, pattern=pattern, tile=tile, precision=precision, domain=domain)
     if _is_path(spec):
-        path = resolve(spec)
-        config = read_meta(path).get("config")
-        folder = run_folder_of(path)
-        label = folder.name if folder is not None else path.stem
-        trained_in = _check_network_domain(label, config, domain)
-        own = _trained_on_one_pattern(config)
-        method = _network_method(load_network(path), label, pattern, tile, precision, own)
-        method.domain = trained_in
-        stat = path.stat()
-        method.fingerprint = (
-            f"{path.resolve()}:{stat.st_size}:{stat.st_mtime_ns}{method.fingerprint}"
-        )
-        return method
+        return _build_network_file(spec, request)
     raise ValueError(
         f"unknown method {str(spec)!r}; valid: {', '.join(method_names())}, a shipped model "
         f"({', '.join(model_names()) or 'none shipped'}), or a run folder / checkpoint file"

@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import math
 
+from ..checks import check_count
+
 __all__ = ["LR_RULES", "SCHEDULES", "learning_rate", "progress", "scaled_lr"]
 
 #: Names accepted by :func:`learning_rate`.
@@ -71,8 +73,8 @@ def scaled_lr(lr: float, batch: int, new_batch: int, rule: str = "none") -> floa
     >>> scaled_lr(1e-3, 8, 64), round(scaled_lr(1e-3, 8, 64, "sqrt"), 6)
     (0.001, 0.002828)
     """
-    if batch < 1 or new_batch < 1:
-        raise ValueError(f"batch sizes must be >= 1, got {batch} and {new_batch}")
+    check_count(batch, "batch", 1)
+    check_count(new_batch, "new batch", 1)
     if rule not in LR_RULES:
         raise ValueError(
             f"unknown learning-rate rule {rule!r}; expected one of {', '.join(LR_RULES)}"

@@ -42,6 +42,7 @@ from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
+from ..checks import check_count
 from ..io import checkpoints as ckpt_io
 from .config import ConfigError, TrainConfig
 
@@ -405,8 +406,10 @@ def run_sweep(
     """
     if executor not in EXECUTORS:
         raise ConfigError(f"unknown executor {executor!r}; use {' or '.join(EXECUTORS)}")
-    if isinstance(jobs, bool) or not isinstance(jobs, int) or jobs < 1:
-        raise ConfigError(f"jobs must be an integer >= 1, got {jobs!r}")
+    try:
+        check_count(jobs, "jobs", 1)
+    except ValueError as err:
+        raise ConfigError(str(err)) from None
     if threads is None and executor == "local":
         threads = os.cpu_count() or 1
     if snapshots is not None:

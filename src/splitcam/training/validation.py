@@ -14,7 +14,7 @@ from ..data.patches import ImageCache, list_images
 from ..data.testsets import centre_crop
 from ..evaluation.protocol import mean_psnr
 from ..io.domains import SRGB
-from ..physics.noise import Exposure
+from ..physics.noise import Exposure, level_label
 from ..physics.system import ImagingSystem
 from ..recon.base import NetworkReconstructor
 from .config import ConfigError, TrainConfig
@@ -168,13 +168,10 @@ def validate(
         torch.clear_autocast_cache()
         system.train(was_training)
 
-    def key(s: float | Exposure) -> str:
-        return f"N{s.photons:g}" if isinstance(s, Exposure) else f"{s:g}"
-
     means = {s: sum(m[s] for m in per_pattern.values()) / len(per_pattern) for s in sigmas}
-    out = {f"val_psnr_{key(s)}": value for s, value in means.items()}
+    out = {f"val_psnr_{level_label(s)}": value for s, value in means.items()}
     if val_patterns:
         for name, scores in per_pattern.items():
-            out.update({f"val_psnr_{name}_{key(s)}": v for s, v in scores.items()})
+            out.update({f"val_psnr_{name}_{level_label(s)}": v for s, v in scores.items()})
     out["val_psnr"] = sum(means.values()) / len(means)
     return out
