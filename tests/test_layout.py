@@ -9,8 +9,6 @@ from __future__ import annotations
 import ast
 from pathlib import Path
 
-import pytest
-
 import splitcam
 
 LAYERS = [
@@ -28,8 +26,6 @@ LAYERS = [
     "cli",
 ]
 PACKAGE = Path(splitcam.__file__).parent
-#: Packages that only say where their content moved (importing them raises ImportError).
-MOVED = {"optics", "methods"}
 
 
 def _part(module: str) -> str | None:
@@ -77,22 +73,7 @@ def test_every_module_belongs_to_a_layer():
         for p in PACKAGE.iterdir()
         if (p.suffix == ".py" or (p / "__init__.py").is_file()) and p.name != "__pycache__"
     }
-    assert tops - {"__init__", "__main__", "weights"} - MOVED == set(LAYERS)
-
-
-def test_moved_modules_hold_no_code():
-    """A moved package or module only raises ImportError naming where its content went."""
-    import importlib
-
-    for name in MOVED:
-        path = (
-            PACKAGE / name / "__init__.py" if (PACKAGE / name).is_dir() else PACKAGE / f"{name}.py"
-        )
-        if path.name == "__init__.py":
-            assert [p.name for p in path.parent.glob("*.py")] == ["__init__.py"]
-        assert not _imports(path)
-        with pytest.raises(ImportError, match="moved to splitcam"):
-            importlib.import_module(f"splitcam.{name}")
+    assert tops - {"__init__", "__main__", "weights"} == set(LAYERS)
 
 
 def test_the_checker_sees_a_wrong_way_import(tmp_path):

@@ -30,12 +30,3 @@ def test_parsing_every_command_imports_no_torch():
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert done.returncode == 0, done.stderr
     assert done.stdout.strip() == "[]"
-
-
-def test_moved_names_say_where_they_went():
-    import splitcam.cli
-
-    with pytest.raises(AttributeError, match="splitcam.data.testsets.load_datasets"):
-        splitcam.cli.load_datasets  # noqa: B018
-    with pytest.raises(ImportError, match="splitcam.physics.optics"):
-        import splitcam.optics  # noqa: F401

@@ -35,20 +35,6 @@ COMMANDS = (
     "reconstruct",
 )
 
-#: Names that moved from ``splitcam.cli`` into the library or a command module.
-_MOVED = {
-    "load_datasets": "splitcam.data.testsets.load_datasets",
-    "MAIN_JOB_MAX_SIZE": "splitcam.cli.evaluate.MAIN_JOB_MAX_SIZE",
-    "FINE_TUNE_MINUTES": "splitcam.cli.train.FINE_TUNE_MINUTES",
-    "FINE_TUNE_LR": "splitcam.cli.train.FINE_TUNE_LR",
-}
-
-
-def __getattr__(name: str):
-    if name in _MOVED:
-        raise AttributeError(f"splitcam.cli.{name} moved: use {_MOVED[name]}")
-    raise AttributeError(f"module 'splitcam.cli' has no attribute {name!r}")
-
 
 def build_parser() -> argparse.ArgumentParser:
     """The parser of every command (argparse only: no torch is imported)."""

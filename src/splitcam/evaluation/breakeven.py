@@ -25,6 +25,7 @@ from ..recon.base import Reconstructor
 from ..recon.closed_form import closed_form_lmmse
 from .exposure import crossings, default_exposures, exposure_study
 from .protocol import Images
+from .tables import markdown_table
 
 __all__ = [
     "DEFAULT_CHIS",
@@ -213,12 +214,11 @@ def write_break_even(
         "`all` / `none` better at every / no exposure, empty: "
         "η + χ > 1 (infeasible). Rows η, columns χ.",
         "",
-        "| η \\ χ | " + " | ".join(f"{x:g}" for x in result["chis"]) + " |",
-        "|---|" + "---|" * len(result["chis"]),
     ]
-    for e in result["etas"]:
-        row = [cell_text(cells[(e, x)]) for x in result["chis"]]
-        lines.append(f"| {e:g} | " + " | ".join(row) + " |")
+    lines += markdown_table(
+        ["η \\ χ", *(f"{x:g}" for x in result["chis"])],
+        ([f"{e:g}", *(cell_text(cells[(e, x)]) for x in result["chis"])] for e in result["etas"]),
+    )
     lines += ["", "Router presets (mean η, χ over R, G, B):", ""]
     lines += [f"- {name}: η = {e:.3f}, χ = {x:.3f}" for name, (e, x) in presets.items()]
     lines += ["", f"![break-even map]({chart.name})", ""]

@@ -37,7 +37,7 @@ from ..recon.base import Reconstructor
 from ..recon.closed_form import closed_form_lmmse
 from .metrics import mean_over_images
 from .protocol import Images, check_method_domains, evaluate
-from .tables import domain_line
+from .tables import domain_line, markdown_table
 
 __all__ = ["crossings", "crossover", "exposure_study", "raw_snr_check", "write_study"]
 
@@ -171,11 +171,11 @@ def _crossover_table(
     itself); a reference a row has none of shows ``—``."""
     if refs == ["bayer"]:
         title = "## Crossover: the exposure below which each pattern beats the Bayer filter"
-        head = "| pattern | PSNR | CIEDE2000 |"
+        head = ["pattern", "PSNR", "CIEDE2000"]
     else:
         title = "## Crossover: the exposure below which each pattern beats " + " and ".join(refs)
-        head = "| pattern | " + " | ".join(f"vs {r}: PSNR | vs {r}: CIEDE2000" for r in refs) + " |"
-    lines = ["", title + title_suffix, "", head, "|---|" + "---|---|" * len(refs)]
+        head = ["pattern", *(f"vs {r}: {m}" for r in refs for m in ("PSNR", "CIEDE2000"))]
+    rows = []
     for p, r in results.items():
         mine = (references_of or {}).get(p, {name: name for name in refs})
         if len(refs) == 1 and mine.get(refs[0]) == p:
@@ -190,8 +190,8 @@ def _crossover_table(
                 curve = {n: sign * r[n][key] for n in photons}
                 ref = {n: sign * results[against][n][key] for n in photons}
                 row.append(_fmt_crossover(crossover(curve, ref), curve, ref))
-        lines.append(f"| {p} | " + " | ".join(row) + " |")
-    return lines
+        rows.append([p, *row])
+    return ["", title + title_suffix, "", *markdown_table(head, rows)]
 
 
 def network_references(networks: dict[str, str], refs: Sequence[str]) -> dict[str, dict[str, str]]:

@@ -15,7 +15,14 @@ from ..io.paper import PAPER_PATTERNS, PAPER_SIGMAS, TABLE1_PATTERNS
 from ..physics.noise import level_heading, level_key, parse_level_label
 from ..viz.charts import exposure_chart, sigma_chart
 from ..viz.patterns import draw_pattern
-from .tables import ENTRY_FIELDS, domain_line, method_of_label
+from .tables import (
+    ENTRY_FIELDS,
+    domain_line,
+    markdown_row,
+    markdown_rule,
+    markdown_table,
+    method_of_label,
+)
 
 #: The paper's test sets: its numbers are means over all their images, whole.
 PAPER_DATASETS = {"kodak24": 24, "mcmaster": 18}
@@ -143,12 +150,8 @@ def make_report(results: list[str | os.PathLike], out: str | os.PathLike) -> Pat
         "",
     ]
     sigmas = sorted({s for _, _, e, _ in entries for s in e["all"]}, key=level_key)
-    lines.append(
-        "| result | method | pattern | images | "
-        + " | ".join(level_heading(s) for s in sigmas)
-        + " |"
-    )
-    lines.append("|---|---|---|---|" + "---|" * len(sigmas))
+    headings = [level_heading(s) for s in sigmas]
+    rows = []
     for folder, method, entry, pattern in entries:
         ref = paper_row(pattern) if comparable(method, entry) else None
         cells = []
@@ -163,15 +166,18 @@ def make_report(results: list[str | os.PathLike], out: str | os.PathLike) -> Pat
                 cell += f" ({p_psnr:.2f}, {st['psnr'] - p_psnr:+.2f})"
             cells.append(cell)
         n = max(st["n_images"] for st in entry["all"].values())
-        lines.append(f"| {folder} | {method} | {pattern.name} | {n} | " + " | ".join(cells) + " |")
+        rows.append([folder, method, pattern.name, str(n), *cells])
+    lines += markdown_table(["result", "method", "pattern", "images", *headings], rows)
     lines += ["", "## CIEDE2000 (lower is better)", ""]
-    lines.append("| result | method | " + " | ".join(level_heading(s) for s in sigmas) + " |")
-    lines.append("|---|---|" + "---|" * len(sigmas))
-    for folder, method, entry, _ in entries:
-        cells = [
-            f"{entry['all'][s]['ciede2000']:.3f}" if s in entry["all"] else "–" for s in sigmas
+    rows = [
+        [
+            folder,
+            method,
+            *(f"{entry['all'][s]['ciede2000']:.3f}" if s in entry["all"] else "–" for s in sigmas),
         ]
-        lines.append(f"| {folder} | {method} | " + " | ".join(cells) + " |")
+        for folder, method, entry, _ in entries
+    ]
+    lines += markdown_table(["result", "method", *headings], rows)
     lines += ["", "## Patterns", ""]
     drawn: list[tuple[patterns.Pattern, str]] = []
     for *_, pattern in entries:
@@ -379,7 +385,7 @@ class _Tables:
 
     @property
     def rule(self) -> str:
-        return "|---|" + "---|" * len(self.sigmas)
+        return markdown_rule(1 + len(self.sigmas))
 
     def cells_row(self, row: str) -> str:
         """A table line of ours beside the paper's (:func:`_cell`) at every level."""
@@ -388,7 +394,7 @@ class _Tables:
 
 def _line(first: str, cells: list[str]) -> str:
     """A markdown table line."""
-    return f"| {first} | " + " | ".join(cells) + " |"
+    return markdown_row([first, *cells])
 
 
 def _intro(t: _Tables) -> list[str]:

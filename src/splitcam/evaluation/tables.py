@@ -24,6 +24,9 @@ from ..physics.noise import Exposure, level_heading, level_key, level_label
 from .metrics import mean_over_images
 
 __all__ = [
+    "markdown_row",
+    "markdown_rule",
+    "markdown_table",
     "CSV_NAME",
     "ENTRY_FIELDS",
     "METRICS",
@@ -262,6 +265,26 @@ def domain_line(domains: Iterable[str]) -> str:
     )
 
 
+def markdown_table(header: Sequence[str], rows: Iterable[Sequence[str]]) -> list[str]:
+    """The lines of a Markdown table: the header, the rule, one line per row (cells as given).
+    Every table splitcam writes is made here.
+
+    >>> markdown_table(["method", "σ=0"], [["lmmse", "30.00"]])
+    ['| method | σ=0 |', '|---|---|', '| lmmse | 30.00 |']
+    """
+    return [markdown_row(header), markdown_rule(len(header))] + [markdown_row(r) for r in rows]
+
+
+def markdown_row(cells: Sequence[str]) -> str:
+    """One line of a Markdown table (:func:`markdown_table`), for tables written line by line."""
+    return "| " + " | ".join(cells) + " |"
+
+
+def markdown_rule(columns: int) -> str:
+    """The rule under a Markdown table's header of ``columns`` columns."""
+    return "|" + "---|" * columns
+
+
 def markdown_tables(summary: dict) -> str:
     """PSNR/SSIM per sigma in the layout of the paper's Table 1 (one table per image set), and
     CIEDE2000 likewise."""
@@ -289,26 +312,30 @@ def markdown_tables(summary: dict) -> str:
                 "images and do not rank against the rest.",
                 "",
             ]
-        lines.append("| method | pattern | " + " | ".join(level_heading(s) for s in sigmas) + " |")
-        lines.append("|---|---|" + "---|" * len(sigmas))
+        headings = [level_heading(s) for s in sigmas]
+        rows = []
         for m in methods:
             cells = []
             for s in sigmas:
                 st = summary[m].get(group, {}).get(s)
                 mark = f" (n = {st['n_images']})" if st and st["n_images"] != n else ""
                 cells.append("–" if st is None else f"{_db(st['psnr'])} / {st['ssim']:.4f}{mark}")
-            lines.append(f"| {m} | {summary[m]['pattern']} | " + " | ".join(cells) + " |")
+            rows.append([m, summary[m]["pattern"], *cells])
+        lines += markdown_table(["method", "pattern", *headings], rows)
         lines += ["", f"### {group}: CIEDE2000 (lower is better)", ""]
-        lines.append("| method | " + " | ".join(level_heading(s) for s in sigmas) + " |")
-        lines.append("|---|" + "---|" * len(sigmas))
-        for m in methods:
-            cells = [
-                "–"
-                if (st := summary[m].get(group, {}).get(s)) is None
-                else f"{st['ciede2000']:.3f}"
-                for s in sigmas
+        rows = [
+            [
+                m,
+                *(
+                    "–"
+                    if (st := summary[m].get(group, {}).get(s)) is None
+                    else f"{st['ciede2000']:.3f}"
+                    for s in sigmas
+                ),
             ]
-            lines.append(f"| {m} | " + " | ".join(cells) + " |")
+            for m in methods
+        ]
+        lines += markdown_table(["method", *headings], rows)
         lines.append("")
     return "\n".join(lines)
 

@@ -7,17 +7,26 @@ killed process) leaves the earlier file as it was and no partial file behind, an
 ``OSError`` line that names the file.
 
 Appending logs (``metrics.jsonl``, ``per_image.csv`` row by row) are the exception: they grow by
-whole lines and are rewritten through :func:`atomic_path` when trimmed.
+whole lines and are rewritten through :func:`atomic_path` when trimmed. :func:`read_json_lines` is
+the one reader of the JSON-lines logs.
 """
 
 from __future__ import annotations
 
+import json
 import os
 from collections.abc import Iterator
 from contextlib import contextmanager, suppress
 from pathlib import Path
 
-__all__ = ["appending", "atomic_path", "stale_temporaries", "write_bytes", "write_text"]
+__all__ = [
+    "appending",
+    "atomic_path",
+    "read_json_lines",
+    "stale_temporaries",
+    "write_bytes",
+    "write_text",
+]
 
 
 _TMP = ".tmp-"
@@ -83,3 +92,27 @@ def appending(path: str | os.PathLike[str], **options) -> Iterator:
     except OSError as exc:
         reason = exc.strerror or str(exc)
         raise OSError(exc.errno, f"cannot write {path}: {reason}") from None
+
+
+def read_json_lines(
+    path: str | os.PathLike[str],
+) -> tuple[list[tuple[int, str, dict]], list[int]]:
+    """The rows of a JSON-lines log (``metrics.jsonl``, ``changes.jsonl``): ``(number, line,
+    row)`` for every line that holds a JSON object, and the numbers of the other non-blank lines
+    (cut short by a killed process, or edited by hand); lines are numbered from 1. A missing
+    file has no rows.
+    """
+    path = Path(path)
+    if not path.is_file():
+        return [], []
+    rows, damaged = [], []
+    for number, line in enumerate(path.read_text(encoding="utf-8").splitlines(), start=1):
+        try:
+            row = json.loads(line)
+        except ValueError:
+            row = None
+        if isinstance(row, dict):
+            rows.append((number, line, row))
+        elif line.strip():
+            damaged.append(number)
+    return rows, damaged

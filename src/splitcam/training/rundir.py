@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from ..io import appending, stale_temporaries, write_text
+from ..io import appending, read_json_lines, stale_temporaries, write_text
 from ..io import checkpoints as ckpt_io
 from .config import ConfigError, TrainConfig, dotted, read_config_file
 
@@ -234,16 +234,9 @@ def _tensorboard(run_dir: Path) -> Any:
 
 def _lines(path: Path) -> Iterator[tuple[str, dict[str, Any]]]:
     """``(line, row)`` of every readable row of a JSON-lines log (a line cut by a kill, or
-    otherwise damaged, is skipped)."""
-    if not path.is_file():
-        return
-    for line in path.read_text(encoding="utf-8").splitlines():
-        try:
-            row = json.loads(line)
-        except ValueError:
-            continue
-        if isinstance(row, dict):
-            yield line, row
+    otherwise damaged, is skipped): :func:`splitcam.io.read_json_lines`."""
+    for _, line, row in read_json_lines(path)[0]:
+        yield line, row
 
 
 def metrics_rows(run_dir: Path) -> list[dict[str, Any]]:

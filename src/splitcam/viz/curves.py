@@ -2,13 +2,13 @@
 
 from __future__ import annotations
 
-import json
 import math
 import os
 import warnings
 from numbers import Real
 from pathlib import Path
 
+from ..io import read_json_lines
 from ..physics.noise import level_heading, level_key
 from ._save import save_figure
 
@@ -39,16 +39,9 @@ def read_metrics(run: str | os.PathLike) -> list[dict]:
     path = Path(run) / "metrics.jsonl" if Path(run).is_dir() else Path(run)
     if not path.is_file():
         raise FileNotFoundError(f"no metrics.jsonl in {str(run)!r}")
-    rows, damaged = [], []
-    for number, line in enumerate(path.read_text(encoding="utf-8").splitlines(), start=1):
-        try:
-            row = json.loads(line)
-        except json.JSONDecodeError:
-            row = None
-        if _valid(row):
-            rows.append(row)
-        elif line.strip():
-            damaged.append(number)
+    lines, damaged = read_json_lines(path)
+    rows = [row for _, _, row in lines if _valid(row)]
+    damaged = sorted(damaged + [number for number, _, row in lines if not _valid(row)])
     if damaged:
         shown = ", ".join(map(str, damaged[:10])) + (", ..." if len(damaged) > 10 else "")
         warnings.warn(
