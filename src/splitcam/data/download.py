@@ -53,6 +53,7 @@ from pathlib import Path
 from typing import Any, BinaryIO
 
 from .. import __version__
+from ..io import atomic_path
 from .registry import MIRROR_ENV, Dataset, DatasetFile, data_root, dataset_names, datasets
 
 __all__ = ["ChecksumError", "DownloadError", "download"]
@@ -317,16 +318,8 @@ class _TiffToPng:
                 f"here (pixel SHA-256 expected {self.entry.pixels_sha256}, got {actual}); the "
                 "image library (Pillow) may decode TIFF differently on this machine"
             )
-        fd, tmp = tempfile.mkstemp(
-            dir=self.final.parent, prefix=f".{self.final.name}.", suffix=".tmp"
-        )
-        try:
-            with os.fdopen(fd, "wb") as fh:
-                Image.fromarray(pixels).save(fh, format="PNG", optimize=True)
-            os.replace(tmp, self.final)
-        except BaseException:
-            Path(tmp).unlink(missing_ok=True)
-            raise
+        with atomic_path(self.final) as tmp:
+            Image.fromarray(pixels).save(tmp, format="PNG", optimize=True)
         return str(self.final)
 
 
