@@ -1,6 +1,6 @@
 """Validation PSNR against patches seen, one curve per batch size and rate (docs/results/batch).
 
-    python docs/results/batch/plot.py RUN [RUN ...] [--out docs/results/batch/curves.png]
+    python studies/batch/plot.py RUN [RUN ...] [--out docs/results/batch/curves.png]
         [--logs docs/results/batch/logs]
 
 Each RUN is a run folder of ``experiments/studies/batch/*.toml``; its validation rows are copied
@@ -18,6 +18,11 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
+from splitcam.io import read_json_lines  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[2]
+RESULTS = ROOT / "docs" / "results" / "batch"
+
 #: The rule a batch-64 rate follows, by its ratio to batch 8's 1e-3 per 8 patches.
 RULES = {0.000354: " (square root)", 0.001: " (linear)", 0.000125: " (unscaled)"}
 
@@ -25,15 +30,17 @@ RULES = {0.000354: " (square root)", 0.001: " (linear)", 0.000125: " (unscaled)"
 def curve(run: Path) -> tuple[int, list[dict]]:
     config = json.loads((run / "config.json").read_text())
     batch = int(config["data"]["batch_size"])
-    rows = [json.loads(line) for line in (run / "metrics.jsonl").read_text().splitlines()]
+    rows = [row for _, _, row in read_json_lines(run / "metrics.jsonl")[0]]
     return batch, [r for r in rows if "val_psnr_0" in r]
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("runs", nargs="+", type=Path)
-    parser.add_argument("--out", type=Path, default=Path(__file__).with_name("curves.png"))
-    parser.add_argument("--logs", type=Path, default=Path(__file__).with_name("logs"))
+    parser.add_argument(
+        "--out", type=Path, default=ROOT / "docs" / "results" / "batch" / "curves.png"
+    )
+    parser.add_argument("--logs", type=Path, default=RESULTS / "logs")
     args = parser.parse_args()
     args.logs.mkdir(parents=True, exist_ok=True)
     fig, axes = plt.subplots(1, 2, figsize=(10, 4.8), sharex=True)

@@ -1,13 +1,13 @@
 """What each network loses at the image border: PSNR with a 4-pixel border left out minus the
 PSNR of the whole image.
 
-    python docs/results/border/measure.py [MODEL_OR_RUN ...] [--images 12] [--threads 1]
+    python studies/border/measure.py [MODEL_OR_RUN ...] [--images 12] [--threads 1]
         [--out FILE.md]
 
 Every model is a shipped model's name (default: all of them), a model file or a run folder. The
 photos are the last ``--images`` of the training photos (``$SPLITCAM_DATA/train``, sorted by
 name; no run trains or
-selects on the last 24, see ``docs/results/universal/heldout.py``), scored by the evaluation
+selects on the last 24, see ``studies/universal/heldout.py``), scored by the evaluation
 protocol at sigma 0 and 15 twice: whole (481x321 or 321x481, odd sides: the last row and column
 are part-way through every period above 1) and cropped to even sides (480x320). A network that
 is right at the border loses nothing there (the 4-pixel crop then changes the PSNR by noise
@@ -67,7 +67,7 @@ def main() -> int:
     print("\n".join(lines), flush=True)
     for spec in args.models or model_names():
         if spec in model_names() and model_serves_any_pattern(spec):
-            continue  # needs a pattern; measured by docs/results/universal/heldout.py
+            continue  # needs a pattern; measured by studies/universal/heldout.py
         method = build_method(spec)
         for label, images in (("odd", odd), ("even", even)):
             res = border_loss(method, images)

@@ -2,7 +2,7 @@
 ``data.val_max_images`` of it: 8 BSDS photos) as PNG files at full size and at half size (and
 quarter size with ``--quarter``), for `splitcam evaluate --datasets`.
 
-    python docs/results/late-training/resized.py $SPLITCAM_DATA/train runs/val
+    python studies/late-training/resized.py $SPLITCAM_DATA/train runs/val
     # writes runs/val/full/*.png and runs/val/half/*.png (and runs/val/quarter/*.png)
 """
 

@@ -1,6 +1,6 @@
 """How far the RGB reduction of a spectral sensor is from the sensor itself on real spectra.
 
-    python docs/results/spectral/metamerism.py [--patterns bayer-d5100,...] [--out FILE.md]
+    python studies/spectral/metamerism.py [--patterns bayer-d5100,...] [--out FILE.md]
 
 splitcam reduces a spectral pattern to RGB kernels exactly for scenes whose spectra are linear
 in linear sRGB (splitcam.patterns.spectral). A real surface has its own spectrum, and two

@@ -1,6 +1,6 @@
 """Universal network against each shipped network and the LMMSE, on held-out whole photos.
 
-    python docs/results/universal/heldout.py UNIVERSAL [--patterns A,B,C,D,E,bayer]
+    python studies/universal/heldout.py UNIVERSAL [--patterns A,B,C,D,E,bayer]
         [--extra NAME=MODEL_OR_RUN ...] [--images 12] [--threads 2] [--flips exact|all]
         [--out FILE.md]
 

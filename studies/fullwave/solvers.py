@@ -1,6 +1,6 @@
 """torcwa against fmmax on the Zou 2022 router: the same quadrant transmissions, side by side.
 
-    python docs/results/fullwave/solvers.py [--orders 9 12] [--wavelengths 450,540,650]
+    python studies/fullwave/solvers.py [--orders 9 12] [--wavelengths 450,540,650]
         [--out FILE.md]
 
 For each Fourier order, splitcam's solver (torcwa, :func:`splitcam.physics.fullwave.
@@ -25,7 +25,7 @@ os.environ.setdefault("XLA_FLAGS", "--xla_cpu_multi_thread_eigen=false")
 
 from splitcam.physics.fullwave import RouterDesign, index_of, quadrant_spectra, read_design
 
-DESIGN = Path(__file__).resolve().parents[3] / "experiments" / "fullwave" / "designs"
+DESIGN = Path(__file__).resolve().parents[2] / "experiments" / "fullwave" / "designs"
 #: Zou et al.'s supplementary figure 7 (blue / both green / red pixel).
 PUBLISHED = {450: (0.436, 0.394, 0.133), 540: (0.160, 0.575, 0.237), 650: (0.117, 0.270, 0.589)}
 

@@ -1,7 +1,7 @@
 """Test-time flips (splitcam.recon.ensemble.SelfEnsemble) against the plain networks on
 held-out training photos: PSNR (dB) at each sigma, plain / with flips / gain.
 
-    python docs/results/flips/measure.py [--models A B bayer] [--sigmas 0 15] [--odd]
+    python studies/flips/measure.py [--models A B bayer] [--sigmas 0 15] [--odd]
 
 The photos are the 8 training photos 25th to 32nd from the end by name (held out of every
 shipped network's training; the last 24 are never used for choices), cut to even sides (as

@@ -1,6 +1,6 @@
 """Closed-form LMMSE at sigma 0 in the srgb and the linear domain, patterns D and bayer, on the
 last 6 training images (sorted by name; inside the 32 that training and the image statistics
-leave out): ``OMP_NUM_THREADS=1 python docs/results/exposure/linear_lmmse.py [TRAIN_DIR]``."""
+leave out): ``OMP_NUM_THREADS=1 python studies/exposure/linear_lmmse.py [TRAIN_DIR]``."""
 
 from __future__ import annotations
 
@@ -16,7 +16,7 @@ from splitcam.data.registry import training_folder
 from splitcam.evaluation import evaluate, summarise
 from splitcam.recon.closed_form import closed_form_lmmse
 
-ROOT = Path(__file__).resolve().parents[3]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def main() -> None:
