@@ -101,6 +101,24 @@ class PatternConfig:
         "steps (`splitcam design`, seconds), then train them jointly with the network",
     )
 
+    def checks(self) -> list[tuple[bool, str]]:
+        """``(holds, message)`` of every range and choice of this section."""
+        return [
+            (
+                self.init in ("support", "exact", "random"),
+                f"pattern.init must be support, exact or random, got {self.init!r}",
+            ),
+            (
+                0 <= self.mix_fraction <= 1 and (self.mix_fraction == 0 or bool(self.mix)),
+                "pattern.mix_fraction must be in [0, 1], and > 0 only with patterns in pattern.mix",
+            ),
+            (self.lr is None or self.lr > 0, "pattern.lr must be > 0"),
+            (
+                self.design_steps >= 0,
+                f"pattern.design_steps must be >= 0, got {self.design_steps}",
+            ),
+        ]
+
 
 @dataclass
 class NetworkConfig:
@@ -113,6 +131,19 @@ class NetworkConfig:
     )
     features: int = _opt(64, "channels of the hidden layers")
     blocks: int = _opt(10, "residual blocks")
+
+    def checks(self) -> list[tuple[bool, str]]:
+        """``(holds, message)`` of every range and choice of this section."""
+        return [
+            (
+                self.arch in ("paper", "packed", "physics", "universal"),
+                f"network.arch must be physics, universal, packed or paper, got {self.arch!r}",
+            ),
+            (
+                self.features >= 1 and self.blocks >= 0,
+                "network.features must be >= 1 and network.blocks >= 0",
+            ),
+        ]
 
 
 @dataclass
@@ -166,6 +197,34 @@ class DataConfig:
         "saved with the run and its exported models, which reconstruct only this domain",
         choices=DOMAINS,
     )
+
+    def checks(self) -> list[tuple[bool, str]]:
+        """``(holds, message)`` of every range and choice of this section."""
+        return [
+            (
+                0 <= self.hard_patches <= 1,
+                f"data.hard_patches must be in [0, 1], got {self.hard_patches}",
+            ),
+            (
+                self.patch_size >= MIN_PATCH,
+                f"data.patch_size must be >= {MIN_PATCH} (a few periods of the largest "
+                f"patterns, 4x4, and context for the network), got {self.patch_size}",
+            ),
+            (
+                self.domain in DOMAINS,
+                f"data.domain must be one of {', '.join(DOMAINS)}, got {self.domain!r}",
+            ),
+            (self.batch_size >= 1, "data.batch_size must be >= 1"),
+            (
+                valid_scales(self.scales),
+                f"data.scales must be distinct factors in (0, 1], got {self.scales}",
+            ),
+            (
+                0 <= self.partial_periods <= 1,
+                f"data.partial_periods must be in [0, 1], got {self.partial_periods}",
+            ),
+            (self.val_split is None or self.val_split >= 0, "data.val_split must be >= 0"),
+        ]
 
 
 #: Settings added after runs were saved without them, and the value that reproduces those runs.
@@ -235,6 +294,47 @@ class OptimConfig:
         False, "one noise sigma per patch instead of one per batch (the paper: per batch)"
     )
 
+    def checks(self) -> list[tuple[bool, str]]:
+        """``(holds, message)`` of every range and choice of this section."""
+        return [
+            (
+                self.schedule in ("constant", "cosine"),
+                f"optim.schedule must be constant or cosine, got {self.schedule!r}",
+            ),
+            (self.warmup_steps >= 0, "optim.warmup_steps must be >= 0"),
+            (
+                self.loss in LOSSES,
+                f"optim.loss must be one of {', '.join(LOSSES)}, got {self.loss!r}",
+            ),
+            (
+                self.ema is None or 0 < self.ema < 1,
+                f"optim.ema must be in (0, 1) or none, got {self.ema!r}",
+            ),
+            (
+                self.adapter in ADAPTERS,
+                f"optim.adapter must be one of {', '.join(ADAPTERS)}, got {self.adapter!r}",
+            ),
+            (
+                self.adapter == "none" or self.ema is None,
+                "optim.adapter and optim.ema: an average of the frozen weights means nothing; "
+                "use one of them",
+            ),
+            (
+                self.base_lr_scale >= 0,
+                f"optim.base_lr_scale must be >= 0, got {self.base_lr_scale}",
+            ),
+            (self.steps >= 1, f"optim.steps must be >= 1, got {self.steps}"),
+            (self.lr > 0, f"optim.lr must be > 0, got {self.lr}"),
+            (
+                0 <= self.sigma_min <= self.sigma_max,
+                "expected 0 <= optim.sigma_min <= optim.sigma_max",
+            ),
+            (
+                len(self.betas) == 2 and all(0 <= b < 1 for b in self.betas),
+                f"optim.betas must be two numbers in [0, 1), got {self.betas}",
+            ),
+        ]
+
 
 @dataclass
 class NoiseConfig:
@@ -264,6 +364,23 @@ class NoiseConfig:
             "gain": self.gain,
             "bits": self.bits,
         }
+
+    def checks(self) -> list[tuple[bool, str]]:
+        """``(holds, message)`` of every range and choice of this section."""
+        return [
+            (
+                self.model in ("gaussian", "photon"),
+                f"noise.model must be gaussian or photon, got {self.model!r}",
+            ),
+            (
+                len(self.photons) == 2
+                and 0 < self.photons[0] <= self.photons[1]
+                and bool(self.val_photons)
+                and min(self.val_photons) > 0,
+                f"noise.photons must be two exposures 0 < lo <= hi (photo-electrons), got "
+                f"{self.photons}; noise.val_photons positive",
+            ),
+        ]
 
 
 @dataclass
@@ -316,6 +433,35 @@ class RunConfig:
     bf16: bool = _opt(False, "bfloat16 autocast for the network (= --precision bf16)")
     compile: bool = _opt(False, "torch.compile the network (slow start, faster steps)")
 
+    def checks(self) -> list[tuple[bool, str]]:
+        """``(holds, message)`` of every range and choice of this section."""
+        return [
+            (
+                self.precision in ("auto", "fp32", "bf16"),
+                f"run.precision must be auto, fp32 or bf16, got {self.precision!r}",
+            ),
+            (
+                self.checkpoint_minutes is None or self.checkpoint_minutes > 0,
+                f"run.checkpoint_minutes must be > 0 or none, got {self.checkpoint_minutes}",
+            ),
+            (
+                self.time_limit is None or self.time_limit > 0,
+                f"run.time_limit must be > 0 minutes or none, got {self.time_limit}",
+            ),
+            (
+                self.threads is None or self.threads >= 1,
+                f"run.threads must be >= 1 or none (torch's choice), got {self.threads}",
+            ),
+            (
+                min(self.log_every, self.val_every, self.checkpoint_every) >= 1,
+                "run.log_every, run.val_every and run.checkpoint_every must be >= 1",
+            ),
+            (
+                not self.continue_schedule or bool(self.init_from),
+                "run.continue_schedule needs run.init_from (the snapshot to continue)",
+            ),
+        ]
+
 
 @dataclass
 class TrainConfig:
@@ -359,17 +505,12 @@ class TrainConfig:
         return TrainConfig.from_dict(data, source="command line")
 
     def validate(self) -> None:
-        """Checks that need more than types (ranges, choices)."""
-        checks = [
-            (
-                self.pattern.init in ("support", "exact", "random"),
-                f"pattern.init must be support, exact or random, got {self.pattern.init!r}",
-            ),
-            (
-                self.network.arch in ("paper", "packed", "physics", "universal"),
-                f"network.arch must be physics, universal, packed or paper, got "
-                f"{self.network.arch!r}",
-            ),
+        """Checks that need more than types (ranges, choices): each section's own
+        (``checks()``), then those that span sections, in that order; the first that fails is
+        raised."""
+        sections = (self.pattern, self.network, self.optim, self.data, self.run, self.noise)
+        checks = [check for section in sections for check in section.checks()]
+        checks += [
             (
                 self.pattern.name.lower() != "random"
                 or (self.network.arch == "universal" and not self.pattern.learn),
@@ -377,128 +518,12 @@ class TrainConfig:
                 "--learn-pattern",
             ),
             (
-                0 <= self.pattern.mix_fraction <= 1
-                and (self.pattern.mix_fraction == 0 or bool(self.pattern.mix)),
-                "pattern.mix_fraction must be in [0, 1], and > 0 only with patterns in pattern.mix",
-            ),
-            (
-                self.optim.schedule in ("constant", "cosine"),
-                f"optim.schedule must be constant or cosine, got {self.optim.schedule!r}",
-            ),
-            (self.optim.warmup_steps >= 0, "optim.warmup_steps must be >= 0"),
-            (
-                self.optim.loss in LOSSES,
-                f"optim.loss must be one of {', '.join(LOSSES)}, got {self.optim.loss!r}",
-            ),
-            (
-                self.optim.ema is None or 0 < self.optim.ema < 1,
-                f"optim.ema must be in (0, 1) or none, got {self.optim.ema!r}",
-            ),
-            (
-                self.optim.adapter in ADAPTERS,
-                f"optim.adapter must be one of {', '.join(ADAPTERS)}, got {self.optim.adapter!r}",
-            ),
-            (
-                self.optim.adapter == "none" or self.optim.ema is None,
-                "optim.adapter and optim.ema: an average of the frozen weights means nothing; "
-                "use one of them",
-            ),
-            (
-                self.optim.base_lr_scale >= 0,
-                f"optim.base_lr_scale must be >= 0, got {self.optim.base_lr_scale}",
-            ),
-            (
                 self.optim.teacher_weight >= 0
                 and (self.optim.teacher_weight == 0 or not self.pattern.learn),
                 "optim.teacher_weight must be >= 0, and 0 with --learn-pattern (a learned "
                 f"pattern has no shipped network), got {self.optim.teacher_weight}",
             ),
-            (
-                0 <= self.data.hard_patches <= 1,
-                f"data.hard_patches must be in [0, 1], got {self.data.hard_patches}",
-            ),
-            (
-                self.run.precision in ("auto", "fp32", "bf16"),
-                f"run.precision must be auto, fp32 or bf16, got {self.run.precision!r}",
-            ),
-            (
-                self.network.features >= 1 and self.network.blocks >= 0,
-                "network.features must be >= 1 and network.blocks >= 0",
-            ),
-            (
-                self.data.patch_size >= MIN_PATCH,
-                f"data.patch_size must be >= {MIN_PATCH} (a few periods of the largest "
-                f"patterns, 4x4, and context for the network), got {self.data.patch_size}",
-            ),
-            (
-                self.data.domain in DOMAINS,
-                f"data.domain must be one of {', '.join(DOMAINS)}, got {self.data.domain!r}",
-            ),
-            (self.data.batch_size >= 1, "data.batch_size must be >= 1"),
-            (
-                self.run.checkpoint_minutes is None or self.run.checkpoint_minutes > 0,
-                f"run.checkpoint_minutes must be > 0 or none, got {self.run.checkpoint_minutes}",
-            ),
-            (
-                valid_scales(self.data.scales),
-                f"data.scales must be distinct factors in (0, 1], got {self.data.scales}",
-            ),
-            (
-                0 <= self.data.partial_periods <= 1,
-                f"data.partial_periods must be in [0, 1], got {self.data.partial_periods}",
-            ),
-            (self.optim.steps >= 1, f"optim.steps must be >= 1, got {self.optim.steps}"),
-            (
-                self.run.time_limit is None or self.run.time_limit > 0,
-                f"run.time_limit must be > 0 minutes or none, got {self.run.time_limit}",
-            ),
-            (
-                self.run.threads is None or self.run.threads >= 1,
-                f"run.threads must be >= 1 or none (torch's choice), got {self.run.threads}",
-            ),
-            (self.optim.lr > 0, f"optim.lr must be > 0, got {self.optim.lr}"),
-            (self.pattern.lr is None or self.pattern.lr > 0, "pattern.lr must be > 0"),
-            (
-                self.pattern.design_steps >= 0,
-                f"pattern.design_steps must be >= 0, got {self.pattern.design_steps}",
-            ),
-            (
-                0 <= self.optim.sigma_min <= self.optim.sigma_max,
-                "expected 0 <= optim.sigma_min <= optim.sigma_max",
-            ),
-            (
-                len(self.optim.betas) == 2 and all(0 <= b < 1 for b in self.optim.betas),
-                f"optim.betas must be two numbers in [0, 1), got {self.optim.betas}",
-            ),
-            (
-                min(self.run.log_every, self.run.val_every, self.run.checkpoint_every) >= 1,
-                "run.log_every, run.val_every and run.checkpoint_every must be >= 1",
-            ),
-            (
-                self.data.val_split is None or self.data.val_split >= 0,
-                "data.val_split must be >= 0",
-            ),
-            (
-                not self.run.continue_schedule or bool(self.run.init_from),
-                "run.continue_schedule needs run.init_from (the snapshot to continue)",
-            ),
         ]
-        checks.append(
-            (
-                self.noise.model in ("gaussian", "photon"),
-                f"noise.model must be gaussian or photon, got {self.noise.model!r}",
-            )
-        )
-        checks.append(
-            (
-                len(self.noise.photons) == 2
-                and 0 < self.noise.photons[0] <= self.noise.photons[1]
-                and bool(self.noise.val_photons)
-                and min(self.noise.val_photons) > 0,
-                f"noise.photons must be two exposures 0 < lo <= hi (photo-electrons), got "
-                f"{self.noise.photons}; noise.val_photons positive",
-            )
-        )
         for ok, message in checks:
             if not ok:
                 raise ConfigError(message)
