@@ -216,22 +216,9 @@ def design_pattern(
     """
     start = get(start)
     sigma_list = check_sigmas(sigmas)
-    check_count(steps, "steps", 1)
-    if (
-        isinstance(lr, bool)
-        or not isinstance(lr, (int, float))
-        or not (math.isfinite(lr) and lr > 0)
-    ):
-        raise ValueError(f"expected lr as a finite number > 0, got {lr!r}")
-    check_count(radius, "radius", 0)
-    if objective not in OBJECTIVES:
-        raise ValueError(
-            f"expected objective to be one of {', '.join(OBJECTIVES)}, got {objective!r}"
-        )
-    if threads is not None:
-        check_count(threads, "threads", 1)
-    if objective == "network" and (network is None or patches is None):
-        raise ValueError("objective 'network' needs a network and training patches")
+    _check_design(
+        steps, lr, radius, objective, threads, network is not None and patches is not None
+    )
     stats = statistics if statistics is not None else shipped_image_statistics()
     sig = torch.tensor(sigma_list, dtype=torch.float64)
     generator = torch.Generator().manual_seed(seed)
@@ -263,27 +250,9 @@ def design_pattern(
     designed = sensor.to_pattern(name or f"{start.name}-designed")
     with torch.no_grad():
         after = mse_of(designed)
-    designed = dataclasses.replace(
-        designed,
-        provenance="designed",
-        description=(
-            f"designed from pattern {start.name} ({init} start) for "
-            + ("a network for any pattern" if objective == "network" else "the closed-form LMMSE")
-            + f" ({objective}) at sigma {', '.join(f'{s:g}' for s in sigma_list)}"
-        ),
-        reference="splitcam design"
-        + (" (a frozen network)" if objective == "network" else " (closed-form LMMSE)"),
-        metadata={
-            "start": start.name,
-            "init": init,
-            "seed": seed,
-            "sigmas": sigma_list,
-            "objective": objective,
-            "steps": steps,
-            "lr": float(lr),
-            "radius": radius,
-        },
-    )
+    settings = {"init": init, "seed": seed, "sigmas": sigma_list, "objective": objective}
+    settings |= {"steps": steps, "lr": float(lr), "radius": radius}
+    designed = _with_provenance(designed, start, settings)
     return DesignResult(
         pattern=designed,
         start=start,
@@ -295,6 +264,47 @@ def design_pattern(
         history=history,
         seconds=seconds,
         logits=sensor.logits.detach().clone(),
+    )
+
+
+def _check_design(
+    steps: Any, lr: Any, radius: Any, objective: Any, threads: Any, has_network: bool
+) -> None:
+    """The checks of :func:`design_pattern`'s settings (its Raises)."""
+    check_count(steps, "steps", 1)
+    if (
+        isinstance(lr, bool)
+        or not isinstance(lr, (int, float))
+        or not (math.isfinite(lr) and lr > 0)
+    ):
+        raise ValueError(f"expected lr as a finite number > 0, got {lr!r}")
+    check_count(radius, "radius", 0)
+    if objective not in OBJECTIVES:
+        raise ValueError(
+            f"expected objective to be one of {', '.join(OBJECTIVES)}, got {objective!r}"
+        )
+    if threads is not None:
+        check_count(threads, "threads", 1)
+    if objective == "network" and not has_network:
+        raise ValueError("objective 'network' needs a network and training patches")
+
+
+def _with_provenance(designed: Pattern, start: Pattern, settings: dict[str, Any]) -> Pattern:
+    """The designed pattern with what made it: its description, reference and ``metadata``
+    (the start's name and ``settings``)."""
+    objective = settings["objective"]
+    network = objective == "network"
+    return dataclasses.replace(
+        designed,
+        provenance="designed",
+        description=(
+            f"designed from pattern {start.name} ({settings['init']} start) for "
+            + ("a network for any pattern" if network else "the closed-form LMMSE")
+            + f" ({objective}) at sigma {', '.join(f'{s:g}' for s in settings['sigmas'])}"
+        ),
+        reference="splitcam design"
+        + (" (a frozen network)" if network else " (closed-form LMMSE)"),
+        metadata={"start": start.name, **settings},
     )
 
 

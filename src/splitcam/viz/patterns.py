@@ -30,7 +30,6 @@ def draw_pattern(pattern: Pattern, out: str | os.PathLike | None = None, *, dpi:
     lands on each pixel, with the fraction written in.
     """
     from matplotlib.figure import Figure
-    from matplotlib.patches import Rectangle
 
     ph, pw = pattern.period
     kh, kw = pattern.kernel_size
@@ -47,28 +46,8 @@ def draw_pattern(pattern: Pattern, out: str | os.PathLike | None = None, *, dpi:
 
     top = fig_h - 1.25
     response = pixel_response(pattern)
-    peak = max(float(response.max()), 1e-12)
     cell = min(0.9, (left_w - 0.4) / pw)
-    ax = box(0.3, top - ph * cell - 0.05, pw * cell, ph * cell)
-    for i, j in sites:
-        rgb = response[i, j] / peak
-        ax.add_patch(Rectangle((j, i), 1, 1, fc=rgb, ec="black", lw=1.2))
-        text = f"s{pattern.layout[i, j]}\n" + " ".join(
-            f"{c}{_fmt(v)}" for c, v in zip(COLOURS, response[i, j], strict=True)
-        )
-        ax.text(
-            j + 0.5,
-            i + 0.5,
-            text,
-            ha="center",
-            va="center",
-            fontsize=7,
-            color="white" if rgb.mean() < 0.5 else "black",
-        )
-    ax.set_xlim(0, pw)
-    ax.set_ylim(ph, 0)
-    ax.set_axis_off()
-    ax.set_title("unit cell: splitter and\nwhat each pixel records", fontsize=8)
+    _draw_unit_cell(box(0.3, top - ph * cell - 0.05, pw * cell, ph * cell), pattern, response)
 
     x0 = left_w + 0.7
     for r, (i, j) in enumerate(sites):
@@ -84,42 +63,86 @@ def draw_pattern(pattern: Pattern, out: str | os.PathLike | None = None, *, dpi:
         )
         for c, colour in enumerate(COLOURS):
             ax = box(x0 + c * (mini_w + 0.35), y0, mini_w, mini_h)
-            k = pattern.kernels[s, c]
-            ox = (max(kw, 3) - kw) / 2
-            for a in range(kh):
-                for b in range(kw):
-                    f = float(k[a, b])
-                    shade = np.array(_RGB[colour]) * f + np.ones(3) * (1 - f)
-                    centre = (a, b) == (kh // 2, kw // 2)
-                    ax.add_patch(
-                        Rectangle(
-                            (ox + b, a),
-                            1,
-                            1,
-                            fc=shade,
-                            ec="black" if centre else "#aaaaaa",
-                            lw=1.6 if centre else 0.6,
-                            zorder=2 if centre else 1,
-                        )
-                    )
-                    if f > 1e-3:
-                        ax.text(
-                            ox + b + 0.5,
-                            a + 0.5,
-                            _fmt(f),
-                            ha="center",
-                            va="center",
-                            fontsize=7,
-                            color="white" if f > 0.55 else "black",
-                            zorder=3,
-                        )
-            ax.set_xlim(0, max(kw, 3))
-            ax.set_ylim(kh, 0)
-            ax.set_aspect("equal")
-            ax.set_axis_off()
-            if r == 0:
-                ax.set_title(f"{colour} light goes to", fontsize=8, color=_RGB[colour])
+            _draw_kernel(ax, pattern.kernels[s, c], colour, titled=r == 0)
 
+    _caption(fig, fig_w, fig_h, pattern)
+    if out is not None:
+        save_figure(fig, out, dpi=dpi)
+    return fig
+
+
+def _draw_unit_cell(ax, pattern: Pattern, response: np.ndarray) -> None:
+    """The unit cell: each pixel's splitter and the colour mixture it records from white."""
+    from matplotlib.patches import Rectangle
+
+    ph, pw = pattern.period
+    peak = max(float(response.max()), 1e-12)
+    for i in range(ph):
+        for j in range(pw):
+            rgb = response[i, j] / peak
+            ax.add_patch(Rectangle((j, i), 1, 1, fc=rgb, ec="black", lw=1.2))
+            text = f"s{pattern.layout[i, j]}\n" + " ".join(
+                f"{c}{_fmt(v)}" for c, v in zip(COLOURS, response[i, j], strict=True)
+            )
+            ax.text(
+                j + 0.5,
+                i + 0.5,
+                text,
+                ha="center",
+                va="center",
+                fontsize=7,
+                color="white" if rgb.mean() < 0.5 else "black",
+            )
+    ax.set_xlim(0, pw)
+    ax.set_ylim(ph, 0)
+    ax.set_axis_off()
+    ax.set_title("unit cell: splitter and\nwhat each pixel records", fontsize=8)
+
+
+def _draw_kernel(ax, kernel, colour: str, *, titled: bool) -> None:
+    """One colour's kernel of one splitter: the neighbourhood shaded by the fraction of the
+    light each pixel gets (outlined centre: the pixel the light arrives at)."""
+    from matplotlib.patches import Rectangle
+
+    kh, kw = kernel.shape
+    ox = (max(kw, 3) - kw) / 2
+    for a in range(kh):
+        for b in range(kw):
+            f = float(kernel[a, b])
+            shade = np.array(_RGB[colour]) * f + np.ones(3) * (1 - f)
+            centre = (a, b) == (kh // 2, kw // 2)
+            ax.add_patch(
+                Rectangle(
+                    (ox + b, a),
+                    1,
+                    1,
+                    fc=shade,
+                    ec="black" if centre else "#aaaaaa",
+                    lw=1.6 if centre else 0.6,
+                    zorder=2 if centre else 1,
+                )
+            )
+            if f > 1e-3:
+                ax.text(
+                    ox + b + 0.5,
+                    a + 0.5,
+                    _fmt(f),
+                    ha="center",
+                    va="center",
+                    fontsize=7,
+                    color="white" if f > 0.55 else "black",
+                    zorder=3,
+                )
+    ax.set_xlim(0, max(kw, 3))
+    ax.set_ylim(kh, 0)
+    ax.set_aspect("equal")
+    ax.set_axis_off()
+    if titled:
+        ax.set_title(f"{colour} light goes to", fontsize=8, color=_RGB[colour])
+
+
+def _caption(fig, fig_w: float, fig_h: float, pattern: Pattern) -> None:
+    """The pattern's name, provenance and measures above, the key to the numbers below."""
     m = measure(pattern)
     eff = "/".join(_fmt(e) for e in m.efficiency)
     width = int(fig_w * 13)
@@ -139,9 +162,6 @@ def draw_pattern(pattern: Pattern, out: str | os.PathLike | None = None, *, dpi:
         fontsize=7,
         color="#555555",
     )
-    if out is not None:
-        save_figure(fig, out, dpi=dpi)
-    return fig
 
 
 def draw_height_maps(
