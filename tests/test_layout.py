@@ -86,3 +86,49 @@ def test_the_checker_sees_a_wrong_way_import(tmp_path):
     )
     found = _imports(fake / "physics" / "bad.py", root=fake)
     assert found == [(1, "splitcam.patterns"), (4, "splitcam.training"), (5, "splitcam.methods")]
+
+
+def _code_files() -> list[Path]:
+    return sorted(p for p in PACKAGE.rglob("*.py") if "__pycache__" not in p.parts)
+
+
+def test_noise_is_asked_through_its_interface():
+    """No ``isinstance(..., Exposure)`` outside the noise module: the rest asks a NoiseModel."""
+    wrong = []
+    for path in _code_files():
+        if path == PACKAGE / "physics" / "noise.py":
+            continue
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if (
+                isinstance(node, ast.Call)
+                and getattr(node.func, "id", None) == "isinstance"
+                and "Exposure" in ast.unparse(node.args[1])
+            ):
+                wrong.append(f"{path.relative_to(PACKAGE)}:{node.lineno}")
+    assert not wrong, f"isinstance on Exposure outside physics/noise.py: {wrong}"
+
+
+def test_markdown_tables_have_one_writer():
+    """Every Markdown table rule is made by evaluation.tables (markdown_table / markdown_rule)."""
+    home = PACKAGE / "evaluation" / "tables.py"
+    wrong = [
+        str(path.relative_to(PACKAGE))
+        for path in _code_files()
+        if path != home and "---|" in path.read_text(encoding="utf-8")
+    ]
+    assert not wrong, f"Markdown table rules written outside evaluation/tables.py: {wrong}"
+
+
+def test_no_function_body_is_longer_than_100_lines():
+    """A function longer than a screenful does several things: name them (docstrings aside)."""
+    long = []
+    for path in _code_files():
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if not isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                continue
+            body = node.body
+            if ast.get_docstring(node) is not None:
+                body = body[1:]
+            if body and body[-1].end_lineno - body[0].lineno + 1 > 100:
+                long.append(f"{path.relative_to(PACKAGE)}:{node.name}")
+    assert not long, f"functions over 100 lines: {long}"

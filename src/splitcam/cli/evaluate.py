@@ -128,19 +128,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         default=0,
         help="border pixels left out of the scores (default 0, as in the paper)",
     )
-    p.add_argument("--out", default="results", help="output folder (default: results)")
-    p.add_argument(
-        "--save-images",
-        action="store_true",
-        help="write reconstructions and zoomed side-by-side crops",
-    )
-    p.add_argument(
-        "--zoom",
-        action="append",
-        metavar="IMAGE[:TOP,LEFT,SIZE][@SIGMA]",
-        help="image (and region, and noise level) for zoomed side-by-side crops (default: the "
-        "most detailed region of the first image of each dataset, at every level)",
-    )
+    _add_output_options(p)
     add_method_options(p)
     p.add_argument(
         "--restart",
@@ -194,9 +182,7 @@ def _draw_charts(out: Path, rows: list, summary: dict) -> list[Path]:
 def run(args: argparse.Namespace) -> int:
     from ..data.testsets import load_datasets
     from ..evaluation.protocol import evaluate, parse_zoom
-    from ..evaluation.tables import markdown_tables, summarise
-    from ..recon.loading import model_names
-    from ..recon.registry import build_methods, model_domain
+    from ..recon.registry import build_methods
 
     zooms = [parse_zoom(z) for z in args.zoom or ()]  # bad syntax fails before any work
     chosen = args.checkpoint or args.method or args.model
@@ -214,23 +200,7 @@ def run(args: argparse.Namespace) -> int:
     # on centre crops of the built-in photos (within 3 minutes on a 2-core CPU): the shipped
     # networks of the evaluation's light domain (srgb by default; linear: those trained on
     # photons in linear light).
-    given_patterns = args.patterns is not None
-    if not given_patterns:
-        args.patterns = list(PAPER_PATTERNS)
-    models = args.model if chosen else model_names()
-    if not chosen and given_patterns:
-        # The main job on the patterns asked for: their own networks and the network for any
-        # pattern, not every shipped network.
-        models = [m for m in models if _serves_one_of(m, args.patterns)]
-        print(f"the main job on {', '.join(args.patterns)}: {', '.join(models) or 'no network'}")
-    if not chosen:
-        other = [m for m in models if model_domain(m) != args.domain]
-        models = [m for m in models if m not in other]
-        if other:
-            print(
-                f"shipped networks of another light domain left out of this {args.domain}-domain "
-                f"evaluation: {', '.join(other)}"
-            )
+    models = _models(args, chosen)
     max_size = args.max_size
     if max_size is None and not chosen and args.datasets == "default":
         max_size = MAIN_JOB_MAX_SIZE
@@ -283,8 +253,41 @@ def run(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
         return 130
-    # What the folder holds: this evaluation's rows and those of others kept beside them.
-    from ..evaluation.tables import CSV_NAME, read_rows
+    _report(args, rows, chosen)
+    return 0
+
+
+def _models(args: argparse.Namespace, chosen: bool) -> list[str]:
+    """The shipped models to evaluate: those named, or for the main job every shipped network
+    of the evaluation's light domain (of the patterns asked for, where ``--patterns`` is
+    given; it defaults to the paper's)."""
+    from ..recon.loading import model_names
+    from ..recon.registry import model_domain
+
+    given_patterns = args.patterns is not None
+    if not given_patterns:
+        args.patterns = list(PAPER_PATTERNS)
+    if chosen:
+        return args.model
+    models = model_names()
+    if given_patterns:
+        # The main job on the patterns asked for: their own networks and the network for any
+        # pattern, not every shipped network.
+        models = [m for m in models if _serves_one_of(m, args.patterns)]
+        print(f"the main job on {', '.join(args.patterns)}: {', '.join(models) or 'no network'}")
+    other = [m for m in models if model_domain(m) != args.domain]
+    if other:
+        print(
+            f"shipped networks of another light domain left out of this {args.domain}-domain "
+            f"evaluation: {', '.join(other)}"
+        )
+    return [m for m in models if m not in other]
+
+
+def _report(args: argparse.Namespace, rows: list, chosen: bool) -> None:
+    """Print the tables of what the folder holds (this evaluation's rows and those of others
+    kept beside them), draw the charts, and say what was written."""
+    from ..evaluation.tables import CSV_NAME, markdown_tables, read_rows, summarise
 
     kept = read_rows(Path(args.out) / CSV_NAME)
     summary = summarise(kept)
@@ -299,4 +302,20 @@ def run(args: argparse.Namespace) -> int:
     if (not chosen or args.save_images) and zoom.is_dir() and any(zoom.iterdir()):
         written += " and the zoomed crops in zoom/"
     print(f"wrote {args.out}/{written}")
-    return 0
+
+
+def _add_output_options(p: argparse.ArgumentParser) -> None:
+    """What ``evaluate`` writes: the folder, reconstructions and zoomed crops."""
+    p.add_argument("--out", default="results", help="output folder (default: results)")
+    p.add_argument(
+        "--save-images",
+        action="store_true",
+        help="write reconstructions and zoomed side-by-side crops",
+    )
+    p.add_argument(
+        "--zoom",
+        action="append",
+        metavar="IMAGE[:TOP,LEFT,SIZE][@SIGMA]",
+        help="image (and region, and noise level) for zoomed side-by-side crops (default: the "
+        "most detailed region of the first image of each dataset, at every level)",
+    )

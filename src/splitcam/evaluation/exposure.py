@@ -318,12 +318,7 @@ def write_study(
     )
     chart = exposure_chart(results, out / "exposure.png", networks=networks)
     photons = sorted(next(iter(results.values())))
-    head = (
-        "| pattern | "
-        + " | ".join(f"N={n:.3g}" if n < 1000 else f"N={n:.0f}" for n in photons)
-        + " |"
-    )
-    rule = "|---|" + "---|" * len(photons)
+    head = ["pattern", *(f"N={n:.3g}" if n < 1000 else f"N={n:.0f}" for n in photons)]
     lines = [
         "# Filters and splitters at equal exposure",
         "",
@@ -339,14 +334,17 @@ def write_study(
         "",
         "## PSNR (dB)",
         "",
-        head,
-        rule,
+        *markdown_table(
+            head, ([p, *(f"{r[n]['psnr']:.2f}" for n in photons)] for p, r in results.items())
+        ),
+        "",
+        "## CIEDE2000 (lower is better)",
+        "",
+        *markdown_table(
+            head,
+            ([p, *(f"{r[n]['ciede2000']:.3f}" for n in photons)] for p, r in results.items()),
+        ),
     ]
-    for p, r in results.items():
-        lines.append(f"| {p} | " + " | ".join(f"{r[n]['psnr']:.2f}" for n in photons) + " |")
-    lines += ["", "## CIEDE2000 (lower is better)", "", head, rule]
-    for p, r in results.items():
-        lines.append(f"| {p} | " + " | ".join(f"{r[n]['ciede2000']:.3f}" for n in photons) + " |")
     networks = networks or {}
     lmmse = {k: v for k, v in results.items() if k not in networks}
     refs = [r for r in references if r in lmmse]
@@ -371,15 +369,19 @@ def write_study(
             "`k`: mean raw signal over the filter's. Shot-limited gain should be "
             "10·log10 k, read-limited 20·log10 k.",
             "",
-            "| pattern | k | shot-limited gain (theory) | read-limited gain (theory) |",
-            "|---|---|---|---|",
         ]
-        for p, v in snr.items():
-            lines.append(
-                f"| {p} | {v['k']:.3f} | {v['shot_gain_db']:+.2f} dB "
-                f"({v['shot_theory_db']:+.2f}) | {v['read_gain_db']:+.2f} dB "
-                f"({v['read_theory_db']:+.2f}) |"
-            )
+        lines += markdown_table(
+            ["pattern", "k", "shot-limited gain (theory)", "read-limited gain (theory)"],
+            (
+                [
+                    p,
+                    f"{v['k']:.3f}",
+                    f"{v['shot_gain_db']:+.2f} dB ({v['shot_theory_db']:+.2f})",
+                    f"{v['read_gain_db']:+.2f} dB ({v['read_theory_db']:+.2f})",
+                ]
+                for p, v in snr.items()
+            ),
+        )
     lines += ["", f"![exposure]({chart.name})", ""]
     path = out / "exposure.md"
     write_text(path, "\n".join(lines))
