@@ -273,3 +273,36 @@ def test_a_deepinv_solver_through_the_evaluation_protocol():
         assert torch.equal(y, simulate(physics.splitter, rgb[None], "scene", sigma))
         assert 0 <= estimate.min() and estimate.max() <= 1
         assert score(estimate, rgb)["psnr"] > 10
+
+
+def test_any_splitcam_noise_model_becomes_a_deepinv_noise_model():
+    """A noise model defined outside the library (uniform noise) reaches deepinv through the
+    NoiseModel interface: its draws and its variance, with nothing else to register."""
+    from dataclasses import dataclass
+
+    from splitcam.integrations.deepinv import SplitcamNoise
+    from splitcam.physics.noise import NoiseModel
+
+    @dataclass(frozen=True)
+    class Uniform(NoiseModel):
+        width: float
+
+        def apply(self, raw, generator):
+            u = torch.rand(tuple(raw.shape), generator=generator, dtype=torch.float64)
+            return raw + ((2 * u - 1) * self.width / 255).to(raw.dtype)
+
+        def variance_coefficients(self):
+            return 0.0, (self.width / 255) ** 2 / 3
+
+        def label(self):
+            return f"U{self.width:g}"
+
+    model = noise_model(Uniform(30.0), seed=4)
+    assert isinstance(model, SplitcamNoise)
+    assert float(model.sigma) == pytest.approx(30.0 / 255 / 3**0.5)
+    z = torch.full((1, 1, 64, 64), 0.5, dtype=torch.float64)
+    y = model(z)
+    assert float((y - z).abs().max()) <= 30.0 / 255 + 1e-12
+    assert float((y - z).std()) == pytest.approx(float(model.sigma), rel=0.1)
+    model.reset_rng()
+    assert torch.equal(model(z), y)
