@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 import torch
@@ -163,3 +165,66 @@ def test_the_map_with_a_method_reconstructs_every_sensor_with_it(tiny) -> None:
     blind = break_even(tiny, **grid, method=Grey)
     feasible = [c for c in blind["cells"] if c["verdict"] != "infeasible"]
     assert feasible and all(c["verdict"] == "tie" for c in feasible)
+
+
+def test_the_map_against_another_reference_equals_computing_it_again(tiny) -> None:
+    """``against`` reconstructs only the new reference; the map must be the one a full pass
+    against that reference computes (an independent computation of every router's curve)."""
+    from splitcam.evaluation.breakeven import against, break_even
+
+    grid = {"etas": [0.5, 0.9], "chis": [0.0, 0.2], "photons": PHOTONS, "tol": 0.01}
+    first = break_even(tiny, reference="rgbw", **grid)
+    direct = break_even(tiny, reference="bayer-d5100", **grid)
+    rebased = against(first, "bayer-d5100", tiny)
+    assert rebased["reference"] == "bayer-d5100"
+    assert rebased["reference_curve"] == pytest.approx(direct["reference_curve"], abs=1e-9)
+    for mine, theirs in zip(rebased["cells"], direct["cells"], strict=True):
+        assert (mine["eta"], mine["chi"], mine["verdict"]) == (
+            theirs["eta"],
+            theirs["chi"],
+            theirs["verdict"],
+        )
+        if theirs["difference"] is None:
+            assert mine["difference"] is None
+        else:
+            assert mine["difference"] == pytest.approx(theirs["difference"], abs=1e-9)
+    # back against the first reference: the first map again
+    again = against(rebased, "rgbw", tiny)
+    assert [c["verdict"] for c in again["cells"]] == [c["verdict"] for c in first["cells"]]
+
+
+def test_several_references_each_get_a_map(tmp_path, tiny, monkeypatch) -> None:
+    from splitcam.cli import main
+
+    folder = tmp_path / "photos"
+    folder.mkdir()
+    from PIL import Image
+
+    Image.fromarray((tiny[0][1].permute(1, 2, 0).numpy() * 255).astype(np.uint8)).save(
+        folder / "ramp.png"
+    )
+    code = main(
+        [
+            "study",
+            "breakeven",
+            "--datasets",
+            str(folder),
+            "--eta",
+            "0.6",
+            "1",
+            "--chi",
+            "0",
+            "--photons",
+            "3",
+            "300",
+            "--reference",
+            "rgbw,rgbw-d5100",
+            "--quiet",
+            "--out",
+            str(tmp_path / "map"),
+        ]
+    )
+    assert code == 0
+    for name in ("rgbw", "rgbw-d5100"):
+        data = json.loads((tmp_path / "map" / name / "breakeven.json").read_text())
+        assert data["reference"] == name and (tmp_path / "map" / name / "breakeven.png").is_file()

@@ -81,7 +81,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--chi", type=float, nargs="+", help="breakeven: crosstalks (default 0 to 0.35, 8 steps)"
     )
-    p.add_argument("--reference", default="rgbw", help="breakeven: the pattern to tie")
+    p.add_argument(
+        "--reference",
+        default="rgbw",
+        help="breakeven: the pattern to tie; several, comma-separated, each get a map in "
+        "OUT/NAME/ (the routers are reconstructed once)",
+    )
     p.add_argument(
         "--metric",
         choices=["psnr", "ssim", "ciede2000"],
@@ -116,7 +121,13 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _run_breakeven(args: argparse.Namespace, images: list, names: str, photons: list) -> int:
-    from ..evaluation.breakeven import DEFAULT_CHIS, DEFAULT_ETAS, break_even, write_break_even
+    from ..evaluation.breakeven import (
+        DEFAULT_CHIS,
+        DEFAULT_ETAS,
+        against,
+        break_even,
+        write_break_even,
+    )
 
     sensor = sensor_settings(args)
     method = None
@@ -136,13 +147,20 @@ def _run_breakeven(args: argparse.Namespace, images: list, names: str, photons: 
                 f"universal-photon); {spec} was trained on one pattern"
             )
         method = lambda pattern: build_model(spec, pattern=pattern, domain=args.domain)  # noqa: E731
+    references = [r.strip() for r in args.reference.split(",") if r.strip()]
+    if not references:
+        raise ValueError("--reference names no pattern")
+    from ..patterns import get as get_pattern
+
+    for name in references:
+        get_pattern(name)  # an unknown reference fails before the map is computed
     result = break_even(
         images,
         method=method,
         etas=args.eta or DEFAULT_ETAS,
         chis=args.chi or DEFAULT_CHIS,
         photons=photons,
-        reference=args.reference,
+        reference=references[0],
         metric=args.metric,
         domain=args.domain,
         tol=args.tol,
@@ -150,9 +168,14 @@ def _run_breakeven(args: argparse.Namespace, images: list, names: str, photons: 
         **sensor,
     )
     note = f"Images: {names}. Command: {_command(args)}"
-    path = write_break_even(result, args.out or "results/breakeven", note=note)
-    print(path.read_text(encoding="utf-8"))
-    print(f"wrote {path}, breakeven.json and breakeven.png")
+    out = Path(args.out or "results/breakeven")
+    for i, name in enumerate(references):
+        if i:
+            result = against(result, name, images, method=method, **sensor)
+        folder = out if len(references) == 1 else out / name
+        path = write_break_even(result, folder, note=note)
+        print(path.read_text(encoding="utf-8"))
+        print(f"wrote {path}, breakeven.json and breakeven.png")
     return 0
 
 

@@ -30,6 +30,7 @@ from .tables import markdown_table
 __all__ = [
     "DEFAULT_CHIS",
     "DEFAULT_ETAS",
+    "against",
     "break_even",
     "crossings",
     "preset_points",
@@ -172,6 +173,45 @@ def break_even(
         "reference_curve": ref_values,
         "cells": cells,
     }
+
+
+def against(
+    result: dict[str, Any],
+    reference: str | Pattern,
+    images: Images,
+    *,
+    method: Callable[[Pattern], Reconstructor] | None = None,
+    **settings: Any,
+) -> dict[str, Any]:
+    """The map of :func:`break_even` against another reference, without reconstructing a router
+    again: each router's curve is the old reference's plus its difference, so only the new
+    reference is reconstructed (on the same ``images``, exposures, photon model and
+    reconstruction: ``method`` and ``settings`` as given to :func:`break_even`).
+
+    Raises:
+        ValueError: As :func:`break_even`.
+    """
+    ref = get(reference)
+    domain = result["domain"]
+    reconstruct = method or (lambda p: closed_form_lmmse(p, domain=domain, name=f"lmmse-{p.name}"))
+    photons = result["photons"]
+    if settings.pop("read_noise", result["read_noise"]) != result["read_noise"]:
+        raise ValueError("against(): the map's read noise is its own; give no other")
+    study = {"photons": photons, "read_noise": result["read_noise"], "domain": domain}
+    rec = reconstruct(ref)
+    curve = exposure_study(images, patterns=[], methods=[rec], progress=False, **study, **settings)
+    values = [curve[rec.name][n][result["metric"]] for n in photons]
+    sign = -1.0 if result["metric"] == "ciede2000" else 1.0
+    shift = [sign * (old - new) for old, new in zip(result["reference_curve"], values, strict=True)]
+    cells = []
+    for cell in result["cells"]:
+        if cell["difference"] is None:
+            cells.append(dict(cell))
+            continue
+        diff = [d + s for d, s in zip(cell["difference"], shift, strict=True)]
+        where = {k: cell[k] for k in ("eta", "chi", "label")}
+        cells.append({**where, **verdict(photons, diff, result["tol"]), "difference": diff})
+    return {**result, "reference": ref.name, "reference_curve": values, "cells": cells}
 
 
 def preset_points(names: Sequence[str] = ("router-zou", "router-best")) -> dict[str, tuple]:
