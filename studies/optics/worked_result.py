@@ -4,7 +4,7 @@ routing (RGGB collection efficiency), in two geometries; their collection effici
 height maps, and their image quality against pattern A and the Bayer filter at equal noise and
 at equal exposure.
 
-    SPLITCAM_DATA=DIR python scripts/optics_worked_result.py --out docs/results/optics
+    SPLITCAM_DATA=DIR python studies/optics/worked_result.py --out docs/results/optics
 
 Every router is scored by the closed-form LMMSE of its kernels (model.md §10), and so are A
 and the Bayer filter, so the comparison is between sensors, not between reconstructions. Images:
@@ -130,7 +130,7 @@ def main() -> int:
         out / "equal_exposure",
         note=f"Images: the first {args.images} of Kodak24 and of McMaster. Read noise 2 e-, no "
         "saturation or ADC. Command: `SPLITCAM_DATA=DIR python "
-        "scripts/optics_worked_result.py` (DIR: the data root holding kodak24/ and mcmaster/)",
+        "studies/optics/worked_result.py` (DIR: the data root holding kodak24/ and mcmaster/)",
     )
     info = {
         "command": " ".join(["python", *sys.argv]),
@@ -159,7 +159,7 @@ def _write_readme(out: Path, rows: list[dict], summary: dict, study: dict, info:
         f"({info['machine']}; {info['seconds'] / 60:.1f} min in all, {info['steps']} Adam steps "
         f"at lr {info['lr']} per design).",
         "",
-        "Scalar thin-element model (`splitcam.optics`): a height map of a dielectric of index 2.0 "
+        "Scalar thin-element model (`splitcam.physics.optics`): a height map of a dielectric of index 2.0 "
         "in air (at most 1.2 µm), normal incidence, angular-spectrum propagation to the "
         "photodiodes, Gaussian colour bands at 610/540/460 nm (σ 30 nm), 16 wavelengths from "
         "400 to 700 nm, 3x3-pixel kernels. Geometry p1: 1 µm pixels 2 µm below the metasurface "
