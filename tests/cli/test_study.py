@@ -72,6 +72,11 @@ def test_study_exposure_states_crossovers_against_rgbw(tmp_path) -> None:
     args = ["study", "exposure", "--max-images", "1", "--crop", "32", "--photons", "3", "300"]
     assert main([*args, "--patterns", "A,bayer,rgbw", "--quiet", "--out", str(tmp_path)]) == 0
     assert "vs rgbw: PSNR" in (tmp_path / "exposure.md").read_text()
+    # --reference names the crossover columns; the same folder's scores are reused.
+    patterns = ["--patterns", "A,bayer,rgbw,rgbw-d5100", "--quiet", "--out", str(tmp_path)]
+    assert main([*args, *patterns, "--reference", "rgbw,rgbw-d5100"]) == 0
+    text = (tmp_path / "exposure.md").read_text()
+    assert "vs rgbw-d5100: PSNR" in text and "vs bayer: PSNR" not in text
 
 
 def test_study_breakeven_with_a_network_for_any_pattern(tmp_path, capsys) -> None:

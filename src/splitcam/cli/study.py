@@ -83,9 +83,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--reference",
-        default="rgbw",
-        help="breakeven: the pattern to tie; several, comma-separated, each get a map in "
-        "OUT/NAME/ (the routers are reconstructed once)",
+        help="the patterns compared with, comma-separated: breakeven: the pattern to tie "
+        "(default rgbw; several each get a map in OUT/NAME/, the routers reconstructed once); "
+        "exposure: the crossover columns (default bayer,rgbw, those among --patterns)",
     )
     p.add_argument(
         "--metric",
@@ -147,9 +147,7 @@ def _run_breakeven(args: argparse.Namespace, images: list, names: str, photons: 
                 f"universal-photon); {spec} was trained on one pattern"
             )
         method = lambda pattern: build_model(spec, pattern=pattern, domain=args.domain)  # noqa: E731
-    references = [r.strip() for r in args.reference.split(",") if r.strip()]
-    if not references:
-        raise ValueError("--reference names no pattern")
+    references = _references(args.reference, ["rgbw"])
     from ..patterns import get as get_pattern
 
     for name in references:
@@ -216,9 +214,19 @@ def _run_exposure(args: argparse.Namespace, images: list, names: str, photons: l
         out,
         note=note,
         domain=args.domain,
-        references=REFERENCES,
+        references=_references(args.reference, list(REFERENCES)),
         networks=networks,
     )
     print(path.read_text(encoding="utf-8"))
     print(f"wrote {path}, exposure.json and exposure.png")
     return 0
+
+
+def _references(text: str | None, default: list[str]) -> list[str]:
+    """The patterns of ``--reference`` (comma-separated), or ``default``."""
+    if text is None:
+        return default
+    names = [r.strip() for r in text.split(",") if r.strip()]
+    if not names:
+        raise ValueError("--reference names no pattern")
+    return names
