@@ -21,6 +21,7 @@ def test_registry_names_and_case_insensitive_lookup():
         "router-zou",
         "router-best",
         "router-zou-fullwave",
+        "router-zou-fullwave-f2",
         "bayer-d5100",
         "rgbw-d5100",
         "bayer-sdmerrill",
