@@ -159,14 +159,14 @@ def _write_readme(out: Path, rows: list[dict], summary: dict, study: dict, info:
         f"({info['machine']}; {info['seconds'] / 60:.1f} min in all, {info['steps']} Adam steps "
         f"at lr {info['lr']} per design).",
         "",
-        "Scalar thin-element model (`splitcam.physics.optics`): a height map of a dielectric "
-        "of index 2.0 in air (at most 1.2 µm), normal incidence, angular-spectrum propagation "
-        "to the photodiodes, Gaussian colour bands at 610/540/460 nm (σ 30 nm), 16 wavelengths "
-        "from 400 to 700 nm, 3x3-pixel kernels. Geometry p1: 1 µm pixels 2 µm below the metasurface "
-        "(the defaults); p2: 2 µm pixels 4 µm below it. Each router is one 2x2 period designed "
-        "by Adam on its height map (sigmoid-bounded) from a random or a lens-array start, for "
-        "the closed-form LMMSE error averaged over σ = 0-20 (`lmmse`), or for the geometric mean "
-        "of the R/G/B collection efficiencies into an RGGB arrangement (`routing`).",
+        "Scalar thin-element model (`splitcam.physics.optics`): a height map of a dielectric of "
+        "index 2.0 in air (at most 1.2 µm), normal incidence, angular-spectrum propagation to the"
+        " photodiodes, Gaussian colour bands at 610/540/460 nm (σ 30 nm), 16 wavelengths from 400"
+        " to 700 nm, 3x3-pixel kernels. Geometry p1: 1 µm pixels 2 µm below the metasurface (the "
+        "defaults); p2: 2 µm pixels 4 µm below it. Each router is one 2x2 period designed by Adam"
+        " on its height map (sigmoid-bounded) from a random or a lens-array start, for the "
+        "closed-form LMMSE error averaged over σ = 0-20 (`lmmse`), or for the geometric mean of "
+        "the R/G/B collection efficiencies into an RGGB arrangement (`routing`).",
         "",
         "## Collection efficiency into RGGB pixels",
         "",
