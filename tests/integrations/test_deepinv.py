@@ -41,6 +41,22 @@ def test_deepinv_adjointness_test_on_every_library_pattern(name):
     assert float(error) < 1e-12
 
 
+def test_deepinv_adjointness_test_on_pattern_files_a_user_wrote(tmp_path):
+    """Patterns read from files (random valid ones, periods up to 4x4 and kernels up to 5x5)
+    pass deepinv's own adjointness test on an image that ends part-way through a period."""
+    import numpy as np
+
+    from splitcam.patterns.files import save
+    from splitcam.patterns.random import random_pattern
+
+    rng = np.random.default_rng(7)
+    for i in range(4):
+        path = save(random_pattern(rng, name=f"mine{i}"), tmp_path / f"mine{i}.toml")
+        physics = SplitterPhysics(str(path))
+        x = torch.rand(1, 3, 17, 22, dtype=torch.float64)
+        assert float(physics.adjointness_test(x, num_samples=4)) < 1e-12
+
+
 @pytest.mark.parametrize("name", ["A", "C", "router-best"])
 def test_adjointness_at_odd_sizes(name):
     torch.manual_seed(1)
