@@ -20,6 +20,7 @@ def test_registry_names_and_case_insensitive_lookup():
         "quad",
         "router-zou",
         "router-best",
+        "router-best-fullwave",
         "router-zou-fullwave",
         "router-zou-fullwave-f2",
         "bayer-d5100",
