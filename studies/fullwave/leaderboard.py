@@ -28,23 +28,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from solvers import DESIGN, fmmax_quadrants  # noqa: E402
 
-from splitcam.physics.fullwave import RouterDesign, read_design  # noqa: E402
+from splitcam.physics.fullwave import RouterDesign, band_efficiencies, read_design  # noqa: E402
 
 #: The leaderboard's numbers (blue / green / red band efficiency, 1000 terms).
 LEADERBOARD = (0.656, 0.594, 0.551)
-
-
-def bands(per_wavelength: dict[float, np.ndarray]) -> tuple[float, float, float]:
-    """Blue, green (both green pixels), red band efficiencies from ``{nm: (2, 2)}``."""
-    lams = sorted(per_wavelength)
-    blue = int(np.argmax(per_wavelength[lams[0]]))
-    red = int(np.argmax(per_wavelength[lams[-1]]))
-    green = [q for q in range(4) if q not in (blue, red)]
-    out = []
-    for quads, low, high in (([blue], 400, 500), (green, 500, 600), ([red], 600, 700)):
-        inside = [lam for lam in lams if low <= lam <= high]
-        out.append(float(np.mean([per_wavelength[lam].reshape(4)[quads].sum() for lam in inside])))
-    return tuple(out)
 
 
 def main() -> None:
@@ -60,11 +47,14 @@ def main() -> None:
     if args.merge:
         runs = [json.loads(p.read_text()) for p in args.merge]
         quads = {float(k): np.array(v) for r in runs for k, v in r["quadrants"].items()}
-        b = bands(quads)
-        print(f"band efficiency blue / green / red: {b[0]:.3f} / {b[1]:.3f} / {b[2]:.3f}")
+        lams = sorted(quads)
+        t = np.stack([quads[lam] for lam in lams], axis=-1)  # (2, 2, L)
+        b = band_efficiencies(t, lams)
+        ours = (b["blue"], b["green"], b["red"])
+        print("band efficiency blue / green / red: {:.3f} / {:.3f} / {:.3f}".format(*ours))
         print("leaderboard: {:.3f} / {:.3f} / {:.3f}".format(*LEADERBOARD))
         if args.pattern:
-            _write_pattern(args.pattern, quads, runs, args.pattern_out)
+            _write_pattern(args.pattern, lams, t, runs, args.pattern_out)
         return
     design = RouterDesign(read_design(DESIGN / "best-240325.csv"), thickness=0.699, depth=2.8)
     result = {"formulation": args.formulation, "quadrants": {}, "seconds": {}}
@@ -79,28 +69,19 @@ def main() -> None:
             args.out.write_text(json.dumps(result, indent=1) + "\n", encoding="utf-8")
 
 
-def _write_pattern(name: str, quads: dict, runs: list[dict], out: Path | None) -> None:
-    """The merged spectra as a spectral pattern file (checked to read back and conserve light)."""
-    from splitcam import patterns
-    from splitcam.cli.rcwa import spectral_toml
-    from splitcam.io import write_text
-    from splitcam.patterns.spectral import SpectralPattern
+def _write_pattern(name: str, lams, t, runs: list[dict], out: Path | None) -> None:
+    """The merged spectra as a spectral pattern file (checked, then read back)."""
+    from splitcam.patterns.files import save_transmission
 
-    lams = sorted(quads)
-    t = np.clip(np.stack([quads[lam] for lam in lams], axis=-1), 0.0, None)  # (2, 2, L)
-    terms = runs[0]["terms"]
     info = {
-        "provenance": f"full-wave (RCWA by fmmax, {runs[0]['formulation']}, {terms} terms, "
-        "normal incidence)",
+        "provenance": f"full-wave (RCWA by fmmax, {runs[0]['formulation']}, "
+        f"{runs[0]['terms']} terms, normal incidence)",
         "description": "metasurface router best-240325.csv (the invrs-gym leaderboard's best "
         "Bayer sorter): pitch 1 µm, 0.699 µm of Si3N4 in vacuum on SiO2, monitor 2.8 µm deep; "
         "normal incidence",
         "reference": "studies/fullwave/leaderboard.py",
     }
-    SpectralPattern.from_transmission(name, lams, t, **info)  # light conserved
-    path = out or Path(f"{name}.toml")
-    write_text(path, spectral_toml(name, lams, t, info))
-    patterns.get(str(path))  # it reads back
+    path = save_transmission(out or Path(f"{name}.toml"), name, lams, np.clip(t, 0.0, None), **info)
     print(f"wrote {path}")
 
 

@@ -137,3 +137,39 @@ def test_bad_spectral_patterns_are_refused(change, message):
     data.update(change)
     with pytest.raises(PatternError, match=message):
         SpectralPattern.from_dict(data)
+
+
+def test_a_router_s_spectra_written_as_a_file_read_back_as_the_same_pattern(tmp_path):
+    """save_transmission: the file reads back as from_transmission's pattern (to the file's 6
+    significant digits); spectra that create light are refused and nothing is written."""
+    from splitcam.patterns.files import save_transmission
+
+    lams = np.arange(400.0, 701.0, 20.0)
+    rng = np.random.default_rng(2)
+    t = rng.uniform(0.0, 1.0, (2, 2, lams.size))
+    t *= 0.97 / t.sum(axis=(0, 1), keepdims=True)  # 3 % reflected at every wavelength
+    path = save_transmission(tmp_path / "mine.toml", "mine", lams, t, provenance="test")
+    read = patterns.get(str(path))
+    direct = SpectralPattern.from_transmission("mine", lams, t).to_pattern()
+    assert read.name == "mine" and read.provenance == "test"
+    assert np.allclose(read.kernels, direct.kernels, atol=1e-5)
+    with pytest.raises(PatternError):
+        save_transmission(tmp_path / "bright.toml", "bright", lams, t * 1.1)
+    assert not (tmp_path / "bright.toml").exists()
+
+
+def test_band_efficiencies_as_the_leaderboard_scores_them():
+    """Each band's mean share into its own pixels, the quadrants found by where the ends peak."""
+    from splitcam.physics.fullwave import band_efficiencies
+
+    lams = np.array([433.0, 467.0, 533.0, 567.0, 633.0, 667.0])
+    t = np.full((2, 2, 6), 0.1)
+    t[0, 0, :2] = [0.7, 0.6]  # blue pixel, row 0 column 0
+    t[1, 1, 4:] = [0.5, 0.6]  # red pixel, row 1 column 1
+    t[0, 1, 2:4] = [0.3, 0.25]
+    t[1, 0, 2:4] = [0.3, 0.35]
+    eff = band_efficiencies(t, lams)
+    assert eff["quadrants"] == {"blue": 0, "red": 3}
+    assert eff["blue"] == pytest.approx(0.65)
+    assert eff["green"] == pytest.approx((0.6 + 0.6) / 2)
+    assert eff["red"] == pytest.approx(0.55)

@@ -60,36 +60,19 @@ def wavelengths_of(text: str) -> list[float]:
         ) from None
 
 
-def bands(transmission, wavelengths) -> dict[str, float]:
-    """Band efficiencies (the mean transmission of 400-500, 500-600 and 600-700 nm into its
-    own pixels: blue where the shortest wavelength peaks, red where the longest peaks, green the
-    other two) from ``(2, 2, L)`` transmissions."""
-    import numpy as np
-
-    t = np.asarray(transmission).reshape(4, -1)
-    lam = np.asarray(wavelengths)
-    blue, red = int(t[:, 0].argmax()), int(t[:, -1].argmax())
-    green = [q for q in range(4) if q not in (blue, red)]
-    out = {}
-    for name, quads, low, high in (
-        ("blue", [blue], 400, 500),
-        ("green", green, 500, 600),
-        ("red", [red], 600, 700),
-    ):
-        inside = (lam >= low) & (lam <= high)
-        out[name] = float(t[quads][:, inside].sum(axis=0).mean()) if inside.any() else float("nan")
-    out["quadrants"] = {"blue": blue, "red": red}
-    return out
-
-
 def run(args: argparse.Namespace) -> int:
     import numpy as np
     import torch
 
-    from .. import patterns
-    from ..io import write_text
+    from ..patterns.files import save_transmission
     from ..patterns.spectral import SpectralPattern
-    from ..physics.fullwave import RouterDesign, cone_directions, quadrant_spectra, read_design
+    from ..physics.fullwave import (
+        RouterDesign,
+        band_efficiencies,
+        cone_directions,
+        quadrant_spectra,
+        read_design,
+    )
 
     lams = wavelengths_of(args.wavelengths)
     grid = read_design(args.design)
@@ -153,13 +136,11 @@ def run(args: argparse.Namespace) -> int:
         f"monitor {args.depth:g} µm deep; {where}",
         "reference": "splitcam optics rcwa",
     }
-    SpectralPattern.from_transmission(name, lams, t, **info)  # light conserved
+    out.mkdir(parents=True, exist_ok=True)
+    pattern_file = save_transmission(out / "pattern.toml", name, lams, t, **info)
     _write_spectra(out, lams, {**result, "transmission": t})
     _chart(lams, t, result["reflection"], out / "spectra.png", f"{name}: {where}")
-    pattern_file = out / "pattern.toml"
-    write_text(pattern_file, spectral_toml(name, lams, t, info))
-    patterns.get(str(pattern_file))  # it reads back
-    eff = bands(t, lams)
+    eff = band_efficiencies(t, lams)
     print(
         f"blue peaks in quadrant (row, col) {divmod(eff['quadrants']['blue'], 2)}, red in "
         f"{divmod(eff['quadrants']['red'], 2)}; band efficiency blue {eff['blue']:.3f}, green "
@@ -192,24 +173,6 @@ def _write_spectra(out: Path, lams, result: dict) -> None:
     rows = [",".join(header)]
     rows += [",".join(f"{v:.6g}" for v in row) for row in np.stack(columns, axis=1)]
     write_text(out / "spectra.csv", "\n".join(rows) + "\n")
-
-
-def spectral_toml(name: str, lams, transmission, info: dict) -> str:
-    """A spectral pattern file: one line per pixel's spectrum."""
-    import json
-
-    lines = [f"name = {json.dumps(name, ensure_ascii=False)}"]
-    lines += [f"{k} = {json.dumps(v, ensure_ascii=False)}" for k, v in info.items()]
-    lines.append("wavelengths = [" + ", ".join(f"{v:g}" for v in lams) + "]")
-    lines.append("# transmission[row][column]: the share of each wavelength's light arriving on")
-    lines.append("# the period that lands on that pixel")
-    lines.append("transmission = [")
-    for row in transmission:
-        lines.append("  [")
-        lines += ["    [" + ", ".join(f"{v:.6g}" for v in px) + "]," for px in row]
-        lines.append("  ],")
-    lines.append("]")
-    return "\n".join(lines) + "\n"
 
 
 def _material(text: str) -> str | float:

@@ -105,3 +105,34 @@ def save(pattern: Pattern, path: str | os.PathLike) -> Path:
     data = pattern.to_dict()
     text = json.dumps(data, indent=2) + "\n" if suffix == ".json" else _toml(data)
     return write_text(path, text)
+
+
+def save_transmission(
+    path: str | os.PathLike, name: str, wavelengths, transmission, **info: str
+) -> Path:
+    """Write a router's spectra as a spectral pattern file (TOML): ``transmission[i, j, l]``,
+    the share of light of wavelength ``l`` arriving on the period that lands on pixel
+    ``(i, j)`` (:meth:`~splitcam.patterns.spectral.SpectralPattern.from_transmission`, whose
+    checks run first: wavelengths in range, no light created), with ``info`` (provenance,
+    description, reference). Written atomically and read back.
+
+    Raises:
+        PatternError: Spectra that fail those checks (nothing is written).
+    """
+    from .spectral import SpectralPattern
+
+    SpectralPattern.from_transmission(name, wavelengths, transmission, **info)
+    lines = [f"name = {json.dumps(name, ensure_ascii=False)}"]
+    lines += [f"{k} = {json.dumps(v, ensure_ascii=False)}" for k, v in info.items()]
+    lines.append("wavelengths = [" + ", ".join(f"{v:g}" for v in wavelengths) + "]")
+    lines.append("# transmission[row][column]: the share of each wavelength's light arriving on")
+    lines.append("# the period that lands on that pixel")
+    lines.append("transmission = [")
+    for row in transmission:
+        lines.append("  [")
+        lines += ["    [" + ", ".join(f"{v:.6g}" for v in px) + "]," for px in row]
+        lines.append("  ],")
+    lines.append("]")
+    written = write_text(path, "\n".join(lines) + "\n")
+    load(written)
+    return written

@@ -29,6 +29,7 @@ import os
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -36,6 +37,7 @@ __all__ = [
     "MATERIALS",
     "FullwaveError",
     "RouterDesign",
+    "band_efficiencies",
     "cone_directions",
     "index_of",
     "quadrant_spectra",
@@ -288,3 +290,24 @@ def _flux(fields) -> np.ndarray:
     (``[x, y]`` arrays)."""
     (ex, ey, _), (hx, hy, _) = fields
     return (0.5 * (ex * hy.conj() - ey * hx.conj()).real).numpy().T
+
+
+def band_efficiencies(transmission: Any, wavelengths: Any) -> dict[str, Any]:
+    """Band efficiencies of a 2x2 router, as the leaderboard scores them: the mean transmission
+    of 400-500, 500-600 and 600-700 nm into its own pixels (blue where the shortest wavelength
+    peaks, red where the longest peaks, green the other two), from ``(2, 2, L)`` transmissions;
+    ``quadrants`` names the blue and red ones (row-major index)."""
+    t = np.asarray(transmission).reshape(4, -1)
+    lam = np.asarray(wavelengths)
+    blue, red = int(t[:, 0].argmax()), int(t[:, -1].argmax())
+    green = [q for q in range(4) if q not in (blue, red)]
+    out: dict[str, Any] = {}
+    for name, quads, low, high in (
+        ("blue", [blue], 400, 500),
+        ("green", green, 500, 600),
+        ("red", [red], 600, 700),
+    ):
+        inside = (lam >= low) & (lam <= high)
+        out[name] = float(t[quads][:, inside].sum(axis=0).mean()) if inside.any() else float("nan")
+    out["quadrants"] = {"blue": blue, "red": red}
+    return out
