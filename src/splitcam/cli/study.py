@@ -128,6 +128,7 @@ def _run_breakeven(args: argparse.Namespace, images: list, names: str, photons: 
         break_even,
         write_break_even,
     )
+    from ..patterns import get as get_pattern
 
     sensor = sensor_settings(args)
     method = None
@@ -148,8 +149,6 @@ def _run_breakeven(args: argparse.Namespace, images: list, names: str, photons: 
             )
         method = lambda pattern: build_model(spec, pattern=pattern, domain=args.domain)  # noqa: E731
     references = _references(args.reference, ["rgbw"])
-    from ..patterns import get as get_pattern
-
     for name in references:
         get_pattern(name)  # an unknown reference fails before the map is computed
     result = break_even(

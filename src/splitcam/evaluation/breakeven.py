@@ -129,7 +129,7 @@ def break_even(
     make = candidate or (lambda e, x: router(e, x, name=_label(e, x)))
     study = {"photons": photons, "read_noise": read_noise, "domain": domain, "progress": False}
 
-    reconstruct = method or (lambda p: closed_form_lmmse(p, domain=domain, name=f"lmmse-{p.name}"))
+    reconstruct = method or _closed_form(domain)
 
     def curve_of(rec: Reconstructor) -> dict[float, dict[str, float]]:
         return exposure_study(images, patterns=[], methods=[rec], **study, **settings)[rec.name]
@@ -193,7 +193,7 @@ def against(
     """
     ref = get(reference)
     domain = result["domain"]
-    reconstruct = method or (lambda p: closed_form_lmmse(p, domain=domain, name=f"lmmse-{p.name}"))
+    reconstruct = method or _closed_form(domain)
     photons = result["photons"]
     if settings.pop("read_noise", result["read_noise"]) != result["read_noise"]:
         raise ValueError("against(): the map's read noise is its own; give no other")
@@ -212,6 +212,11 @@ def against(
         where = {k: cell[k] for k in ("eta", "chi", "label")}
         cells.append({**where, **verdict(photons, diff, result["tol"]), "difference": diff})
     return {**result, "reference": ref.name, "reference_curve": values, "cells": cells}
+
+
+def _closed_form(domain: str) -> Callable[[Pattern], Reconstructor]:
+    """The map's default reconstruction: each pattern's closed-form LMMSE."""
+    return lambda p: closed_form_lmmse(p, domain=domain, name=f"lmmse-{p.name}")
 
 
 def preset_points(names: Sequence[str] = ("router-zou", "router-best")) -> dict[str, tuple]:

@@ -530,9 +530,9 @@ def noise_level_map(
         sig = sigma.to(dtype=raw.dtype, device=raw.device).reshape(-1)
         sig = sig.expand(n) if sig.numel() == 1 else sig
         return sig.view(n, 1, 1, 1).expand(shape)
-    levels = [as_noise(s) for s in sigma] if isinstance(sigma, (list, tuple)) else [sigma]
+    levels = [as_noise(s) for s in (sigma if isinstance(sigma, (list, tuple)) else [sigma])]
     if len(levels) == 1:
-        return as_noise(levels[0]).level_map(cells)
+        return levels[0].level_map(cells)
     if len(levels) != n:
         raise ValueError(f"expected 1 or {n} noise levels, got {len(levels)}")
     return torch.cat([lv.level_map(cells[i : i + 1]) for i, lv in enumerate(levels)])

@@ -41,7 +41,7 @@ from ..physics.light import check_domain
 from .base import NetworkReconstructor, Reconstructor
 from .closed_form import closed_form_lmmse
 from .demosaic import ClassicalDemosaic
-from .lmmse import LMMSE, fit_lmmse, shipped_lmmse
+from .lmmse import LMMSE, shipped_lmmse
 from .loading import (
     LoadedNetwork,
     ModelError,
@@ -110,9 +110,11 @@ def build_model(
         loaded,
         f"net-{name}",
         pattern,
-        _Inference(tile, precision, trained_in),
         own_pattern=_trained_on_one_pattern(meta.get("config")),
         identity=f"model:{name}:{meta.get('sha256', '')}{fields}",
+        tile=tile,
+        precision=precision,
+        domain=trained_in,
     )
 
 
@@ -157,29 +159,20 @@ def _trained_on_one_pattern(config: dict | None) -> bool:
     return str(name).strip().lower() != "random"
 
 
-@dataclass(frozen=True)
-class _Inference:
-    """How a network method runs: tile size, precision, and the domain it was trained in."""
-
-    tile: int | None
-    precision: str
-    domain: str
-
-
 def _network_method(
     loaded: LoadedNetwork,
     label: str,
     pattern,
-    inference: _Inference,
     *,
     own_pattern: bool,
     identity: str,
+    **options,
 ) -> NetworkReconstructor:
     """A trained network as a method: with its own pattern, or for a network of any pattern
     (``period`` None) with ``pattern``, labelled ``<label>-<pattern>``. Its fingerprint is
     ``identity`` (the file) followed by what else identifies its results (the pattern's values).
     A network of any pattern fine-tuned on one (``own_pattern``) reconstructs that one unless
-    told another."""
+    told another. ``options``: the reconstructor's ``tile``, ``precision`` and ``domain``."""
     if not serves_any_pattern(loaded.network) and pattern is not None:
         given = patterns.get(pattern)
         if not given.equals(loaded.pattern):
@@ -188,11 +181,6 @@ def _network_method(
                 f"of {_pattern_label(pattern, given)}: use a network of that pattern, the "
                 f"universal network or lmmse"
             )
-    options = {
-        "tile": inference.tile,
-        "precision": inference.precision,
-        "domain": inference.domain,
-    }
     if not serves_any_pattern(loaded.network) or (own_pattern and pattern is None):
         return NetworkReconstructor(
             loaded.network, loaded.pattern, label, fingerprint=identity, **options
@@ -287,8 +275,7 @@ def _build_lmmse(key: str, request: _Request) -> Reconstructor:
             )
         return closed_form_lmmse(resolved, name=name, domain=LINEAR)
     if request.lmmse_train is not None:
-        statistics = fit_lmmse(resolved, request.lmmse_train, progress=request.progress)
-        return LMMSE(statistics, name, pattern=resolved)
+        return LMMSE.fit(resolved, request.lmmse_train, name, progress=request.progress)
     try:
         return shipped_lmmse(resolved, name)
     except FileNotFoundError:  # not a built-in's kernels: solve its filters in closed form
@@ -306,11 +293,11 @@ def _build_network_file(spec: str | os.PathLike, request: _Request) -> Reconstru
         load_network(path),
         label,
         request.pattern,
-        _Inference(
-            request.tile, request.precision, _check_network_domain(label, config, request.domain)
-        ),
         own_pattern=_trained_on_one_pattern(config),
         identity=f"{path.resolve()}:{stat.st_size}:{stat.st_mtime_ns}",
+        tile=request.tile,
+        precision=request.precision,
+        domain=_check_network_domain(label, config, request.domain),
     )
 
 
@@ -376,12 +363,11 @@ def build_method(
     if key in BUILDERS:
         return BUILDERS[key](key, request)
     check_unambiguous(spec, "method")
-    if isinstance(spec, str) and spec.strip() in model_names():
-        spec = spec.strip()
-    if (isinstance(spec, str) and spec in model_names()) or (
-        _is_path(spec) and str(spec).endswith(".json") and Path(spec).is_file()
-    ):
-        return build_model(spec, pattern=pattern, tile=tile, precision=precision, domain=domain)
+    model = spec.strip() if isinstance(spec, str) and spec.strip() in model_names() else None
+    if model is None and _is_path(spec) and str(spec).endswith(".json") and Path(spec).is_file():
+        model = spec
+    if model is not None:
+        return build_model(model, pattern=pattern, tile=tile, precision=precision, domain=domain)
     if _is_path(spec):
         return _build_network_file(spec, request)
     raise ValueError(
