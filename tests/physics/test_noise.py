@@ -11,6 +11,7 @@ import torch
 
 from splitcam.physics.noise import (
     Exposure,
+    Gaussian,
     GaussianNoise,
     PhotonNoise,
     add_evaluation_noise,
@@ -26,17 +27,18 @@ from splitcam.recon.closed_form import (
 
 def test_fixed_sigma_has_the_right_statistics():
     raw = torch.zeros(4, 1, 256, 256)
-    noisy, sigma = GaussianNoise(10.0, seed=0)(raw)
-    assert torch.all(sigma == 10.0)
+    noisy, levels = GaussianNoise(10.0, seed=0)(raw)
+    assert levels == [Gaussian(10.0)] * 4  # the objects evaluation uses
     assert noisy.std().item() == pytest.approx(10 / 255, rel=0.01)
     assert abs(noisy.mean().item()) < 1e-3
 
 
 def test_sigma_range_per_batch_and_per_sample():
     raw = torch.zeros(8, 1, 64, 64)
-    noisy, sigma = GaussianNoise((5.0, 20.0), seed=1)(raw)
-    assert torch.all(sigma == sigma[0]) and 5 <= sigma[0] <= 20
-    noisy, sigma = GaussianNoise((5.0, 20.0), per_sample=True, seed=1)(raw)
+    noisy, levels = GaussianNoise((5.0, 20.0), seed=1)(raw)
+    assert len(set(levels)) == 1 and 5 <= levels[0].sigma <= 20
+    noisy, levels = GaussianNoise((5.0, 20.0), per_sample=True, seed=1)(raw)
+    sigma = torch.tensor([level.sigma for level in levels])
     assert len(set(sigma.tolist())) == 8 and torch.all((sigma >= 5) & (sigma <= 20))
     per_image_std = noisy.flatten(1).std(dim=1) * 255
     torch.testing.assert_close(per_image_std, sigma, rtol=0.05, atol=0)
@@ -216,11 +218,11 @@ def test_gaussian_training_noise_on_the_cpu_is_the_one_stream() -> None:
     """On the CPU the noise field comes from the sigma generator, after the sigma: the stream
     CPU runs have always drawn (a naive re-draw in that order gives the same numbers)."""
     raw = torch.zeros(3, 1, 8, 8)
-    noisy, sigma = GaussianNoise((0.0, 30.0), seed=7)(raw)
+    noisy, levels = GaussianNoise((0.0, 30.0), seed=7)(raw)
     gen = torch.Generator().manual_seed(7)
     expected_sigma = 30.0 * torch.rand(1, generator=gen, dtype=torch.float64)
     field = torch.randn(raw.shape, generator=gen, dtype=torch.float32)
-    assert float(sigma[0]) == pytest.approx(float(expected_sigma))
+    assert levels == [Gaussian(float(expected_sigma.float()))] * 3
     torch.testing.assert_close(noisy, field * (expected_sigma.float() / 255))
     assert GaussianNoise(seed=7).state_dict().keys() == {"generator"}
 

@@ -119,9 +119,9 @@ class GaussianNoise(_TrainingDraws):
         seed: Seed of the generators that draw sigmas and noise.
         device: Where the noise is drawn (see :class:`_TrainingDraws`; default the CPU).
 
-    Shape:
-        - raw: ``(N, 1, H, W)``; returns the noisy raw image and the sigmas ``(N,)`` used (on
-          the CPU).
+    Returns (when called on ``(N, 1, H, W)`` raw images): the noisy images and the
+    :class:`Gaussian` of each image, the same objects evaluation uses (what the LMMSE solves
+    for and the physics-informed networks are told).
     """
 
     def __init__(
@@ -139,7 +139,7 @@ class GaussianNoise(_TrainingDraws):
         self.per_sample = per_sample
         self._seed(seed, device)
 
-    def __call__(self, raw: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    def __call__(self, raw: torch.Tensor) -> tuple[torch.Tensor, list[Gaussian]]:
         lo, hi = self.range
         n = raw.shape[0] if self.per_sample else 1
         sigma = lo + (hi - lo) * torch.rand(n, generator=self.generator, dtype=torch.float64)
@@ -149,7 +149,9 @@ class GaussianNoise(_TrainingDraws):
         )
         noise = noise.to(device=raw.device, dtype=raw.dtype)
         scale = (sigma / 255.0).to(device=raw.device, dtype=raw.dtype).view(-1, 1, 1, 1)
-        return raw + scale * noise, sigma.float()
+        # The levels as the float32 numbers the noise was scaled by, so that what the networks
+        # are told is exactly what was drawn.
+        return raw + scale * noise, [Gaussian(float(s)) for s in sigma.float()]
 
 
 class NoiseModel(ABC):

@@ -13,7 +13,7 @@ from .sensor import SplitterSensor
 
 __all__ = ["ImagingSystem", "simulate"]
 
-NoiseFn = Callable[[torch.Tensor], tuple[torch.Tensor, torch.Tensor]]
+NoiseFn = Callable[[torch.Tensor], tuple[torch.Tensor, list[NoiseModel]]]
 
 
 class ImagingSystem(nn.Module):
@@ -56,7 +56,7 @@ class ImagingSystem(nn.Module):
         # network runs in reduced precision.
         with torch.autocast(rgb.device.type, enabled=False):
             raw = self.sensor(rgb)
-        sigma = torch.zeros(rgb.shape[0], device=rgb.device)
+        sigma: float | list = 0.0
         if noise is not None:
             raw, sigma = noise(raw)
         if self.channels_last:
