@@ -164,3 +164,66 @@ def test_a_wavelength_where_an_order_grazes_is_solved():
     np.testing.assert_allclose(
         out["transmission"].sum(axis=(0, 1)) + out["reflection"], 1.0, atol=1e-6
     )
+
+
+# --- the second solver: fmmax (splitcam[fmmax]) ---------------------------------------------
+
+
+def _fmmax():
+    pytest.importorskip("fmmax")
+
+
+@pytest.mark.parametrize("solver", ["fmmax-fft", "fmmax-jones"])
+def test_fmmax_transmits_what_a_thin_film_does(solver):
+    _fmmax()
+    lam = 530.0
+    design = RouterDesign(np.full((4, 4), 1.0), thickness=0.31, depth=0.7)
+    out = quadrant_spectra(design, [lam], order=1, samples=8, solver=solver)
+    n_film = float(MATERIALS["Si3N4"](lam / 1000))
+    expect = _airy(n_film, 0.31, float(MATERIALS["SiO2"](lam / 1000)), lam / 1000)
+    np.testing.assert_allclose(out["transmission"][:, :, 0], expect / 4, rtol=1e-6)
+    assert out["reflection"][0] == pytest.approx(1 - expect, abs=1e-6)
+
+
+def test_fmmax_conserves_light_at_an_angle_and_agrees_with_torcwa():
+    """fmmax's FFT formulation conserves light through a patterned layer at oblique incidence,
+    and lands near torcwa at the same order (the truncations differ: a circle of about
+    ``(2 order + 1)^2`` terms against the square)."""
+    _fmmax()
+    rng = np.random.default_rng(0)
+    design = RouterDesign(rng.random((8, 8)) > 0.5, thickness=0.5, depth=1.0)
+    direction = [cone_directions(2.0)[3]]
+    ours = quadrant_spectra(design, [610.0], order=4, samples=16, directions=direction)
+    out = quadrant_spectra(
+        design, [610.0], order=4, samples=16, directions=direction, solver="fmmax-fft"
+    )
+    assert out["terms"] == pytest.approx(81, abs=4) and ours["terms"] == 81
+    assert out["transmission"].sum() + out["reflection"][0] == pytest.approx(1.0, abs=1e-6)
+    np.testing.assert_allclose(out["transmission"], ours["transmission"], atol=0.03)
+    assert out["transmission"].std() > 0.01  # the layer sorts light
+
+
+def test_solver_settings_are_checked(monkeypatch):
+    design = RouterDesign(np.ones((2, 2)))
+    with pytest.raises(FullwaveError, match="unknown solver 'meep'; expected one of torcwa"):
+        quadrant_spectra(design, [500.0], solver="meep")
+    with pytest.raises(FullwaveError, match="terms: a number >= 1, for an fmmax solver"):
+        quadrant_spectra(design, [500.0], terms=100)
+    monkeypatch.setitem(sys.modules, "fmmax", None)
+    with pytest.raises(FullwaveError, match=r"pip install 'splitcam\[fmmax\]'"):
+        quadrant_spectra(design, [500.0], solver="fmmax-fft")
+
+
+def test_the_command_solves_with_fmmax_and_says_so(tmp_path, capsys):
+    _fmmax()
+    from splitcam import patterns
+    from splitcam.cli import main
+
+    out = tmp_path / "zou"
+    args = ["optics", "rcwa", str(DESIGNS / "zou2022-16x16.csv"), "--wavelengths", "450,650"]
+    fmmax = ["--solver", "fmmax-fft", "--terms", "40", "--quiet"]
+    assert main([*args, *fmmax, "--out", str(out)]) == 0
+    pattern = patterns.get(str(out / "pattern.toml"))
+    assert "fmmax-fft, 37 terms" in pattern.provenance
+    assert main([*args, "--terms", "40", "--out", str(tmp_path / "x")]) == 1
+    assert "for an fmmax solver" in capsys.readouterr().err and not (tmp_path / "x").exists()

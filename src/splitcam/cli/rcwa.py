@@ -34,6 +34,19 @@ def register(optics_sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--order", type=int, default=9, help="Fourier order per axis (default 9)")
     p.add_argument(
+        "--solver",
+        choices=["torcwa", "fmmax-fft", "fmmax-jones"],
+        default="torcwa",
+        help="torcwa (default; splitcam[fullwave]) or fmmax in its FFT or Jones-direct "
+        "formulation (splitcam[fmmax]; fmmax-jones with --terms 1000 is the invrs-gym "
+        "leaderboard's setting)",
+    )
+    p.add_argument(
+        "--terms",
+        type=int,
+        help="fmmax: about this many Fourier terms, circular truncation (default (2 order + 1)^2)",
+    )
+    p.add_argument(
         "--f-number",
         type=float,
         help="average over the cone of light of a lens at this f-number (7 directions) "
@@ -98,12 +111,14 @@ def run(args: argparse.Namespace) -> int:
     if not args.quiet:
         from tqdm import tqdm
 
-        bar = tqdm(total=len(lams), desc=f"rcwa order {args.order}", unit="wavelength")
+        bar = tqdm(total=len(lams), desc=f"rcwa {args.solver}", unit="wavelength")
     result = quadrant_spectra(
         design,
         lams,
         order=args.order,
         directions=directions,
+        solver=args.solver,
+        terms=args.terms,
         progress=(lambda n: bar.update(n - bar.n)) if bar else None,
     )
     if bar:
@@ -121,7 +136,8 @@ def run(args: argparse.Namespace) -> int:
         _write_spectra(out, lams, result)
         raise ValueError(
             f"quadrant ({i}, {j}) at {lams[li]:g} nm transmits {lowest:.4f} < 0: not converged "
-            f"at order {args.order}; raise --order (spectra.csv written for a look)"
+            f"with {_solved_by(args, result['terms'])}; raise --order or --terms (spectra.csv "
+            "written for a look)"
         )
     t = np.clip(t, 0.0, None)
     where = (
@@ -130,7 +146,7 @@ def run(args: argparse.Namespace) -> int:
         else "normal incidence"
     )
     info = {
-        "provenance": f"full-wave (RCWA, order {args.order}, {where})",
+        "provenance": f"full-wave (RCWA, {_solved_by(args, result['terms'])}, {where})",
         "description": f"metasurface router {Path(args.design).name}: pitch {args.pitch:g} µm, "
         f"{args.thickness:g} µm of {args.pillar} in {args.background} on {args.substrate}, "
         f"monitor {args.depth:g} µm deep; {where}",
@@ -175,6 +191,12 @@ def _write_spectra(out: Path, lams, result: dict) -> None:
     write_text(out / "spectra.csv", "\n".join(rows) + "\n")
 
 
+def _solved_by(args: argparse.Namespace, terms: int) -> str:
+    """``order 9`` for torcwa (the provenance the shipped files carry), ``fmmax-jones, 997
+    terms`` for fmmax."""
+    return f"order {args.order}" if args.solver == "torcwa" else f"{args.solver}, {terms} terms"
+
+
 def _material(text: str) -> str | float:
     try:
         return float(text)
@@ -185,16 +207,27 @@ def _material(text: str) -> str | float:
 def _chart(lams, t, reflection, path: Path, title: str) -> None:
     import matplotlib
 
+    from ..physics.fullwave import band_efficiencies
+
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     from ..viz._save import save_figure
 
+    # Each pixel drawn in the colour it collects: blue where the shortest wavelength peaks, red
+    # where the longest peaks, green the other two (dashed for the second).
+    roles = band_efficiencies(t, lams)["quadrants"]
+    styles = {roles["blue"]: ("tab:blue", "-", "blue"), roles["red"]: ("tab:red", "-", "red")}
+    greens = [q for q in range(4) if q not in styles]
+    for k, q in enumerate(greens):
+        styles[q] = ("tab:green", "-" if k == 0 else "--", "green")
     fig, ax = plt.subplots(figsize=(6.4, 4.0))
-    for i in range(2):
-        for j in range(2):
-            ax.plot(lams, t[i, j], marker=".", label=f"pixel row {i}, col {j}")
-    ax.plot(lams, reflection, "k--", label="reflected")
+    for q in range(4):
+        i, j = divmod(q, 2)
+        colour, line, role = styles[q]
+        label = f"pixel row {i}, col {j} ({role})"
+        ax.plot(lams, t[i, j], line, color=colour, marker=".", label=label)
+    ax.plot(lams, reflection, "k:", label="reflected")
     ax.set_xlabel("wavelength (nm)")
     ax.set_ylabel("share of the light on the period")
     ax.set_ylim(0, max(1e-3, float(t.max())) * 1.1)
