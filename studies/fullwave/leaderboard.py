@@ -6,7 +6,8 @@ its band efficiencies when the formulation is the other one?
 
 The design (``experiments/fullwave/designs/best-240325.csv``: 0.699 µm of Si3N4 in vacuum on
 SiO2, monitor 2.8 µm deep) at each wavelength, normal incidence, both polarisations averaged, by
-:func:`solvers.fmmax_quadrants` (fmmax must be installed: ``pip install fmmax``). The band
+:func:`solvers.fmmax_quadrants` (``splitcam optics rcwa --solver fmmax-jones`` solves the same;
+fmmax must be installed: ``pip install 'splitcam[fmmax]'``). The band
 efficiency of a colour is the mean, over that band's wavelengths, of the transmission into its
 own pixels (blue where 433 nm peaks, red where 667 nm peaks, green the other two), as the
 leaderboard defines it. Wavelengths can be split over several runs and their JSON files merged
