@@ -39,7 +39,14 @@ from .metrics import mean_over_images
 from .protocol import Images, check_method_domains, evaluate
 from .tables import domain_line, markdown_table
 
-__all__ = ["crossings", "crossover", "exposure_study", "raw_snr_check", "write_study"]
+__all__ = [
+    "crossings",
+    "crossover",
+    "describe_crossover",
+    "exposure_study",
+    "raw_snr_check",
+    "write_study",
+]
 
 DEFAULT_PATTERNS = ("A", "B", "C", "D", "E", "bayer")
 
@@ -143,9 +150,18 @@ def crossings(photons: Sequence[float], diff: Sequence[float], tol: float = 0.0)
     return out
 
 
-def _fmt_crossover(v: float | None, curve: dict[float, float], ref: dict[float, float]) -> str:
-    """A crossover as the table shows it; where the curve does not win at the lowest exposure
-    but does higher up, the exposures where it wins (between two crossings, or above one)."""
+def describe_crossover(curve: dict[float, float], ref: dict[float, float]) -> str:
+    """Where ``curve`` beats ``ref`` (higher is better), as the crossover tables say it: the
+    exposure below which it wins (:func:`crossover`); where it does not win at the lowest
+    exposure but does higher up, the exposures where it wins (between two crossings, or above
+    one); or never.
+
+    >>> describe_crossover({1: 2.0, 10: 1.0, 100: 0.0}, {1: 1.0, 10: 1.0, 100: 1.0})
+    'N ≈ 3.16'
+    >>> describe_crossover({1: 0.0, 10: 2.0, 100: 0.0}, {1: 1.0, 10: 1.0, 100: 1.0})
+    'never below; between N ≈ 3.16 and 31.6'
+    """
+    v = crossover(curve, ref)
     if v is not None:
         return "every exposure studied" if math.isinf(v) else f"N ≈ {v:.3g}"
     xs = sorted(curve)
@@ -189,7 +205,7 @@ def _crossover_table(
             for key, sign in (("psnr", 1), ("ciede2000", -1)):
                 curve = {n: sign * r[n][key] for n in photons}
                 ref = {n: sign * results[against][n][key] for n in photons}
-                row.append(_fmt_crossover(crossover(curve, ref), curve, ref))
+                row.append(describe_crossover(curve, ref))
         rows.append([p, *row])
     return ["", title + title_suffix, "", *markdown_table(head, rows)]
 

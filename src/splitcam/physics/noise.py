@@ -14,10 +14,10 @@ Training noise comes from :class:`GaussianNoise` and :class:`PhotonNoise`, which
 generators (so a resumed run draws the same noise as an uninterrupted one): the noise levels on
 the CPU, the noise itself on the device of the raw images (:class:`_TrainingDraws`). Both hand
 on the level of each image as the :class:`NoiseModel` evaluation uses (:class:`Gaussian`,
-:class:`Exposure`), so training and evaluation tell the LMMSE and the networks the same things. Evaluation
-noise comes from :func:`evaluation_noise`, seeded from the image's name and sigma, so that every
-pattern and every method is scored on identical noise. Nothing here touches Python's ``random``
-or global RNGs.
+:class:`Exposure`), so training and evaluation tell the LMMSE and the networks the same things.
+Evaluation noise comes from :func:`evaluation_noise`, seeded from the image's name and sigma, so
+that every pattern and every method is scored on identical noise. Nothing here touches Python's
+``random`` or global RNGs.
 """
 
 from __future__ import annotations
