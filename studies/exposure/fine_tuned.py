@@ -9,7 +9,8 @@ Reads two exposure studies per read noise, both in ``docs/results/exposure/measu
 decided before either was run, on the runs' validation photos (held out of training, never a
 test image): a fine-tune counts where its validation PSNR rose by at least ``--min-gain`` dB.
 Each router's best network is then compared with each reference array's (the fine-tuned one
-where that paid, else ``universal-photon``), PSNR, the exposure below which the router wins (:func:`splitcam.evaluation.exposure.describe_crossover`).
+where that paid, else ``universal-photon``), PSNR, the exposure below which the router wins
+(:func:`splitcam.evaluation.exposure.describe_crossover`).
 """
 
 from __future__ import annotations
