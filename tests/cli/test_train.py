@@ -308,3 +308,31 @@ def test_a_users_pattern_file_of_any_period_fine_tunes_and_reconstructs(
     raw = add_evaluation_noise(SplitterSensor(drawn)(scene), "x", 5.0)
     out = method.reconstruct(raw, 5.0)
     assert out.shape == (1, 3, 13, 11) and torch.isfinite(out).all()
+
+
+def test_a_photon_fine_tune_keeps_the_exposures_its_network_was_trained_on(
+    image_folder, tmp_path, capsys
+):
+    """`--init-from universal-photon --noise photon` without `--photons` trains on the range the
+    shipped network was trained on (its header: 1 to 10^4), not the default 10 to 10^4, which
+    forgot the exposures below 10 (docs/results/exposure/measured/fine-tuned/); `--photons`
+    given, or a network trained on Gaussian noise, keep the run's own."""
+    from splitcam.cli.train import photon_range
+    from splitcam.recon.loading import resolve_model
+    from splitcam.training.config import TrainConfig
+
+    header = json.loads(resolve_model("universal-photon").read_text())["config"]["noise"]
+    assert header["photons"] != TrainConfig().noise.photons  # what the rule is for
+    photon = {"noise.model": "photon"}
+    assert photon_range("universal-photon", photon) == {"noise.photons": header["photons"]}
+    assert photon_range("universal-photon", {**photon, "noise.photons": [5.0, 50.0]}) == {}
+    assert photon_range("universal-photon", {}) == {}  # a Gaussian run
+    assert photon_range("universal", photon) == {}  # trained on Gaussian noise
+    run = tmp_path / "ft"
+    args = ["train", "--pattern", "D", "--init-from", "universal-photon", "--noise", "photon"]
+    tiny = ["--val-split", "2", "--val-images", "1", "--patch-size", "16", "--batch-size", "2"]
+    more = ["--domain", "linear", "--data", str(image_folder), "--steps", "1", "--quiet"]
+    assert main([*args, *tiny, *more, "--out", str(run)]) == 0
+    assert "the range universal-photon was trained on" in capsys.readouterr().out
+    saved = json.loads((run / "config.json").read_text())
+    assert saved["noise"]["photons"] == header["photons"]

@@ -52,6 +52,23 @@ def start_settings(source: str, given: dict) -> dict:
     return implied
 
 
+def photon_range(source: str, given: dict) -> dict:
+    """A photon-model run from a network trained with the photon model keeps that network's
+    range of exposures unless ``--photons`` is given: a narrower range forgets the exposures
+    left out (a fine-tune of ``universal-photon``, trained from 1, on the default 10 to 10^4 lost
+    1.6-4.1 dB at N = 1; docs/results/exposure/measured/fine-tuned/)."""
+    from ..training.init_from import source_header
+
+    if given.get("noise.model") != "photon" or "noise.photons" in given:
+        return {}
+    noise = (source_header(source).get("config") or {}).get("noise") or {}
+    if noise.get("model") != "photon" or not noise.get("photons"):
+        return {}
+    lo, hi = (float(v) for v in noise["photons"])
+    print(f"photons {lo:g} to {hi:g}, the range {source} was trained on (--photons)")
+    return {"noise.photons": [lo, hi]}
+
+
 def own_pattern_start(given: dict) -> dict:
     """A user's pattern (a file or a router, not a library name) has no network of its own:
     unless the run says how to start (``--init-from``, ``--arch``, ``--learn-pattern``), it
@@ -144,6 +161,8 @@ def run(args: argparse.Namespace) -> int:
         print(f"fine-tuning for {FINE_TUNE_MINUTES:g} minutes (--time-limit), the search included")
     elif not args.resume and init_from and "network.arch" not in given:
         overrides.update(fine_tuning(init_from, given))
+    if not args.resume and init_from and not auto:
+        overrides.update(photon_range(init_from, given))
     config = config.override(overrides)
     if auto:
         from ..training.auto_init import choose_start

@@ -125,21 +125,28 @@ def _start_universal(
     return record
 
 
-def source_network(spec: str) -> dict[str, Any] | None:
-    """The network config of what ``run.init_from`` names (a shipped model, a model file, a run
-    folder or a checkpoint), read from its JSON header; None where there is none to read."""
+def source_header(spec: str) -> dict[str, Any]:
+    """The JSON header of what ``run.init_from`` names (a shipped model, a model file, a run
+    folder or a checkpoint): its ``network`` and training ``config`` among others; empty where
+    there is none to read."""
     from ..recon.loading import resolve_model
 
     path = Path(spec)
     if path.is_dir() or ckpt_io.run_folder_of(path) is not None:
         try:
-            return ckpt_io.read_meta(ckpt_io.resolve(path)).get("network")
+            return ckpt_io.read_meta(ckpt_io.resolve(path))
         except (OSError, ValueError):
-            return None
+            return {}
     try:
-        return json.loads(resolve_model(spec).read_text(encoding="utf-8")).get("network")
+        return json.loads(resolve_model(spec).read_text(encoding="utf-8"))
     except (ModelError, OSError, ValueError):
-        return None
+        return {}
+
+
+def source_network(spec: str) -> dict[str, Any] | None:
+    """The network config of what ``run.init_from`` names (:func:`source_header`); None where
+    there is none to read."""
+    return source_header(spec).get("network")
 
 
 def continue_point(init_from: dict[str, Any], config: TrainConfig) -> tuple[int, float]:
