@@ -19,7 +19,14 @@ import torch
 from splitcam import patterns
 from splitcam.evaluation import evaluate
 from splitcam.evaluation.tables import append_rows, read_rows
-from splitcam.physics.noise import Gaussian, NoiseModel, as_noise, level_heading, level_key
+from splitcam.physics.noise import (
+    Exposure,
+    Gaussian,
+    NoiseModel,
+    as_noise,
+    level_heading,
+    level_key,
+)
 from splitcam.physics.sensor import SplitterSensor, pattern_pixel_kernels
 from splitcam.physics.system import simulate
 from splitcam.recon.closed_form import lmmse_estimate, shipped_image_statistics
@@ -135,3 +142,17 @@ def test_a_results_file_from_before_the_noise_column_is_extended_not_corrupted(t
     append_rows(path, [row.__class__("m", "D", "s", "b", 0.0, 31.0, 0.9, 2.0, noise="U3")])
     rows = read_rows(path)
     assert [(r.image, r.level) for r in rows] == [("a", "5"), ("b", "U3")]
+
+
+def test_one_level_for_the_batch_gives_the_maps_of_one_per_image():
+    """What training hands on (one level object per image, often all the same) gives the maps
+    the levels give image by image, and Gaussian levels the map of their sigmas as a tensor."""
+    raw = torch.rand(3, 1, 8, 12)
+    same = [Exposure(50.0)] * 3
+    per_image = torch.cat([noise_level_map(raw[i : i + 1], e, (2, 2)) for i, e in enumerate(same)])
+    assert torch.equal(noise_level_map(raw, same, (2, 2)), per_image)
+    sigmas = [Gaussian(3.0), Gaussian(17.0), Gaussian(3.0)]
+    as_tensor = noise_level_map(raw, torch.tensor([3.0, 17.0, 3.0]), (2, 2))
+    assert torch.equal(noise_level_map(raw, sigmas, (2, 2)), as_tensor)
+    with pytest.raises(ValueError, match="expected 1 or 3 noise levels, got 2"):
+        noise_level_map(raw, [Exposure(50.0)] * 2, (2, 2))

@@ -155,8 +155,8 @@ def run(args: argparse.Namespace) -> int:
     out.mkdir(parents=True, exist_ok=True)
     pattern_file = save_transmission(out / "pattern.toml", name, lams, t, **info)
     _write_spectra(out, lams, {**result, "transmission": t})
-    _chart(lams, t, result["reflection"], out / "spectra.png", f"{name}: {where}")
     eff = band_efficiencies(t, lams)
+    _chart(lams, t, result["reflection"], eff["quadrants"], out / "spectra.png", f"{name}: {where}")
     print(
         f"blue peaks in quadrant (row, col) {divmod(eff['quadrants']['blue'], 2)}, red in "
         f"{divmod(eff['quadrants']['red'], 2)}; band efficiency blue {eff['blue']:.3f}, green "
@@ -204,19 +204,18 @@ def _material(text: str) -> str | float:
         return text
 
 
-def _chart(lams, t, reflection, path: Path, title: str) -> None:
+def _chart(lams, t, reflection, roles: dict[str, int], path: Path, title: str) -> None:
+    """The spectra, each pixel in the colour it collects (``roles``: the blue and red
+    quadrants of :func:`~splitcam.physics.fullwave.band_efficiencies`)."""
     import matplotlib
-
-    from ..physics.fullwave import band_efficiencies
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     from ..viz._save import save_figure
 
-    # Each pixel drawn in the colour it collects: blue where the shortest wavelength peaks, red
-    # where the longest peaks, green the other two (dashed for the second).
-    roles = band_efficiencies(t, lams)["quadrants"]
+    # Blue where the shortest wavelength peaks, red where the longest peaks, green the other two
+    # (dashed for the second).
     styles = {roles["blue"]: ("tab:blue", "-", "blue"), roles["red"]: ("tab:red", "-", "red")}
     greens = [q for q in range(4) if q not in styles]
     for k, q in enumerate(greens):

@@ -531,10 +531,10 @@ def noise_level_map(
         sig = sig.expand(n) if sig.numel() == 1 else sig
         return sig.view(n, 1, 1, 1).expand(shape)
     levels = [as_noise(s) for s in (sigma if isinstance(sigma, (list, tuple)) else [sigma])]
-    if len(levels) == 1:
-        return levels[0].level_map(cells)
-    if len(levels) != n:
+    if len(levels) not in (1, n):
         raise ValueError(f"expected 1 or {n} noise levels, got {len(levels)}")
+    if len(set(levels)) == 1:  # one level for the batch (training draws one per batch): one map
+        return levels[0].level_map(cells)
     return torch.cat([lv.level_map(cells[i : i + 1]) for i, lv in enumerate(levels)])
 
 
