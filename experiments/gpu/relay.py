@@ -260,6 +260,10 @@ def gate_levels(config: dict) -> list:
 
 
 def check_candidate(name: str, candidate, shipped) -> None:
+    """Refuse a candidate that is not a continuation of the shipped model of its name: one that
+    serves other patterns, or (for a network of one pattern) started from another pattern. A
+    model that learns its pattern (A-opt) moves its pattern as it trains, so the patterns
+    compared are the ones both started from, not the learned ones."""
     from splitcam import patterns
     from splitcam.recon.networks import serves_any_pattern
 
@@ -268,9 +272,12 @@ def check_candidate(name: str, candidate, shipped) -> None:
         raise RelayError(f"candidate {name}: it and the shipped {name} serve different patterns")
     if not any_shipped:
         start = patterns.Pattern.from_dict(candidate.meta["start_pattern"])
-        if not start.equals(shipped.pattern):
+        shipped_start = shipped.meta.get("start_pattern")
+        origin = patterns.Pattern.from_dict(shipped_start) if shipped_start else shipped.pattern
+        if not start.equals(origin):
             raise RelayError(
-                f"candidate {name} was trained from another pattern than the shipped {name}'s"
+                f"candidate {name} was trained from pattern {start.name}, the shipped {name} "
+                f"from {origin.name}"
             )
 
 
@@ -304,10 +311,16 @@ def run_gate(args: argparse.Namespace) -> int:
         raise RelayError(f"{folder} holds no relay candidates (candidates/NAME.json)")
     ship_to = Path(args.ship_to) if args.ship_to else MODELS_DIR
     shipped_names = model_names()
+    gated, refused = [], {}
     for path in found:
-        if path.stem not in shipped_names:
-            raise RelayError(f"candidate {path.stem}: no shipped model of that name")
-        check_candidate(path.stem, load_model(path), load_model(path.stem))
+        try:
+            if path.stem not in shipped_names:
+                raise RelayError(f"candidate {path.stem}: no shipped model of that name")
+            check_candidate(path.stem, load_model(path), load_model(path.stem))
+            gated.append(path)
+        except RelayError as err:
+            refused[path.stem] = str(err)
+            print(f"skipped: {err}", flush=True)
     torch.set_num_threads(args.threads)
     lines = [
         "# Gate: the validation photos and the last 12, whole; ship when the cleanest level "
@@ -317,7 +330,10 @@ def run_gate(args: argparse.Namespace) -> int:
         "|---|---|---|---|---|---|---|",
     ]
     decisions = {}
-    for path in found:
+    for name, reason in refused.items():
+        decisions[name] = False
+        lines.append(f"| {name} | | | | | not gated: {reason} | no |")
+    for path in gated:
         name = path.stem
         config = load_model(path).meta["config"]
         photos = held_out_photos(config, Path(args.data))

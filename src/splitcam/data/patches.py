@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from .colour import ColourMix
 from .images import IMAGE_SUFFIXES, ImageReadError, decode_image
 from .registry import dataset_folder
 from .scales import valid_scales
@@ -332,6 +333,11 @@ class DeviceImages:
         self.widths = cache.sizes[:, 1].to(self.device)
         self.max_value = cache.max_value
         self.wide = wide
+        # Each integer's value in [0, 1], divided on the host as ImageCache's arrays are: a
+        # division on the device may multiply by the reciprocal instead (CUDA does), which
+        # differs in the last bit, so the same seed would not give the same patches.
+        levels = np.arange(cache.max_value + 1, dtype=np.float32)
+        self.values = torch.from_numpy(levels / np.float32(cache.max_value)).to(self.device)
 
     @property
     def nbytes(self) -> int:
@@ -368,7 +374,7 @@ class DeviceImages:
         pixel = (self.offsets[index].view(b, 1, 1) + rows * width + cols).unsqueeze(1)
         samples = self.flat[pixel + torch.arange(3, device=dev).view(1, 3, 1, 1) * plane]
         values = (samples.int() & 0xFFFF) if self.wide else samples
-        return values.float() / float(self.max_value)
+        return self.values[values.long()]
 
 
 class PatchSampler:
@@ -408,6 +414,9 @@ class PatchSampler:
             difference of neighbouring pixels): patches with texture and edges, where
             reconstruction errs most, come more often, and flat ones still come. The
             candidates of one batch are drawn without replacement.
+        colour: Chroma augmentation and dead-leaves scenes mixed into each batch after it is
+            cut (:class:`~splitcam.data.colour.ColourMix`), drawn on the same generator; None
+            or an inactive mix draws nothing, so the patch sequence is unchanged.
         device: Hold the images on this device (:class:`DeviceImages`) and build each batch
             there by one gather; None: build batches on the host from the cache's arrays, which
             on a CPU is faster (``benchmarks/bench_data.py``). Either way the random choices are
@@ -430,6 +439,7 @@ class PatchSampler:
         period: tuple[int, int] = (1, 1),
         hard: float = 0.0,
         device: torch.device | str | None = None,
+        colour: ColourMix | None = None,
     ) -> None:
         if not 0.0 <= hard <= 1.0:
             raise ValueError(f"hard must be in [0, 1], got {hard}")
@@ -462,6 +472,8 @@ class PatchSampler:
         self._positions = (cache.sizes - patch_size + 1).to(torch.float64)
         #: The images on the device batches are built on, or None (built on the host).
         self.images = DeviceImages(cache, device) if device is not None else None
+        #: Colour shown beyond the photos' (chroma augmentation, dead leaves), or None.
+        self.colour = colour if colour is not None and colour.active else None
 
     @property
     def device(self) -> torch.device:
@@ -516,7 +528,8 @@ class PatchSampler:
                 hit = float(torch.rand((), generator=self.generator)) < self.partial
                 r = int(torch.randint(1, max(side, 2), (), generator=self.generator))
                 cut[i] += r if hit and side > 1 else 0
-        return batch[..., : self.patch_size - cut[0], : self.patch_size - cut[1]]
+        batch = batch[..., : self.patch_size - cut[0], : self.patch_size - cut[1]]
+        return self.colour(batch, self.generator) if self.colour is not None else batch
 
     def _harder(self, candidates: torch.Tensor, batch_size: int) -> torch.Tensor:
         """``batch_size`` of ``candidates`` chosen by detail (see ``hard`` in the class)."""

@@ -188,6 +188,19 @@ class DataConfig:
         "1 0.5: the photos and copies at half size, which pack more detail into a patch; "
         "splitcam.data.downscale)",
     )
+    colour_chroma: float = _opt(
+        0.0,
+        "probability that a patch's chroma is moved: channels reordered, hue rotated, chroma "
+        "scaled by up to --colour-chroma-max in an opponent space (in linear light for "
+        "data.domain linear); shows the network saturated colour the photos lack "
+        "(splitcam.data.colour)",
+    )
+    colour_chroma_max: float = _opt(2.2, "largest chroma factor of --colour-chroma (>= 1)")
+    colour_leaves: float = _opt(
+        0.0,
+        "probability that a patch is replaced by a colour dead-leaves scene (discs with "
+        "radii ~ r^-3 and colours uniform in the RGB cube; splitcam.data.colour)",
+    )
     domain: str = _opt(
         DEFAULT_DOMAIN,
         "light domain (model.md §13): srgb (the paper's: the 8-bit values / 255 are the "
@@ -215,6 +228,15 @@ class DataConfig:
                 f"data.domain must be one of {', '.join(DOMAINS)}, got {self.domain!r}",
             ),
             (self.batch_size >= 1, "data.batch_size must be >= 1"),
+            (
+                0 <= self.colour_chroma <= 1 and 0 <= self.colour_leaves <= 1,
+                "data.colour_chroma and data.colour_leaves must be probabilities in [0, 1], "
+                f"got {self.colour_chroma} and {self.colour_leaves}",
+            ),
+            (
+                self.colour_chroma_max >= 1,
+                f"data.colour_chroma_max must be >= 1, got {self.colour_chroma_max}",
+            ),
             (
                 valid_scales(self.scales),
                 f"data.scales must be distinct factors in (0, 1], got {self.scales}",

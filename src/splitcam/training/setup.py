@@ -18,6 +18,7 @@ from typing import Any
 import torch
 
 from .. import patterns
+from ..data.colour import ColourMix
 from ..data.patches import ImageCache, PatchSampler, list_images
 from ..design.kernels import design_pattern
 from ..io import checkpoints as ckpt_io
@@ -337,6 +338,12 @@ def _patch_sampler(
         "world_size": run.dist.world_size,
         "partial": config.data.partial_periods,
         "hard": config.data.hard_patches,
+        "colour": ColourMix(
+            chroma=config.data.colour_chroma,
+            chroma_max=config.data.colour_chroma_max,
+            leaves=config.data.colour_leaves,
+            space=config.data.domain,
+        ),
         # A new pattern every step: cut into periods of up to 4 (the largest drawn) instead.
         "period": (4, 4) if run.mix is not None else system.sensor.period,
     }

@@ -1,0 +1,81 @@
+"""Held-out photos for choosing colour levers: the training photos no run trains on, ranked by
+colourfulness, the most colourful ones in a folder of their own.
+
+    python studies/colour/heldout.py [--data DIR] [--out runs/colour/heldout] [--top 12]
+
+Every run holds out the last 32 training photos by name (``data.val_split``'s default for 432
+photos) and validates on the first 8 of them; none of the 32 is trained on. They are ranked by
+Hasler and Suesstrunk's colourfulness (:func:`splitcam.data.colour.colourfulness`), and the
+``--top`` most colourful are copied, whole, to ``OUT/colourful``; all 32 go to ``OUT/all``.
+The table ``OUT/colourfulness.md`` lists every held-out photo with its score, and the mean
+score of each test set beside them as a description of what the test sets hold (they choose
+nothing). Then, for example:
+
+    splitcam evaluate --model bayer --checkpoint runs/colour/bayer-chroma \\
+        --datasets runs/colour/heldout/colourful,runs/colour/heldout/all --sigmas 0 15
+"""
+
+from __future__ import annotations
+
+import argparse
+import shutil
+from pathlib import Path
+
+import torch
+
+from splitcam.data.colour import colourfulness
+from splitcam.data.imageio import read_image
+from splitcam.data.patches import list_images
+from splitcam.data.registry import dataset_folder, training_folder
+
+HELD_OUT = 32
+
+
+def score(path: Path) -> float:
+    return colourfulness(torch.from_numpy(read_image(path)).permute(2, 0, 1))
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--data", default=str(training_folder()))
+    parser.add_argument("--out", default="runs/colour/heldout")
+    parser.add_argument("--top", type=int, default=12)
+    args = parser.parse_args()
+    held = list_images(args.data)[-HELD_OUT:]
+    ranked = sorted(((score(p), p) for p in held), reverse=True)
+    out = Path(args.out)
+    for sub, chosen in (("colourful", ranked[: args.top]), ("all", ranked)):
+        (out / sub).mkdir(parents=True, exist_ok=True)
+        for _, path in chosen:
+            shutil.copyfile(path, out / sub / path.name)
+    lines = [
+        f"# Colourfulness of the {len(held)} held-out training photos",
+        "",
+        "Hasler and Suesstrunk (2003): about 33 moderately, 45 averagely, 59 quite, 82 highly "
+        "colourful.",
+        "",
+        "| photo | colourfulness | in colourful |",
+        "|---|---|---|",
+    ]
+    lines += [
+        f"| {p.stem} | {m:.1f} | {'yes' if i < args.top else ''} |"
+        for i, (m, p) in enumerate(ranked)
+    ]
+    chosen_mean = sum(m for m, _ in ranked[: args.top]) / args.top
+    all_mean = sum(m for m, _ in ranked) / len(ranked)
+    lines += ["", "| set | photos | mean colourfulness |", "|---|---|---|"]
+    lines.append(f"| held-out, all | {len(ranked)} | {all_mean:.1f} |")
+    lines.append(f"| held-out, colourful | {args.top} | {chosen_mean:.1f} |")
+    for name in ("kodak24", "mcmaster"):
+        try:
+            paths = list_images(dataset_folder(name))
+        except (FileNotFoundError, ValueError):
+            continue
+        mean = sum(score(p) for p in paths) / len(paths)
+        lines.append(f"| {name} (described, not used) | {len(paths)} | {mean:.1f} |")
+    (out / "colourfulness.md").write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
+
+
+if __name__ == "__main__":
+    main()
