@@ -36,3 +36,32 @@ def test_results_written_before_the_photons_column_still_read(tmp_path) -> None:
     )
     (row,) = read_rows(path)
     assert (row.sigma, row.photons, row.level, row.psnr) == (5.0, 0.0, "5", 30.5)
+
+
+def test_kodak_minus_mcmaster_drop_per_method_and_level() -> None:
+    """The drop table is each method's Kodak24 mean minus its McMaster mean, cell by cell;
+    absent when one of the two sets is missing."""
+
+    def stats(psnr: float) -> dict:
+        return {"psnr": psnr, "ssim": 0.9, "ciede2000": 1.0, "n_images": 2, "n_infinite": 0}
+
+    summary = {
+        "net-bayer": {
+            "pattern": "bayer",
+            "domain": "srgb",
+            "kodak24": {"0": stats(41.47), "15": stats(31.0)},
+            "mcmaster": {"0": stats(35.40), "15": stats(30.25)},
+        },
+        "bayer+demosaicnet": {
+            "pattern": "bayer",
+            "domain": "srgb",
+            "kodak24": {"0": stats(42.09)},
+            "mcmaster": {"0": stats(39.15)},
+        },
+    }
+    text = markdown_tables(summary)
+    section = text.split("### kodak24 minus mcmaster")[1].splitlines()
+    assert "| net-bayer | 6.07 | 0.75 |" in section
+    assert "| bayer+demosaicnet | 2.94 | – |" in section
+    del summary["net-bayer"]["mcmaster"], summary["bayer+demosaicnet"]["mcmaster"]
+    assert "minus" not in markdown_tables(summary)

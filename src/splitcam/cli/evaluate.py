@@ -65,7 +65,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--method",
         action="append",
         metavar="NAME",
-        help="baseline: bilinear, malvar2004, menon2007 (bayer) or lmmse (repeatable)",
+        help="baseline: bilinear, malvar2004, menon2007 (bayer), lmmse, or demosaicnet (the "
+        "released networks of Gharbi et al. 2016 for bayer and xtrans; the optional extra "
+        "splitcam[demosaicnet]) (repeatable)",
     )
     p.add_argument(
         "--model",
@@ -79,9 +81,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--patterns",
         type=lambda s: [x for x in s.split(",") if x],
         default=None,
-        help="the patterns of lmmse and of a network for any pattern, comma-separated names or "
-        f"files (default: {','.join(PAPER_PATTERNS)}); with no method named, the main job on "
-        "these patterns only",
+        help="the patterns of lmmse, demosaicnet and of a network for any pattern, comma-separated "
+        f"names or files (default: {','.join(PAPER_PATTERNS)}); with no method named, the main "
+        "job on these patterns only",
     )
     p.add_argument(
         "--datasets",

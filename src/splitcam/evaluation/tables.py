@@ -337,7 +337,47 @@ def markdown_tables(summary: dict) -> str:
         ]
         lines += markdown_table(["method", *headings], rows)
         lines.append("")
+    lines += colour_drop_lines(summary, sigmas)
     return "\n".join(lines)
+
+
+#: The two test sets whose difference measures how a method holds on saturated colour: Kodak24
+#: (photographs of muted colour, like the training photos) and McMaster (saturated colours and
+#: sharp colour edges, weak correlation between channels).
+DROP_SETS = ("kodak24", "mcmaster")
+
+
+def colour_drop_lines(summary: dict, sigmas: Sequence[str]) -> list[str]:
+    """A table of each method's Kodak24 PSNR minus its McMaster PSNR at each level, when both
+    sets (cut alike) are in the summary: how much a method loses on saturated colour. Empty
+    otherwise."""
+    groups = {g for m in summary.values() for g in m if g not in ENTRY_FIELDS}
+    pairs = [
+        (g, DROP_SETS[1] + g.removeprefix(DROP_SETS[0]))
+        for g in sorted(groups)
+        if g.startswith(DROP_SETS[0]) and DROP_SETS[1] + g.removeprefix(DROP_SETS[0]) in groups
+    ]
+    lines: list[str] = []
+    for kodak, mcmaster in pairs:
+        rows = []
+        for method, entry in summary.items():
+            if kodak not in entry or mcmaster not in entry:
+                continue
+            cells = [
+                _db(entry[kodak][s]["psnr"] - entry[mcmaster][s]["psnr"])
+                if s in entry[kodak] and s in entry[mcmaster]
+                else "–"
+                for s in sigmas
+            ]
+            rows.append([method, *cells])
+        if rows:
+            lines += [
+                f"### {kodak} minus {mcmaster}: PSNR (dB), the drop on saturated colour",
+                "",
+            ]
+            lines += markdown_table(["method", *(level_heading(s) for s in sigmas)], rows)
+            lines.append("")
+    return lines
 
 
 def _db(v: float) -> str:

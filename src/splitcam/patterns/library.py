@@ -174,6 +174,27 @@ def _pattern_quad() -> Pattern:
     )
 
 
+def _pattern_xtrans() -> Pattern:
+    g, r, b = _G, _R, _B
+    layout = [
+        [g, b, g, g, r, g],
+        [r, g, r, b, g, b],
+        [g, b, g, g, r, g],
+        [g, r, g, g, b, g],
+        [b, g, b, r, g, r],
+        [g, r, g, g, b, g],
+    ]
+    return Pattern(
+        name="xtrans",
+        layout=np.array(layout),
+        kernels=_FILTERS.copy(),
+        provenance="standard",
+        description="X-Trans colour filter array: a 6x6 cell with every row and column holding "
+        "all three colours (20 G, 8 R, 8 B), ideal filters; collects 1/3 of white light",
+        reference="Fujifilm X-Trans CMOS sensor (2012)",
+    )
+
+
 # Which colour each pixel of A's RGGB arrangement collects (model.md §2).
 _A_COLOURS = np.array([[0, 1], [1, 2]])
 
@@ -335,6 +356,7 @@ BUILTIN_FACTORIES = {
     "bayer": _pattern_bayer,
     "rgbw": _pattern_rgbw,
     "quad": _pattern_quad,
+    "xtrans": _pattern_xtrans,
     "router-zou": _router_zou,
     "router-best": _router_best,
     # Routers from full-wave simulation (splitcam optics rcwa), shipped as spectra.

@@ -8,6 +8,8 @@ name means the same thing everywhere:
   filters from the shipped image statistics for any other kernels, or fitted on a folder of
   training images with ``lmmse_train``);
 - ``bilinear``, ``malvar2004``, ``menon2007``: classical demosaicking of the ``bayer`` pattern;
+- ``demosaicnet``: the released networks of Gharbi et al. 2016 for ``bayer`` (the default) and
+  ``xtrans`` (:mod:`splitcam.recon.peers`; the optional ``demosaicnet`` extra);
 - a run folder or checkpoint file: a trained network with the pattern it was trained for;
 - a shipped model's name (``A`` ... ``E``, ``bayer``, ``A-opt``, ``D-opt``, ``D-opt-random``; see
   :func:`splitcam.recon.loading.model_names`) or a model file: a trained network shipped with
@@ -42,6 +44,7 @@ from .base import NetworkReconstructor, Reconstructor
 from .closed_form import closed_form_lmmse
 from .demosaic import ClassicalDemosaic
 from .lmmse import LMMSE, shipped_lmmse
+from .peers import DEMOSAICNET_PATTERNS, Demosaicnet
 from .loading import (
     LoadedNetwork,
     ModelError,
@@ -245,6 +248,11 @@ def _pattern_label(
     return pattern.name
 
 
+def _pattern_key(pattern: str | os.PathLike | patterns.Pattern) -> str:
+    """A pattern's name as typed (lower case), or a Pattern's own."""
+    return (pattern.name if isinstance(pattern, patterns.Pattern) else str(pattern)).lower()
+
+
 @dataclass(frozen=True)
 class _Request:
     """What :func:`build_method` was asked, besides the method's name."""
@@ -259,6 +267,14 @@ class _Request:
 
 def _build_demosaic(key: str, request: _Request) -> Reconstructor:
     return ClassicalDemosaic(key, name=f"bayer+{key}", domain=request.domain or SRGB)
+
+
+def _build_demosaicnet(key: str, request: _Request) -> Reconstructor:
+    return Demosaicnet(
+        request.pattern if request.pattern is not None else "bayer",
+        tile=request.tile,
+        domain=request.domain or SRGB,
+    )
 
 
 def _build_lmmse(key: str, request: _Request) -> Reconstructor:
@@ -306,6 +322,7 @@ def _build_network_file(spec: str | os.PathLike, request: _Request) -> Reconstru
 BUILDERS: dict[str, Callable[[str, _Request], Reconstructor]] = {
     "lmmse": _build_lmmse,
     **{key: _build_demosaic for key in ClassicalDemosaic.METHODS},
+    "demosaicnet": _build_demosaicnet,
 }
 
 
@@ -382,13 +399,20 @@ def build_methods(
     patterns_for_lmmse: Sequence[str | os.PathLike | patterns.Pattern] = (),
     **options,
 ) -> list[Reconstructor]:
-    """:func:`build_method` for each spec; ``lmmse`` expands to one method per pattern."""
+    """:func:`build_method` for each spec; ``lmmse`` expands to one method per pattern, and
+    ``demosaicnet`` to one per pattern it has a network for (``bayer`` when none is given; a
+    list with none of its patterns is refused, naming them)."""
     methods: list[Reconstructor] = []
     for spec in specs:
-        if str(spec).strip().lower() == "lmmse":
+        key = str(spec).strip().lower()
+        if key == "lmmse":
             if not patterns_for_lmmse:
                 raise ValueError("method 'lmmse' needs at least one pattern")
             methods += [build_method(spec, pattern=p, **options) for p in patterns_for_lmmse]
+        elif key == "demosaicnet":
+            given = list(patterns_for_lmmse) or ["bayer"]
+            served = [p for p in given if _pattern_key(p) in DEMOSAICNET_PATTERNS]
+            methods += [build_method(spec, pattern=p, **options) for p in served or given[:1]]
         else:
             methods.append(build_method(spec, **options))
     return methods
