@@ -44,7 +44,6 @@ from .base import NetworkReconstructor, Reconstructor
 from .closed_form import closed_form_lmmse
 from .demosaic import ClassicalDemosaic
 from .lmmse import LMMSE, shipped_lmmse
-from .peers import DEMOSAICNET_PATTERNS, Demosaicnet
 from .loading import (
     LoadedNetwork,
     ModelError,
@@ -55,6 +54,7 @@ from .loading import (
     resolve_model,
 )
 from .networks import serves_any_pattern
+from .peers import DEMOSAICNET_PATTERNS, Demosaicnet
 
 __all__ = [
     "BUILDERS",
