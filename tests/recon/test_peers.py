@@ -16,7 +16,8 @@ import torch
 
 from splitcam import patterns
 from splitcam.physics.sensor import SplitterSensor
-from splitcam.recon.peers import Demosaicnet, PeerUnavailable, mirror_index
+from splitcam.recon.extend import mirror_index
+from splitcam.recon.peers import Demosaicnet, PeerUnavailable
 from splitcam.recon.registry import build_method
 
 try:

@@ -18,6 +18,7 @@ from ..io.domains import SRGB
 from ..patterns import get
 from ..physics.light import check_domain
 from ..physics.noise import check_level
+from .extend import extend_mosaic
 from .tiling import DEFAULT_TILE, tiled
 
 __all__ = ["ClassicalDemosaic"]
@@ -44,8 +45,10 @@ class ClassicalDemosaic:
 
     The image is demosaicked in tiles of ``tile`` pixels that start on whole Bayer cells and
     overlap by :attr:`RADIUS` (rounded up to whole cells), the farthest any mosaic pixel reaches
-    into the output. Tile edges that are image edges keep the package's border handling, so the
-    result equals demosaicking the whole image exactly.
+    into the output. At image edges the mosaic is extended keeping its RGGB layout
+    (:func:`~splitcam.recon.extend.extend_mosaic`; the package's own mirror breaks the layout),
+    so the result equals demosaicking the whole image exactly, and a pixel at the edge keeps its
+    recorded value at its own colour site.
 
     Args:
         method: One of ``bilinear``, ``malvar2004``, ``menon2007`` (case-insensitive).
@@ -107,16 +110,19 @@ class ClassicalDemosaic:
             - raw: ``(N, 1, H, W)``, the RGGB mosaic (R at (0, 0)).
             - output: ``(N, 3, H, W)``, same dtype and device as ``raw``.
         """
-        cfa = raw.detach().cpu().double().numpy()
-        height, width = cfa.shape[-2:]
-        # colour-demosaicing squeezes its input, so a side of one pixel loses an axis: such an
-        # image is padded with zeros below or to the right (nothing is measured there; the
-        # (0, 0) phase stays where it is) and the result cut back.
-        grow = ((0, 0), (0, 0), (0, max(0, 2 - height)), (0, max(0, 2 - width)))
-        cfa = np.pad(cfa, grow)
+        height, width = raw.shape[-2:]
+        # The package mirrors the mosaic about its edge pixel (scipy's ``reflect``), which puts
+        # a red pixel where a green one belongs: bilinear borders came out up to 2.25 times too
+        # bright. So the mosaic is first extended past every edge keeping the RGGB layout
+        # (an even margin beyond the method's reach), and the result cut back; the package's
+        # own border handling then only touches pixels that are cut away. This also keeps
+        # images of one-pixel sides from losing an axis in the package's squeeze.
+        m = 2 * ((self.radius + 2) // 2)
+        cfa = extend_mosaic(raw.detach().cpu().double(), (m, m, m, m), self.pattern.period)
+        cfa = cfa.numpy()
         # The package works in float64 on (H, W) arrays and returns (H, W, 3).
         out = np.stack([self._function(cfa[n, 0], "RGGB") for n in range(cfa.shape[0])])
-        out = out[:, :height, :width]
+        out = out[:, m : m + height, m : m + width]
         rgb = torch.from_numpy(np.ascontiguousarray(out.transpose(0, 3, 1, 2)))
         return rgb.to(device=raw.device, dtype=raw.dtype)
 

@@ -17,10 +17,9 @@ the X-Trans filter arrays. How they are loaded, and why not through the package:
   convolution, and adds the mosaic back through a last full-resolution convolution; the X-Trans
   network runs 11 convolutions at full resolution and the same last stage. An output pixel is
   31 (Bayer) or 12 (X-Trans) pixels inside the input's edge.
-- Whole images of any size: the mosaic is extended past each edge by mirroring, choosing for
-  each outside pixel the nearest mirror-image pixel of the same colour site (for Bayer's 2x2
-  period that is the plain mirror), so the network sees a mosaic of its own layout everywhere
-  and its output covers the image exactly. Images are reconstructed in tiles
+- Whole images of any size: the mosaic is extended past each edge keeping its layout
+  (:func:`~splitcam.recon.extend.extend_mosaic`), so the network sees a mosaic of its own
+  layout everywhere and its output covers the image exactly. Images are reconstructed in tiles
   (:func:`~splitcam.recon.tiling.tiled`) so memory stays bounded.
 - Phase: the released Bayer network expects the ``GRBG`` phase (green at the top-left, red to
   its right); our ``bayer`` is ``RGGB``. The extension puts an odd number of columns on the
@@ -46,9 +45,10 @@ from ..io.domains import SRGB
 from ..patterns import Pattern, get
 from ..physics.light import check_domain
 from ..physics.noise import check_level
+from .extend import extend_mosaic
 from .tiling import DEFAULT_TILE, tiled
 
-__all__ = ["DEMOSAICNET_PATTERNS", "Demosaicnet", "PeerUnavailable", "mirror_index"]
+__all__ = ["DEMOSAICNET_PATTERNS", "Demosaicnet", "PeerUnavailable"]
 
 #: The patterns demosaicnet has released networks for, and their weight files in its package.
 DEMOSAICNET_PATTERNS = {"bayer": "bayer.pth", "xtrans": "xtrans.pth"}
@@ -144,26 +144,6 @@ class _XTransNetwork(nn.Module):
         return self.fullres_processor(torch.cat([_centre(mosaic, features), features], 1))
 
 
-def mirror_index(size: int, before: int, after: int, period: int) -> np.ndarray:
-    """Source index of each pixel of an axis extended by ``before`` and ``after`` pixels.
-
-    Inside, each pixel is itself. Outside, it is the in-image pixel of the same phase (index
-    mod ``period``) nearest to its mirror image (``-t`` before the start, ``2 (size - 1) - t``
-    after the end), so a mosaic keeps its layout; ``-1`` where the image holds no pixel of that
-    phase (an image shorter than the period), to be filled with 0 (nothing measured).
-    For ``period`` 1 or 2 this is the plain mirror (numpy's ``reflect``) wherever it exists.
-    """
-    positions = np.arange(-before, size + after)
-    source = positions.copy()
-    for k, t in enumerate(positions):
-        if 0 <= t < size:
-            continue
-        mirror = -t if t < 0 else 2 * (size - 1) - t
-        same = np.arange(t % period, size, period)
-        source[k] = same[np.argmin(np.abs(same - mirror))] if len(same) else -1
-    return source
-
-
 class Demosaicnet:
     """demosaicnet's released network of a filter array as a reconstruction method.
 
@@ -232,13 +212,15 @@ class Demosaicnet:
         # Padded sides: at least the margin past the far edges, and even for Bayer's packing.
         bottom = margin + (h + self._top + margin) % 2 if ph == 2 else margin
         right = margin + (w + self._left + margin) % 2 if pw == 2 else margin
-        rows = torch.from_numpy(mirror_index(h, self._top, bottom, ph))
-        cols = torch.from_numpy(mirror_index(w, self._left, right, pw))
-        values = raw.detach().float().cpu()[:, 0]
-        padded = values[:, rows.clamp(min=0)][:, :, cols.clamp(min=0)]
-        padded = padded * ((rows >= 0)[:, None] & (cols >= 0)[None, :])
-        site = self._sites[rows.remainder(ph)][:, cols.remainder(pw)]
-        mosaic = torch.stack([padded * (site == c) for c in range(3)], dim=1)
+        values = extend_mosaic(
+            raw.detach().float().cpu()[:, 0], (self._top, bottom, self._left, right), (ph, pw)
+        )
+        hp, wp = values.shape[-2:]
+        # The colour site of each padded pixel: the period's layout, from the padded origin.
+        rows = (torch.arange(hp) - self._top).remainder(ph)
+        cols = (torch.arange(wp) - self._left).remainder(pw)
+        site = self._sites[rows][:, cols]
+        mosaic = torch.stack([values * (site == c) for c in range(3)], dim=1)
         with torch.inference_mode():
             out = self.network(mosaic)
         # Output pixel (i, j) lies at padded (i + margin, j + margin).
