@@ -177,7 +177,9 @@ def run(args: argparse.Namespace) -> int:
         for k, v in result.last_metrics.items()
         if k in ("loss", "train_psnr", "val_psnr")
     )
-    state = "interrupted at" if result.interrupted else "finished at"
+    state = (
+        "interrupted at" if result.interrupted else "failed at" if result.failure else "finished at"
+    )
     print(f"{state} step {result.step}: {summary}; run folder {result.run_dir}")
     if result.failure:
         print(f"splitcam train: failed: {result.failure}", file=sys.stderr)

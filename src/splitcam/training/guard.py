@@ -15,8 +15,15 @@ smaller learning rate.
 window of recent losses, and a learning-rate scale. A step whose loss is not finite or exceeds
 ``factor`` times the median of the window is a divergence: its update is not applied, the older
 snapshot is restored and the scale is multiplied by ``drop``. The scale is part of the run's
-state (checkpoints record it, a resumed run keeps it); the snapshots and the window are not (a
-resumed run starts them afresh).
+state (checkpoints record it, a resumed run keeps it); the snapshots and the window are not. A
+run takes its first snapshot before its first update (:meth:`DivergenceGuard.start`), so even
+an update that wrecks the network at once can be undone, and a resumed run seeds the window
+with the losses it logged before (:meth:`DivergenceGuard.seed`), so a resumed run at a
+learning rate far too high is caught at its first exploding step rather than after 20.
+
+While the guard is rolling back (:attr:`DivergenceGuard.settled` is false) the run saves no
+resumable checkpoint, and a run whose guard gives up saves none at all: the resumable state on
+disk stays the last one saved while training was healthy.
 """
 
 from __future__ import annotations
@@ -65,6 +72,26 @@ class DivergenceGuard:
         self.recent: collections.deque[float] = collections.deque(maxlen=history)
         self._snapshots: list[tuple[dict[str, Any], dict[str, Any]]] = []
         self._healthy = 0
+        self._unsettled = False
+
+    def start(self, model: torch.nn.Module, optimizer: torch.optim.Optimizer) -> None:
+        """Snapshot the state before the first update (the one a roll-back can always reach)."""
+        self._snapshots = [_state(model, optimizer)]
+        self._healthy = 1
+
+    def seed(self, losses: list[float]) -> None:
+        """Start the window from losses logged before (a resumed run's last logged ones); the
+        factor then applies from the first step."""
+        finite = [x for x in losses if math.isfinite(x)]
+        if finite:
+            self.recent.extend(finite)
+            self.min_history = min(self.min_history, len(self.recent))
+
+    @property
+    def settled(self) -> bool:
+        """No roll-back yet, or ``every`` healthy steps since the last one: the state is one
+        to save."""
+        return not self._unsettled or self._healthy > self.every
 
     def diverged(self, loss: float) -> bool:
         """Whether a step with this loss diverged (not finite, or ``factor`` times the median)."""
@@ -94,6 +121,7 @@ class DivergenceGuard:
         self.lr_scale *= self.drop
         self.recent.clear()
         self._healthy = 1  # the restored state is the newest snapshot
+        self._unsettled = True
 
 
 def _state(model: torch.nn.Module, optimizer: torch.optim.Optimizer):

@@ -258,6 +258,12 @@ def last_metrics(path: Path) -> dict[str, float]:
     return last
 
 
+def logged_losses(path: Path, n: int) -> list[float]:
+    """The last ``n`` training losses logged in a run's ``metrics.jsonl`` at ``path``."""
+    losses = [float(row["loss"]) for _, row in _lines(path) if "loss" in row]
+    return losses[-n:]
+
+
 def truncate_metrics(path: Path, step: int) -> None:
     """Drop log lines after ``step`` (steps a killed run did after its last checkpoint)."""
     if not path.is_file():

@@ -95,6 +95,10 @@ class TrainState:
     #: The best validation PSNR (mean over levels) so far, whose weights are in
     #: ``best.safetensors`` (:func:`save_best`).
     best_val: float = float("-inf")
+    #: The divergence guard gave up: the run ends without saving its (diverged) state.
+    gave_up: bool = False
+    #: The step of the resumable checkpoint on disk (None: none saved yet).
+    saved_step: int | None = None
 
 
 def restore(state: TrainState, loaded: ckpt_io.Checkpoint, run: Run) -> None:
@@ -142,6 +146,7 @@ def save_checkpoint(state: TrainState, run: Run) -> None:
         tensors.update({f"{EMA_PREFIX}/network.{k}": v for k, v in state.ema.shadow.items()})
     tensors.update(rng)
     ckpt_io.save(run.checkpoint_path, _meta(state, run, opt_meta, replicas), tensors)
+    state.saved_step = state.step
     _export_pattern(state.system, run)
 
 

@@ -44,6 +44,7 @@ from .rundir import (
     failure_of,
     last_metrics,
     lock_run,
+    logged_losses,
     open_run,
     resumable,
 )
@@ -54,6 +55,9 @@ from .state import Run, TrainState, save_best, save_checkpoint
 from .validation import validate
 
 __all__ = ["TrainResult", "train", "training_loss"]
+
+#: Logged losses a resumed run's divergence guard starts its window with.
+GUARD_WINDOW_SEED = 20
 
 logger = logging.getLogger(__name__)
 
@@ -126,7 +130,8 @@ def _train(config: TrainConfig, run_dir: Path, resume: bool, progress: bool) -> 
     try:
         with _StopFlag() as stop:
             interrupted = _steps(state, run, model, log, bar, stop)
-            save_checkpoint(state, run)
+            if not state.gave_up:  # a diverged state never replaces the last good one
+                save_checkpoint(state, run)
     finally:
         if bar is not None:
             bar.close()
@@ -231,6 +236,10 @@ def _steps(
     """Train until the budget, the time limit, a stop request or the divergence guard gives up;
     whether a request stopped it."""
     window = _Window()
+    state.guard.start(state.system, state.optimizer)
+    if state.step > 0:  # resumed: the guard compares with the losses logged before
+        state.saved_step = state.step
+        state.guard.seed(logged_losses(run.run_dir / METRICS_NAME, GUARD_WINDOW_SEED))
     # A resumed run whose time limit is already spent does no more steps.
     limit = run.time_limit_s
     state.timed_out = limit is not None and state.train_seconds >= limit
@@ -241,7 +250,8 @@ def _steps(
     saved_at = state.train_seconds
     while state.step < run.config.optim.steps and not state.timed_out:
         if _step(state, run, model, window):
-            return False  # the guard gave up
+            state.gave_up = True
+            return False
         if bar is not None:
             bar.update(1)
         _log(state, run, window, log, bar)
@@ -258,7 +268,7 @@ def _checkpoint_due(state: TrainState, run: Run, saved_at: float) -> bool:
     ``run.checkpoint_minutes`` of training time (the same on every rank: the time is the
     maximum over ranks). The last step saves anyway."""
     settings = run.config.run
-    if state.step >= run.config.optim.steps:
+    if state.step >= run.config.optim.steps or not state.guard.settled:
         return False
     minutes = settings.checkpoint_minutes
     due_by_time = minutes is not None and state.train_seconds - saved_at >= 60 * minutes
@@ -471,6 +481,18 @@ def _result(state: TrainState, run: Run, interrupted: bool) -> TrainResult:
         if not interrupted:
             failure = failure_of(
                 run.run_dir / METRICS_NAME, state.last_metrics, state.guard.lr_scale
+            )
+        if state.gave_up:
+            kept = (
+                f"the resumable checkpoint of step {state.saved_step} (saved before the "
+                f"divergence) is kept: --resume with a lower --lr continues from it"
+                if state.saved_step is not None
+                else "no checkpoint had been saved: start again with a lower --lr"
+            )
+            failure = (
+                f"the loss diverged at step {state.step} and kept diverging after the guard "
+                f"halved the learning rate {GUARD_GIVES_UP} times; nothing of the diverged "
+                f"steps was saved; {kept}"
             )
     return TrainResult(run.run_dir, state.step, interrupted, state.last_metrics, failure)
 
