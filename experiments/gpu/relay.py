@@ -33,6 +33,11 @@ validation uses. A candidate ships when the mean PSNR rises at the cleanest leve
 no more than 0.05 dB at the noisiest (the rule of docs/results/gpu). ``DIR/gate.md`` holds the
 table; ``--dry-run`` prints what would ship and writes nothing.
 
+A candidate that is not a continuation of the shipped model of its name (another pattern to
+start from, or a network of other patterns) is skipped with its reason in the table; the rest
+are gated. A model that learns its pattern (A-opt) goes on learning it, so its candidate's
+pattern moves: the patterns compared are the ones both started from.
+
 ``--device cpu --minutes 0.5`` runs the same path end to end (the test suite does so on tiny
 settings). How to run it on a lent GPU: ``experiments/gpu/README.md``.
 """
@@ -142,6 +147,7 @@ def start_folder(out: Path, args: argparse.Namespace) -> None:
 
 def run_relay(args: argparse.Namespace) -> int:
     from splitcam.data.patches import list_images
+    from splitcam.recon.loading import load_model
     from splitcam.training import train
     from splitcam.training.models import export_model
 
@@ -169,11 +175,13 @@ def run_relay(args: argparse.Namespace) -> int:
         row = summarise(name, config, result)
         overhead = max(0.0, time.monotonic() - began - row["train_s"])
         if result.failure is None:
+            shipped = load_model(name).meta.get("description", "").rstrip(".")
             export_model(
                 result.run_dir,
                 out / "candidates" / name,
                 name=name,
-                description=f"relay candidate of {name} ({row['device']})",
+                description=f"{shipped}; then {row['train_s'] / 60:.1f} GPU minutes "
+                f"({row['steps']} steps of batch {row['batch']}, {row['device']}) by the GPU relay",
             )
         rows.append(row)
         write_table(out / "relay.md", rows, args)
