@@ -162,3 +162,39 @@ def test_model_for_any_pattern_needs_a_pattern_and_names_a_bad_file(tiny_univers
     assert method.reconstruct(raw, 5.0).shape == (1, 3, 21, 19)
     other = build_method(str(model), pattern="D", precision="fp32")
     assert other.fingerprint != method.fingerprint
+
+
+def test_a_run_folder_means_its_best_network(trained_run, tmp_path, capsys):
+    """Evaluation and reconstruction of a run folder use the weights of its best validation
+    (best.safetensors) and say so, with the step; the latest checkpoint is used when its file is
+    given."""
+    from splitcam.cli._common import warn_failed_runs
+    from splitcam.io import checkpoints as ckpt_io
+
+    run = tmp_path / "run"
+    shutil.copytree(trained_run, run)
+    latest = ckpt_io.load(run / ckpt_io.CHECKPOINT_NAME)
+    tensors = {
+        k: v + 0.01 if k.startswith("model/") and v.is_floating_point() else v
+        for k, v in latest.tensors.items()
+        if k.startswith("model/")
+    }
+    meta = {**{k: v for k, v in latest.meta.items() if k not in ("format", "version")}}
+    meta.update({"step": 1, "best_val": 12.5})
+    ckpt_io.save(run / ckpt_io.BEST_NAME, meta, tensors)
+    raw = torch.rand(1, 1, 12, 12, generator=torch.Generator().manual_seed(0))
+
+    def estimate(spec):
+        return build_method(spec, precision="fp32", tile=None).reconstruct(raw, 5.0)
+
+    from_best = estimate(run / ckpt_io.BEST_NAME)
+    from_latest = estimate(run / ckpt_io.CHECKPOINT_NAME)
+    assert not torch.equal(from_best, from_latest)
+    assert torch.equal(estimate(run), from_best)
+    warn_failed_runs([str(run)])
+    said = capsys.readouterr().out
+    assert "using its best validation, 12.50 dB at step 1" in said
+    assert f"step {latest.meta['step']}" in said and "checkpoint.safetensors" in said
+    # Without a best file the folder means its latest checkpoint.
+    (run / ckpt_io.BEST_NAME).unlink()
+    assert torch.equal(estimate(run), from_latest)

@@ -75,7 +75,8 @@ def check_writable(path: str | os.PathLike[str], flag: str = "--out") -> None:
 
 def warn_failed_runs(specs) -> None:
     """One line on stderr for each run folder or latest checkpoint among ``specs`` whose run
-    ended in failure (diverged, or far below where it began): its scores are of such weights."""
+    ended in failure (diverged, or far below where it began), and for each run folder which of
+    its checkpoints is used (its best validation, where kept)."""
     import sys
     from pathlib import Path
 
@@ -88,10 +89,10 @@ def warn_failed_runs(specs) -> None:
             continue
         latest = ckpt_io.resolve(path)
         if latest.is_file() and (failure := run_failure(latest)):
-            best = latest.parent / ckpt_io.BEST_NAME
-            hint = f"; its best weights are in {best}" if best.is_file() else ""
+            used = ckpt_io.network_checkpoint(path)
+            hint = f"; its best weights ({used}) are used" if used.name == ckpt_io.BEST_NAME else ""
             print(f"warning: {path} ended in failure ({failure}){hint}", file=sys.stderr)
-        if (note := ckpt_io.which_checkpoint(path)) is not None:
+        if (note := ckpt_io.which_checkpoint(path, best=True)) is not None:
             print(note)
 
 

@@ -30,6 +30,7 @@ __all__ = [
     "CheckpointError",
     "load",
     "load_module",
+    "network_checkpoint",
     "read_meta",
     "require",
     "resolve",
@@ -43,8 +44,9 @@ VERSION = 1
 CHECKPOINT_NAME = "checkpoint.safetensors"
 #: The run's weights at its best validation so far (weights and header only: what export and
 #: reconstruction need, not what a resume needs), kept beside the latest checkpoint, so a
-#: resume that goes wrong never takes the good weights with it. Give the file itself to use it
-#: (``models export RUN/best.safetensors``, ``--checkpoint RUN/best.safetensors``).
+#: resume that goes wrong never takes the good weights with it. Evaluation and reconstruction of
+#: a run folder use it (:func:`network_checkpoint`); export takes the file itself
+#: (``models export RUN/best.safetensors``).
 BEST_NAME = "best.safetensors"
 #: The section of a checkpoint that holds the average of the network's weights, when the run
 #: keeps one (``optim.ema``, :mod:`splitcam.training.ema`): ``ema/network.<name>``. Readers that
@@ -77,6 +79,17 @@ def resolve(path: str | os.PathLike) -> Path:
     return path / CHECKPOINT_NAME if path.is_dir() else path
 
 
+def network_checkpoint(path: str | os.PathLike) -> Path:
+    """The checkpoint whose network a reader of ``path`` reconstructs with: a file is itself; a
+    run folder means its best network (:data:`BEST_NAME`, the weights of its best validation)
+    where the run kept one, else its latest checkpoint. Give ``RUN/checkpoint.safetensors`` for
+    the latest."""
+    path = Path(path)
+    if path.is_dir() and (path / BEST_NAME).is_file():
+        return path / BEST_NAME
+    return resolve(path)
+
+
 def run_folder_of(path: str | os.PathLike) -> Path | None:
     """The run folder a checkpoint file belongs to (the latest or the best), or None for a
     checkpoint file of another name."""
@@ -84,25 +97,36 @@ def run_folder_of(path: str | os.PathLike) -> Path | None:
     return path.parent if path.name in (CHECKPOINT_NAME, BEST_NAME) else None
 
 
-def which_checkpoint(path: str | os.PathLike) -> str | None:
-    """For a run folder: which checkpoint a reader of the folder uses (its latest), and, where
-    the run kept better weights at an earlier validation (:data:`BEST_NAME`), where they are;
-    None for a checkpoint file or a folder without a checkpoint."""
+def which_checkpoint(path: str | os.PathLike, *, best: bool = False) -> str | None:
+    """For a run folder: which checkpoint a reader of the folder uses, from which step, and
+    where the other is; None for a checkpoint file or a folder without a checkpoint.
+
+    Args:
+        path: A run folder (or a file: None).
+        best: The reader uses :func:`network_checkpoint` (evaluation and reconstruction: the
+            best where kept), not the latest (export, ``--init-from``).
+    """
     path = Path(path)
     latest_path = path / CHECKPOINT_NAME
     if not path.is_dir() or not latest_path.is_file():
         return None
     latest = read_meta(latest_path)
-    line = f"{path}: using its latest checkpoint, step {latest.get('step')}"
     best_path = path / BEST_NAME
-    if best_path.is_file():
-        best = read_meta(best_path)
-        if best.get("step") != latest.get("step"):
-            line += (
-                f"; its best validation, {best.get('best_val', float('nan')):.2f} dB at step "
-                f"{best.get('step')}, is kept in {best_path} (give that file to use it)"
-            )
-    return line
+    kept = read_meta(best_path) if best_path.is_file() else None
+    if kept is None or kept.get("step") == latest.get("step"):
+        return f"{path}: using its latest checkpoint, step {latest.get('step')}"
+    best_text = (
+        f"best validation, {kept.get('best_val', float('nan')):.2f} dB at step {kept.get('step')}"
+    )
+    if best:
+        return (
+            f"{path}: using its {best_text} ({best_path}); its latest checkpoint, step "
+            f"{latest.get('step')}, is {latest_path} (give that file to use it)"
+        )
+    return (
+        f"{path}: using its latest checkpoint, step {latest.get('step')}; its {best_text}, is "
+        f"kept in {best_path} (give that file to use it)"
+    )
 
 
 def save(path: str | os.PathLike, meta: dict[str, Any], tensors: dict[str, torch.Tensor]) -> Path:

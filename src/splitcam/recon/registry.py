@@ -36,7 +36,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from .. import patterns
-from ..io.checkpoints import read_meta, resolve, run_folder_of
+from ..io.checkpoints import network_checkpoint, read_meta, run_folder_of
 from ..io.domains import LINEAR, SRGB
 from ..io.tensorfiles import meta_checksum
 from ..physics.light import check_domain
@@ -299,8 +299,9 @@ def _build_lmmse(key: str, request: _Request) -> Reconstructor:
 
 
 def _build_network_file(spec: str | os.PathLike, request: _Request) -> Reconstructor:
-    """A run folder or checkpoint file: the network with the pattern it was trained for."""
-    path = resolve(spec)
+    """A run folder (its best network where the run kept one) or checkpoint file: the network
+    with the pattern it was trained for."""
+    path = network_checkpoint(spec)
     config = read_meta(path).get("config")
     folder = run_folder_of(path)
     label = folder.name if folder is not None else path.stem
