@@ -6,13 +6,19 @@ colourfulness, the most colourful ones in a folder of their own.
 Every run holds out the last 32 training photos by name (``data.val_split``'s default for 432
 photos) and validates on the first 8 of them; none of the 32 is trained on. They are ranked by
 Hasler and Suesstrunk's colourfulness (:func:`splitcam.data.colour.colourfulness`), and the
-``--top`` most colourful are copied, whole, to ``OUT/colourful``; all 32 go to ``OUT/all``.
+``--top`` most colourful are copied, whole, to ``OUT/colourful``; all 32 go to ``OUT/heldout``,
+and to ``OUT/saturated`` with their chroma scaled by ``--saturate`` (1.8) in the BT.601
+opponent space and clipped to the gamut (:func:`splitcam.data.colour.augment_chroma`, no hue
+turned): photos as colourful as McMaster's, built from held-out photos alone. (That set is
+of the same family of transforms as the chroma augmentation, so it measures holding on
+saturated colour, and favours that lever by construction; the colourful set does not.)
 The table ``OUT/colourfulness.md`` lists every held-out photo with its score, and the mean
 score of each test set beside them as a description of what the test sets hold (they choose
 nothing). Then, for example:
 
     splitcam evaluate --model bayer --checkpoint runs/colour/bayer-chroma \\
-        --datasets runs/colour/heldout/colourful,runs/colour/heldout/all --sigmas 0 15
+        --datasets runs/colour/heldout/colourful,runs/colour/heldout/heldout,\
+runs/colour/heldout/saturated --sigmas 0 15
 """
 
 from __future__ import annotations
@@ -23,7 +29,10 @@ from pathlib import Path
 
 import torch
 
-from splitcam.data.colour import colourfulness
+import numpy as np
+from PIL import Image
+
+from splitcam.data.colour import augment_chroma, colourfulness
 from splitcam.data.imageio import read_image
 from splitcam.data.patches import list_images
 from splitcam.data.registry import dataset_folder, training_folder
@@ -40,14 +49,24 @@ def main() -> None:
     parser.add_argument("--data", default=str(training_folder()))
     parser.add_argument("--out", default="runs/colour/heldout")
     parser.add_argument("--top", type=int, default=12)
+    parser.add_argument("--saturate", type=float, default=1.8)
     args = parser.parse_args()
     held = list_images(args.data)[-HELD_OUT:]
     ranked = sorted(((score(p), p) for p in held), reverse=True)
     out = Path(args.out)
-    for sub, chosen in (("colourful", ranked[: args.top]), ("all", ranked)):
+    for sub, chosen in (("colourful", ranked[: args.top]), ("heldout", ranked)):
         (out / sub).mkdir(parents=True, exist_ok=True)
         for _, path in chosen:
             shutil.copyfile(path, out / sub / path.name)
+    (out / "saturated").mkdir(parents=True, exist_ok=True)
+    saturated = []
+    for _, path in ranked:
+        rgb = torch.from_numpy(read_image(path)).permute(2, 0, 1)[None]
+        one = torch.ones(1)
+        pushed = augment_chroma(rgb, 0 * one, args.saturate * one, torch.zeros(1, dtype=torch.long))
+        saturated.append(colourfulness(pushed[0]))
+        pixels = (pushed[0].permute(1, 2, 0).numpy() * 255).round().astype(np.uint8)
+        Image.fromarray(pixels).save(out / "saturated" / f"{path.stem}.png")
     lines = [
         f"# Colourfulness of the {len(held)} held-out training photos",
         "",
@@ -66,6 +85,8 @@ def main() -> None:
     lines += ["", "| set | photos | mean colourfulness |", "|---|---|---|"]
     lines.append(f"| held-out, all | {len(ranked)} | {all_mean:.1f} |")
     lines.append(f"| held-out, colourful | {args.top} | {chosen_mean:.1f} |")
+    sat_mean = sum(saturated) / len(saturated)
+    lines.append(f"| held-out, chroma x{args.saturate:g} | {len(saturated)} | {sat_mean:.1f} |")
     for name in ("kodak24", "mcmaster"):
         try:
             paths = list_images(dataset_folder(name))

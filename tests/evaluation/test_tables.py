@@ -65,3 +65,17 @@ def test_kodak_minus_mcmaster_drop_per_method_and_level() -> None:
     assert "| bayer+demosaicnet | 2.94 | – |" in section
     del summary["net-bayer"]["mcmaster"], summary["bayer+demosaicnet"]["mcmaster"]
     assert "minus" not in markdown_tables(summary)
+
+
+def test_a_folder_named_all_never_merges_with_the_pool() -> None:
+    """A folder of images called ``all`` keeps its own rows; the pool of every set is then
+    ``all-sets`` (the two used to merge silently into one table of the wrong images)."""
+    from splitcam.evaluation.tables import EvalRow, summarise
+
+    def row(dataset: str, image: str, psnr: float) -> EvalRow:
+        return EvalRow("m", "D", dataset, image, 0.0, psnr, 0.9, 1.0)
+
+    rows = [row("all", "a", 30.0), row("all", "b", 32.0), row("colourful", "c", 40.0)]
+    summary = summarise(rows)["m"]
+    assert summary["all"]["0"]["psnr"] == 31.0 and summary["all"]["0"]["n_images"] == 2
+    assert summary["all-sets"]["0"]["n_images"] == 3

@@ -197,13 +197,16 @@ def pooled_groups(rows: Sequence[EvalRow]) -> dict[str, set[str]]:
     """The pooled image sets of a summary and the datasets each pools: ``{"all": every
     dataset}`` when every dataset's images were cut alike, else one ``"all-<crop>"`` per crop
     (``all-whole``, ``all-256px``): a 256-px crop of a photo never ranks beside the whole
-    photo."""
+    photo. Where a dataset's own name starts with ``all`` the pool is ``all-sets`` instead, so
+    the two never merge."""
     crops: dict[str, set[str]] = {}
     for row in rows:
         crops.setdefault(image_crop(row.dataset), set()).add(row.dataset)
+    # A folder of images named like the pool would merge with it: the pool is renamed.
+    pool = "all-sets" if any(d.startswith("all") for d in {r.dataset for r in rows}) else "all"
     if len(crops) <= 1:
-        return {"all": {r.dataset for r in rows}}
-    return {f"all-{crop}": sets for crop, sets in crops.items()}
+        return {pool: {r.dataset for r in rows}}
+    return {f"{pool}-{crop}": sets for crop, sets in crops.items()}
 
 
 def summarise(rows: Sequence[EvalRow]) -> dict:
