@@ -27,9 +27,8 @@ import argparse
 import shutil
 from pathlib import Path
 
-import torch
-
 import numpy as np
+import torch
 from PIL import Image
 
 from splitcam.data.colour import augment_chroma, colourfulness
