@@ -4,6 +4,7 @@ and earlier results kept in its folder."""
 from __future__ import annotations
 
 import csv
+import dataclasses
 import json
 import shutil
 
@@ -264,12 +265,13 @@ def test_main_job_uses_the_universal_network_for_patterns_without_one(
     export_model(trained_run, shipped / "D", name="D")  # a network of pattern D only
     monkeypatch.setattr(weights, "MODELS_DIR", shipped)
     mine = tmp_path / "mine.toml"
-    patterns.save(random_pattern(np.random.default_rng(5)), mine)
+    drawn = random_pattern(np.random.default_rng(5))
+    patterns.save(dataclasses.replace(drawn, name="cygm-mine"), mine)
     ev = ["evaluate", "--patterns", str(mine), "--datasets", str(data), "--sigmas", "0"]
     assert main([*ev, "--out", str(tmp_path / "ev"), "--quiet"]) == 0
     out = capsys.readouterr().out
     assert f"pattern {mine} has no shipped network: reconstructed by the universal network" in out
-    assert "net-uni-mine.toml" in out and "lmmse-mine.toml" in out  # labelled by its own name
+    assert "net-uni-cygm-mine" in out and "lmmse-cygm-mine" in out  # labelled by its own name
     assert f"the main job on {mine}: universal" in out
     summary = json.loads((tmp_path / "ev" / "summary.json").read_text())
     assert not [name for name in summary if "D" in name.split("-")[0]], list(summary)

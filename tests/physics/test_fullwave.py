@@ -15,6 +15,7 @@ from splitcam.physics.fullwave import (
     MATERIALS,
     FullwaveError,
     RouterDesign,
+    band_efficiencies,
     cone_directions,
     quadrant_spectra,
     read_design,
@@ -139,11 +140,14 @@ def test_the_command_writes_spectra_a_chart_and_a_pattern_file(tmp_path, capsys)
 
     out = tmp_path / "zou"
     args = ["optics", "rcwa", str(DESIGNS / "zou2022-16x16.csv"), "--out", str(out)]
-    assert main([*args, "--order", "2", "--wavelengths", "450,550,650", "--quiet"]) == 0
-    assert {p.name for p in out.iterdir()} == {"spectra.csv", "spectra.png", "pattern.toml"}
-    rows = (out / "spectra.csv").read_text().splitlines()
+    # Order 5: at order 2 blue and red peak in one pixel (an unconverged solve), which is said.
+    assert main([*args, "--order", "5", "--wavelengths", "450,550,650", "--quiet"]) == 0
+    # Named after the design (the file's stem here).
+    written = {"zou2022-16x16-spectra.csv", "zou2022-16x16-spectra.png", "zou2022-16x16.toml"}
+    assert {p.name for p in out.iterdir()} == written
+    rows = (out / "zou2022-16x16-spectra.csv").read_text().splitlines()
     assert len(rows) == 4 and rows[0].startswith("wavelength_nm,T_row0_col0")
-    pattern = patterns.get(str(out / "pattern.toml"))
+    pattern = patterns.get(str(out / "zou2022-16x16.toml"))
     assert pattern.period == (2, 2) and "full-wave" in pattern.provenance
     assert "band efficiency" in capsys.readouterr().out
     # Bad input: one line, nothing written.
@@ -153,6 +157,57 @@ def test_the_command_writes_spectra_a_chart_and_a_pattern_file(tmp_path, capsys)
     assert "densities in [0, 1]" in capsys.readouterr().err and not (tmp_path / "x").exists()
     assert main([*args[:3], "--out", str(tmp_path / "y"), "--wavelengths", "350,450"]) == 1
     assert "outside 380-780" in capsys.readouterr().err and not (tmp_path / "y").exists()
+
+
+def test_the_command_names_files_after_the_design_and_refuses_f_number_0(tmp_path, capsys):
+    """--name names the pattern and its files, so two designs in one folder and one
+    evaluation keep apart (every result was once pattern.toml, and evaluate refused two as
+    duplicates); --f-number 0 is refused like the other impossible f-numbers (it once meant
+    normal incidence)."""
+    from splitcam import patterns
+    from splitcam.cli import main
+
+    args = ["optics", "rcwa", str(DESIGNS / "zou2022-16x16.csv"), "--order", "1", "--quiet"]
+    args += ["--wavelengths", "450,650", "--out", str(tmp_path / "o")]
+    assert main([*args, "--name", "zou one"]) == 0
+    assert main([*args, "--name", "zou-two"]) == 0
+    files = sorted(p.name for p in (tmp_path / "o").iterdir())
+    assert "zou_one.toml" in files and "zou-two.toml" in files and "zou-two-spectra.csv" in files
+    assert patterns.get(str(tmp_path / "o" / "zou_one.toml")).name == "zou one"
+    from splitcam.recon.registry import build_methods
+
+    labels = [
+        m.name
+        for m in build_methods(
+            ["lmmse"],
+            patterns_for_lmmse=[
+                str(tmp_path / "o" / f) for f in files if "." in f and f.endswith(".toml")
+            ],
+        )
+    ]
+    assert sorted(labels) == ["lmmse-zou one", "lmmse-zou-two"]
+    for bad in ("0", "0.4", "-2"):
+        out = tmp_path / f"f{bad}"
+        assert main([*args[:-1], str(out), "--f-number", bad]) == 1
+        assert "f-number must be > 0.5" in capsys.readouterr().err and not out.exists()
+
+
+def test_colliding_roles_are_said_with_the_numbers(tmp_path, capsys):
+    """A design that sends blue and red into the same pixel (a blank layer sends every colour
+    everywhere alike) has no band efficiencies: the command writes its spectra and pattern and
+    says so, instead of calling three pixels green."""
+    from splitcam.cli import main
+
+    blank = tmp_path / "blank.csv"
+    blank.write_text("\n".join(",".join(["0"] * 4) for _ in range(4)) + "\n")
+    args = ["optics", "rcwa", str(blank), "--order", "1", "--wavelengths", "450,650", "--quiet"]
+    assert main([*args, "--out", str(tmp_path / "o")]) == 0
+    captured = capsys.readouterr()
+    assert "both peak in quadrant" in captured.err and "450 nm" in captured.err
+    assert "band efficiency" not in captured.out
+    assert (tmp_path / "o" / "blank.toml").exists()
+    with pytest.raises(ValueError, match="both peak"):
+        band_efficiencies(np.full((2, 2, 3), 0.25), [450.0, 550.0, 650.0])
 
 
 def test_a_wavelength_where_an_order_grazes_is_solved():
@@ -223,7 +278,7 @@ def test_the_command_solves_with_fmmax_and_says_so(tmp_path, capsys):
     args = ["optics", "rcwa", str(DESIGNS / "zou2022-16x16.csv"), "--wavelengths", "450,650"]
     fmmax = ["--solver", "fmmax-fft", "--terms", "40", "--quiet"]
     assert main([*args, *fmmax, "--out", str(out)]) == 0
-    pattern = patterns.get(str(out / "pattern.toml"))
+    pattern = patterns.get(str(out / "zou2022-16x16.toml"))
     assert "fmmax-fft, 37 terms" in pattern.provenance
     assert main([*args, "--terms", "40", "--out", str(tmp_path / "x")]) == 1
     assert "for an fmmax solver" in capsys.readouterr().err and not (tmp_path / "x").exists()

@@ -4,6 +4,8 @@ spectral pattern file."""
 from __future__ import annotations
 
 import argparse
+import re
+import sys
 from pathlib import Path
 
 
@@ -14,13 +16,16 @@ def register(optics_sub: argparse._SubParsersAction) -> None:
         description="Solves Maxwell's equations for a metasurface design (RCWA, "
         "splitcam.physics.fullwave; the optional extra splitcam[fullwave]) and writes to --out "
         "the transmission into each pixel quadrant per wavelength and polarisation "
-        "(spectra.csv, spectra.png) and the spectral pattern file (pattern.toml) that every "
+        "(NAME-spectra.csv, NAME-spectra.png) and the spectral pattern file (NAME.toml) that every "
         "other command takes as --pattern. Cost: about (2 order + 1)^6 per wavelength and "
         "direction (order 9: 20 s, order 12: 90 s on one CPU core).",
     )
     p.add_argument("design", help="CSV grid of 0/1 or densities in [0, 1]; rows along y")
-    p.add_argument("--out", required=True, help="folder for the spectra and pattern.toml")
-    p.add_argument("--name", help="the pattern's name (default: the design file's stem)")
+    p.add_argument("--out", required=True, help="folder for the spectra and NAME.toml")
+    p.add_argument(
+        "--name",
+        help="the pattern's name, and of the files written (default: the design file's stem)",
+    )
     p.add_argument("--pitch", type=float, default=1.0, help="pixel pitch, µm (default 1)")
     p.add_argument("--thickness", type=float, default=0.6, help="layer, µm (default 0.6)")
     p.add_argument("--depth", type=float, default=2.4, help="monitor below it, µm (default 2.4)")
@@ -49,8 +54,8 @@ def register(optics_sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--f-number",
         type=float,
-        help="average over the cone of light of a lens at this f-number (7 directions) "
-        "instead of normal incidence",
+        help="average over the cone of light of a lens at this f-number, > 0.5 (7 directions); "
+        "default: normal incidence",
     )
     p.add_argument("--threads", type=int, help="CPU threads (default: torch's)")
     p.add_argument("--quiet", action="store_true")
@@ -80,6 +85,7 @@ def run(args: argparse.Namespace) -> int:
     from ..patterns.files import save_transmission
     from ..patterns.spectral import SpectralPattern
     from ..physics.fullwave import (
+        FullwaveError,
         RouterDesign,
         band_efficiencies,
         cone_directions,
@@ -99,6 +105,7 @@ def run(args: argparse.Namespace) -> int:
         substrate=_material(args.substrate),
     )
     name = args.name or Path(args.design).stem
+    stem = re.sub(r"[^A-Za-z0-9._-]+", "_", name).strip("._") or "router"
     # The pattern's checks (wavelength range) before minutes of solving.
     SpectralPattern.from_transmission(name, lams, np.zeros((2, 2, len(lams))))
     out = Path(args.out)
@@ -106,7 +113,8 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError(f"--out {out} is a file, not a folder")
     if args.threads:
         torch.set_num_threads(args.threads)
-    directions = cone_directions(args.f_number) if args.f_number else [(0.0, 0.0, 1.0)]
+    # 0 is refused with the other impossible f-numbers (it once meant normal incidence).
+    directions = cone_directions(args.f_number) if args.f_number is not None else [(0.0, 0.0, 1.0)]
     bar = None
     if not args.quiet:
         from tqdm import tqdm
@@ -128,21 +136,21 @@ def run(args: argparse.Namespace) -> int:
     # clearly negative net flux means the solve is not converged (raise --order).
     if not np.all(np.isfinite(t)):
         li = int(np.argwhere(~np.isfinite(t))[0][2])
-        _write_spectra(out, lams, result)
-        raise ValueError(f"the solve at {lams[li]:g} nm is not a number; spectra.csv written")
+        written = _write_spectra(out, stem, lams, result)
+        raise ValueError(f"the solve at {lams[li]:g} nm is not a number; {written} written")
     lowest = float(t.min())
     if lowest < -1e-3:
         i, j, li = np.unravel_index(int(t.argmin()), t.shape)
-        _write_spectra(out, lams, result)
+        written = _write_spectra(out, stem, lams, result)
         raise ValueError(
             f"quadrant ({i}, {j}) at {lams[li]:g} nm transmits {lowest:.4f} < 0: not converged "
-            f"with {_solved_by(args, result['terms'])}; raise --order or --terms (spectra.csv "
+            f"with {_solved_by(args, result['terms'])}; raise --order or --terms ({written} "
             "written for a look)"
         )
     t = np.clip(t, 0.0, None)
     where = (
         f"{len(directions)} directions of an f/{args.f_number:g} cone"
-        if args.f_number
+        if args.f_number is not None
         else "normal incidence"
     )
     info = {
@@ -153,21 +161,29 @@ def run(args: argparse.Namespace) -> int:
         "reference": "splitcam optics rcwa",
     }
     out.mkdir(parents=True, exist_ok=True)
-    pattern_file = save_transmission(out / "pattern.toml", name, lams, t, **info)
-    _write_spectra(out, lams, {**result, "transmission": t})
-    eff = band_efficiencies(t, lams)
-    _chart(lams, t, result["reflection"], eff["quadrants"], out / "spectra.png", f"{name}: {where}")
-    print(
-        f"blue peaks in quadrant (row, col) {divmod(eff['quadrants']['blue'], 2)}, red in "
-        f"{divmod(eff['quadrants']['red'], 2)}; band efficiency blue {eff['blue']:.3f}, green "
-        f"{eff['green']:.3f}, red {eff['red']:.3f}; reflection {result['reflection'].mean():.3f}"
-    )
-    print(f"wrote {out / 'spectra.csv'}, {out / 'spectra.png'} and {pattern_file}")
+    pattern_file = save_transmission(out / f"{stem}.toml", name, lams, t, **info)
+    spectra = _write_spectra(out, stem, lams, {**result, "transmission": t})
+    chart = out / f"{stem}-spectra.png"
+    try:
+        eff = band_efficiencies(t, lams)
+    except FullwaveError as exc:
+        print(f"warning: {exc}", file=sys.stderr)
+        _chart(lams, t, result["reflection"], None, chart, f"{name}: {where}")
+    else:
+        _chart(lams, t, result["reflection"], eff["quadrants"], chart, f"{name}: {where}")
+        print(
+            f"blue peaks in quadrant (row, col) {divmod(eff['quadrants']['blue'], 2)}, red in "
+            f"{divmod(eff['quadrants']['red'], 2)}; band efficiency blue {eff['blue']:.3f}, "
+            f"green {eff['green']:.3f}, red {eff['red']:.3f}; reflection "
+            f"{result['reflection'].mean():.3f}"
+        )
+    print(f"wrote {spectra}, {chart} and {pattern_file}")
     return 0
 
 
-def _write_spectra(out: Path, lams, result: dict) -> None:
-    """``spectra.csv``: the mean of the polarisations, each polarisation, and the reflection."""
+def _write_spectra(out: Path, stem: str, lams, result: dict) -> Path:
+    """``STEM-spectra.csv``: the mean of the polarisations, each polarisation, and the
+    reflection; its path."""
     import numpy as np
 
     from ..io import write_text
@@ -188,7 +204,9 @@ def _write_spectra(out: Path, lams, result: dict) -> None:
     columns.append(result["reflection"])
     rows = [",".join(header)]
     rows += [",".join(f"{v:.6g}" for v in row) for row in np.stack(columns, axis=1)]
-    write_text(out / "spectra.csv", "\n".join(rows) + "\n")
+    path = out / f"{stem}-spectra.csv"
+    write_text(path, "\n".join(rows) + "\n")
+    return path
 
 
 def _solved_by(args: argparse.Namespace, terms: int) -> str:
@@ -204,9 +222,10 @@ def _material(text: str) -> str | float:
         return text
 
 
-def _chart(lams, t, reflection, roles: dict[str, int], path: Path, title: str) -> None:
+def _chart(lams, t, reflection, roles: dict[str, int] | None, path: Path, title: str) -> None:
     """The spectra, each pixel in the colour it collects (``roles``: the blue and red
-    quadrants of :func:`~splitcam.physics.fullwave.band_efficiencies`)."""
+    quadrants of :func:`~splitcam.physics.fullwave.band_efficiencies`; None: the design has no
+    such roles, and each pixel gets a neutral colour)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -216,10 +235,17 @@ def _chart(lams, t, reflection, roles: dict[str, int], path: Path, title: str) -
 
     # Blue where the shortest wavelength peaks, red where the longest peaks, green the other two
     # (dashed for the second).
-    styles = {roles["blue"]: ("tab:blue", "-", "blue"), roles["red"]: ("tab:red", "-", "red")}
-    greens = [q for q in range(4) if q not in styles]
-    for k, q in enumerate(greens):
-        styles[q] = ("tab:green", "-" if k == 0 else "--", "green")
+    if roles is None:
+        neutral = ("black", "dimgray", "darkgray", "silver")
+        styles = {q: (neutral[q], "-", "no colour role") for q in range(4)}
+    else:
+        styles = {
+            roles["blue"]: ("tab:blue", "-", "blue"),
+            roles["red"]: ("tab:red", "-", "red"),
+        }
+        greens = [q for q in range(4) if q not in styles]
+        for k, q in enumerate(greens):
+            styles[q] = ("tab:green", "-" if k == 0 else "--", "green")
     fig, ax = plt.subplots(figsize=(6.4, 4.0))
     for q in range(4):
         i, j = divmod(q, 2)

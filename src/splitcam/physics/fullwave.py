@@ -165,7 +165,7 @@ def cone_directions(f_number: float) -> list[tuple[float, float, float]]:
     to a pixel: a 7-point quadrature of its exit pupil, a disk of uniform irradiance. The
     direction sines ``sin(theta) (cos phi, sin phi)`` fill a disk of radius
     ``sin(theta_max) = 1 / (2 N)``; the rule (the centre, weight 1/4, and six points at
-    ``sqrt(2/3)`` of the radius, 1/8 each) integrates polynomials up to degree 3 over the disk
+    ``sqrt(2/3)`` of the radius, 1/8 each) integrates polynomials up to degree 5 over the disk
     exactly (tests/physics/test_fullwave.py)."""
     if not f_number > 0.5:
         raise FullwaveError(f"f-number must be > 0.5, got {f_number}")
@@ -421,6 +421,12 @@ def band_efficiencies(transmission: Any, wavelengths: Any) -> dict[str, Any]:
     t = np.asarray(transmission).reshape(4, -1)
     lam = np.asarray(wavelengths)
     blue, red = int(t[:, 0].argmax()), int(t[:, -1].argmax())
+    if blue == red:
+        raise FullwaveError(
+            f"blue ({lam[0]:g} nm: {t[blue, 0]:.3f}) and red ({lam[-1]:g} nm: "
+            f"{t[red, -1]:.3f}) both peak in quadrant (row, col) {divmod(blue, 2)}: the design "
+            "does not send them to different pixels, so it has no band efficiencies"
+        )
     green = [q for q in range(4) if q not in (blue, red)]
     out: dict[str, Any] = {}
     for name, quads, low, high in (

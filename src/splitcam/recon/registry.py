@@ -239,11 +239,14 @@ def _is_path(spec: str | os.PathLike) -> bool:
 def _pattern_label(
     pattern_spec: str | os.PathLike | patterns.Pattern, pattern: patterns.Pattern
 ) -> str:
-    """``D`` for a built-in pattern, the file name for a pattern file (even if the file's
-    pattern is named like a built-in, so a table never passes one off as the other)."""
-    if isinstance(pattern_spec, (str, os.PathLike)) and str(pattern_spec).lower() not in (
-        n.lower() for n in patterns.names()
-    ):
+    """A pattern's label in tables: its own name (``D``, or ``zou`` for a file whose pattern
+    is called so), except for a file whose pattern is named like a built-in one: then the file
+    name, so a table never passes an edited copy off as the built-in."""
+    builtins = {n.lower() for n in patterns.names()}
+    from_file = isinstance(pattern_spec, (str, os.PathLike)) and (
+        str(pattern_spec).lower() not in builtins
+    )
+    if from_file and pattern.name.lower() in builtins:
         return Path(pattern_spec).name
     return pattern.name
 
