@@ -296,7 +296,13 @@ def _report(args: argparse.Namespace, rows: list, chosen: bool) -> None:
     print(markdown_tables(summary))
     if len(kept) > len(rows):
         others = sorted({r.method for r in kept} - {r.method for r in rows})
-        print(f"(the table keeps the earlier results in {args.out} of: {', '.join(others)})")
+        if others:
+            print(f"(the table keeps the earlier results in {args.out} of: {', '.join(others)})")
+        else:
+            print(
+                f"(the table keeps earlier results in {args.out} of these methods, on other "
+                "images or levels)"
+            )
     written = "per_image.csv, summary.json and table.md"
     for chart in _draw_charts(Path(args.out), kept, summary):
         written += f", {chart.name}"

@@ -70,15 +70,23 @@ def measured_array(kind: str, camera: str) -> Pattern:
     layout = np.searchsorted(used, layout)
     name = f"{kind}-{camera}"
     share = "half W pixels (no filter), " if kind == "rgbw" else ""
+    camera_name = CAMERAS[camera].split(" (")[0]
+    # The SD Merrill is a Foveon sensor: three stacked photodiode layers at every pixel, no
+    # mosaic. Its measured curves are the depths' responses, used here as if they were filters.
+    curves = (
+        f"filters shaped as the layer responses of the {camera_name} (a Foveon sensor: three "
+        "stacked layers at every pixel, no mosaic),"
+        if camera == "sdmerrill"
+        else f"colour filters of the {camera_name} sensitivities"
+    )
     spectral = SpectralPattern(
         name,
         layout,
         grid,
         kernels,
         provenance=f"measured filters ({CAMERAS[camera]})",
-        description=f"{'RGBW' if kind == 'rgbw' else 'RGGB'} array, {share}colour filters of "
-        f"the {CAMERAS[camera].split(' (')[0]} sensitivities measured by NPL "
-        f"({grid[0]:g}-{grid[-1]:g} nm; splitcam.patterns.measured)",
+        description=f"{'RGBW' if kind == 'rgbw' else 'RGGB'} array, {share}{curves} measured "
+        f"by NPL ({grid[0]:g}-{grid[-1]:g} nm; splitcam.patterns.measured)",
         reference="NPL camera spectral sensitivities, in colour-science "
         "(colour.MSDS_CAMERA_SENSITIVITIES)",
     )
