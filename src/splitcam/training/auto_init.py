@@ -13,6 +13,7 @@ weights: the search is part of the budget, not added to it.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 from dataclasses import dataclass
 from pathlib import Path
@@ -112,7 +113,10 @@ def choose_start(
                 "run.val_every": 10**9,  # at its start and its end
             }
         )
-        train(probe, progress=False)
+        # A probe ends at its time limit by design: the trainer's advice to resume it with a
+        # larger limit is not for the user, so its log is quiet for the probe.
+        with _quiet(logging.getLogger(train.__module__)):
+            train(probe, progress=False)
         scores = _val_rows(search / name) or [float("-inf")]
         probes.append(Probe(name, scores[0], scores[-1], share, search / name))
         logger.info(f"  {name}: validation {scores[0]:.2f} -> {scores[-1]:.2f} dB")
@@ -135,3 +139,14 @@ def _val_rows(run: Path) -> list[float]:
     from .rundir import metrics_rows
 
     return [float(r["val_psnr"]) for r in metrics_rows(run) if "val_psnr" in r]
+
+
+@contextlib.contextmanager
+def _quiet(log: logging.Logger):
+    """``log`` says only warnings and worse inside the block."""
+    level = log.level
+    log.setLevel(max(level, logging.WARNING))
+    try:
+        yield
+    finally:
+        log.setLevel(level)
