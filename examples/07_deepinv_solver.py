@@ -7,7 +7,9 @@ deepinv solver runs on it; here a total-variation regularised proximal gradient 
 ``DeepinvReconstructor`` so the paper's protocol scores it beside the closed-form LMMSE and the
 shipped network of pattern D. Writes ``deepinv.png`` (a zoomed crop of each reconstruction).
 
-Needs deepinv (``pip install 'splitcam[deepinv]'``); without it, the script says so and exits.
+Needs deepinv (``pip install 'splitcam[deepinv]'``); without it, or where its torchvision
+cannot load beside this torch, the script says why in one line, with the command that fixes
+it, and exits with status 1.
 
     python examples/07_deepinv_solver.py [--out DIR] [--tiny]
 """
@@ -38,8 +40,8 @@ def main() -> None:
 
         import deepinv as dinv
     except ImportError as exc:
-        print(f"skipped: {exc}")
-        sys.exit(0)
+        print(f"07_deepinv_solver.py cannot run here: {exc}", file=sys.stderr)
+        sys.exit(1)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
 

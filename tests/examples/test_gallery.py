@@ -63,12 +63,15 @@ def test_script_runs_tiny_and_writes_its_figures(script, tmp_path):
         text=True,
         timeout=300,
     )
-    assert done.returncode == 0, done.stdout + done.stderr
     if script == "07_deepinv_solver.py":
         reason = _why_deepinv_cannot_run()
         if reason is not None:
-            assert "skipped: " in done.stdout and reason in done.stdout, done.stdout
-            pytest.skip(f"the script said why it cannot run and exited 0: {reason}")
+            # It cannot run: one line saying why, with the fix, and a failing status.
+            assert done.returncode == 1, done.stdout + done.stderr
+            assert "cannot run here" in done.stderr and reason in done.stderr, done.stderr
+            assert len(done.stderr.strip().splitlines()) == 1
+            pytest.skip(f"the script said why it cannot run and exited 1: {reason}")
+    assert done.returncode == 0, done.stdout + done.stderr
     assert done.stdout.strip(), "a gallery script prints what it found"
     for name in FIGURES[script]:
         path = out / name

@@ -27,9 +27,14 @@ def test_operators_that_do_not_load_are_named_with_the_fix(tmp_path):
     assert line is not None and "\n" not in line
     assert f"beside torch {torch.__version__}" in line
     minor = int(torch.__version__.split(".")[1])
-    assert f"pip install 'torchvision==0.{minor + 15}.*'" in line
+    release = torch.__version__.split("+")[0]
+    # The pair again, together, from one index: torchvision alone was "already satisfied".
+    assert (
+        f"pip install --isolated --force-reinstall 'torch=={release}' "
+        f"'torchvision==0.{minor + 15}.*'" in line
+    )
     if "+" in torch.__version__:
-        assert line.endswith(f"download.pytorch.org/whl/{torch.__version__.split('+')[1]}")
+        assert line.endswith(f"download.pytorch.org/whl/{torch.__version__.split('+')[1]})")
     # Nothing was declared on torchvision's behalf (the old stand-in defined nms); where a working
     # torchvision was imported before, its own nms is there before and after.
     assert _nms_declared() == declared_before

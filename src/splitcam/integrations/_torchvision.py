@@ -46,14 +46,22 @@ def torchvision_mismatch(folder: Path | None = None) -> str | None:
 
 def _mismatch_line(folder: Path) -> str:
     version = _installed_version("torchvision", folder)
-    major, minor = (int(v) for v in torch.__version__.split("+")[0].split(".")[:2])
+    release = torch.__version__.split("+")[0]
+    major, minor = (int(v) for v in release.split(".")[:2])
     matching = f"0.{minor + 15}" if major == 2 else "the release for this torch"
     build = torch.__version__.split("+")[1] if "+" in torch.__version__ else None
-    index = f" --index-url https://download.pytorch.org/whl/{build}" if build else ""
+    # Reinstalling torchvision alone changes nothing where pip sees it as satisfied, and a
+    # torch installed from a local file has no index of its own: the pair is installed again
+    # together from one index (PyPI, ignoring local settings), so the two are built together.
+    other = (
+        f" (or their {build} builds: add --index-url https://download.pytorch.org/whl/{build})"
+        if build
+        else ""
+    )
     return (
         f"torchvision {version} cannot load its operators beside torch {torch.__version__} (it "
-        f"was built for another torch); install the one built for it: pip install "
-        f"'torchvision=={matching}.*'{index}"
+        f"was built for another torch); install the two as one pair: pip install --isolated "
+        f"--force-reinstall 'torch=={release}' 'torchvision=={matching}.*'{other}"
     )
 
 
