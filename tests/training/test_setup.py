@@ -106,3 +106,45 @@ def patterns_kernels(pattern: patterns.Pattern) -> torch.Tensor:
     from splitcam.physics.sensor import pattern_pixel_kernels
 
     return pattern_pixel_kernels(pattern)
+
+
+def _rg_correlation(mean: torch.Tensor, second: torch.Tensor) -> float:
+    """Correlation of red and green at one pixel, from first and second moments."""
+    c = second.shape[-1] // 2
+    var_r = second[0, 0, c, c] - mean[0] ** 2
+    var_g = second[1, 1, c, c] - mean[1] ** 2
+    return float((second[0, 1, c, c] - mean[0] * mean[1]) / (var_r * var_g).sqrt())
+
+
+def test_colour_statistics_give_the_network_a_prior_of_free_colour(tmp_path) -> None:
+    """data.colour_statistics: the LMMSE inside the network is solved from the statistics of
+    the photos and their chroma-moved copies: red and green correlate less than in the photos'
+    own statistics (estimated independently here), and a resumed run keeps them."""
+    from splitcam.data.patches import ImageCache
+    from splitcam.recon.closed_form import estimate_image_statistics
+
+    from PIL import Image
+
+    # Muted photos: one texture in every channel, a little colour (red and green correlate).
+    data = tmp_path / "img"
+    data.mkdir()
+    rng = np.random.default_rng(0)
+    for i in range(6):
+        grey = rng.uniform(40, 215, (10, 12)).repeat(8, 0).repeat(8, 1)[:72, :90]
+        tint = rng.uniform(-12, 12, 3)
+        rgb = np.stack([grey + t for t in tint], -1) + rng.normal(0, 3, (72, 90, 3))
+        Image.fromarray(rgb.clip(0, 255).astype(np.uint8)).save(data / f"{i}.png")
+    settings = {"optim.steps": 2, "run.val_every": 1000, "data.colour_statistics": True}
+    config = tiny_config(data, tmp_path / "r", **settings)
+    train(config, progress=False)
+    system = load_system(tmp_path / "r")
+    mean, second = system.network.stat_mean.double(), system.network.stat_second.double()
+    cache = ImageCache(data, min_size=16, progress=False)
+    own = estimate_image_statistics(
+        [cache.image(i) for i in range(len(cache))], max_offset=second.shape[-1] // 2
+    )
+    assert _rg_correlation(mean, second) < _rg_correlation(own.mean, own.second) - 0.005
+    resumed = config.override({"optim.steps": 3})
+    train(resumed, resume=True, progress=False)
+    again = load_system(tmp_path / "r").network
+    assert torch.equal(again.stat_second.double(), second)

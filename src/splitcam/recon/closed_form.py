@@ -187,8 +187,8 @@ def estimate_image_statistics(
     swapped estimate the same moment). The mean is taken over the same interior pixels.
 
     Args:
-        source: Images ``(N, 3, H, W)`` in [0, 1], an :class:`ImageCache`, a folder, or a list of
-            image files.
+        source: Images ``(N, 3, H, W)`` in [0, 1], a list of ``(3, H, W)`` images of any sizes,
+            an :class:`ImageCache`, a folder, or a list of image files.
         max_offset: ``L``, the largest offset per axis.
         max_images: Use at most this many images (from the start of the sorted list).
         progress: Show a progress bar over the images.
@@ -208,6 +208,11 @@ def estimate_image_statistics(
             raise ValueError(f"expected images of shape (N, 3, H, W), got {tuple(source.shape)}")
         images: Any = list(source[:max_images] if max_images else source)
         info: dict[str, Any] = {"source": "tensor"}
+    elif isinstance(source, list) and source and isinstance(source[0], torch.Tensor):
+        images = source[:max_images] if max_images else source
+        if any(img.ndim != 3 or img.shape[0] != 3 for img in images):
+            raise ValueError("expected a list of images of shape (3, H, W)")
+        info = {"source": "tensors", "images": len(images)}
     else:
         cache = (
             source

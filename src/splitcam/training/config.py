@@ -196,6 +196,13 @@ class DataConfig:
         "(splitcam.data.colour)",
     )
     colour_chroma_max: float = _opt(2.2, "largest chroma factor of --colour-chroma (>= 1)")
+    colour_statistics: bool = _opt(
+        False,
+        "a new run's LMMSE inside the physics and universal networks uses image statistics of "
+        "the training photos together with a chroma-moved copy of each (the moves of "
+        "--colour-chroma, at its --colour-chroma-max), instead of the photos' alone: a prior "
+        "that expects saturated colour (splitcam.training.setup)",
+    )
     colour_leaves: float = _opt(
         0.0,
         "probability that a patch is replaced by a colour dead-leaves scene (discs with "

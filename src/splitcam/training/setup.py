@@ -27,7 +27,7 @@ from ..physics.noise import GaussianNoise, PhotonNoise
 from ..physics.sensor import LearnableSplitterSensor, SplitterSensor, SwitchingSensor
 from ..physics.system import ImagingSystem
 from ..recon.base import fast_precision, strict_float32
-from ..recon.closed_form import shipped_image_statistics
+from ..recon.closed_form import estimate_image_statistics, shipped_image_statistics
 from ..recon.networks import build_network
 from . import adapters, seeds
 from .config import ConfigError, TrainConfig
@@ -78,6 +78,8 @@ def prepare(
     run.init_from, start_step, lr_scale = _origin(config, system, loaded)
     optimizer = build_optimizer(config, system)
     sampler = _patch_sampler(run, source, start_step, system, progress)
+    if loaded is None and config.data.colour_statistics:
+        _use_colour_statistics(system, sampler.cache, config)
     run.train_images = sampler.cache.files
     state = TrainState(
         system,
@@ -147,6 +149,32 @@ def _validation(run: Run, progress: bool) -> None:
         if progress:
             say_held_out(run.config, run.val_images)
     run.val_levels = val_levels(run.config)
+
+
+def _use_colour_statistics(system: ImagingSystem, cache: ImageCache, config: TrainConfig) -> None:
+    """The network's LMMSE solved from the statistics of the training photos and of a copy of
+    each with its chroma moved (``data.colour_statistics``): channels reordered, hue turned and
+    chroma scaled as :class:`~splitcam.data.colour.ColourMix` moves patches, drawn from the
+    run's seed, in the run's light domain."""
+    if not hasattr(system.network, "use_statistics"):
+        raise ConfigError(
+            "data.colour_statistics sets the statistics of the LMMSE inside the physics and "
+            f"universal networks; the {config.network.arch} network has none"
+        )
+    mix = ColourMix(chroma=1.0, chroma_max=config.data.colour_chroma_max, space=config.data.domain)
+    generator = torch.Generator().manual_seed(seeds.global_seed(config))
+    photos = [cache.image(i) for i in range(len(cache))]
+    moved = [mix(image[None], generator)[0] for image in photos]
+    stats = estimate_image_statistics(
+        photos + moved,
+        max_offset=system.network.stat_second.shape[-1] // 2,
+        domain=config.data.domain,
+    )
+    system.network.use_statistics(stats)
+    logger.info(
+        f"the LMMSE inside the network uses the statistics of {len(photos)} photos and their "
+        "chroma-moved copies (data.colour_statistics)"
+    )
 
 
 def _speed_up(system: ImagingSystem, run: Run) -> None:
