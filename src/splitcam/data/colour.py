@@ -40,6 +40,7 @@ __all__ = [
     "dead_leaves",
     "opponent_to_rgb",
     "rgb_to_opponent",
+    "swap_chroma",
 ]
 
 # BT.601 luma weights: Y = 0.299 R + 0.587 G + 0.114 B, Cb = (B - Y) / 1.772, Cr = (R - Y) / 1.402.
@@ -114,6 +115,25 @@ def augment_chroma(
     return opponent_to_rgb(turned).clamp(0.0, 1.0)
 
 
+def swap_chroma(
+    rgb: torch.Tensor, hit: torch.Tensor, scale: torch.Tensor, space: str = "srgb"
+) -> torch.Tensor:
+    """Patches ``hit`` keep their luma and take the chroma of the next patch of the batch
+    (the last takes the first's), multiplied by ``scale``; clipped to [0, 1]. ``space``
+    ``linear``: in linear light, handed back encoded.
+
+    Shape:
+        rgb: ``(B, 3, H, W)``; hit: ``(B,)`` bool; scale: ``(B,)``; output: like ``rgb``.
+    """
+    values = srgb_to_linear(rgb) if space == "linear" else rgb
+    ycc = rgb_to_opponent(values)
+    donor = ycc.roll(-1, dims=0)[:, 1:] * scale.to(rgb).view(-1, 1, 1, 1)
+    moved = opponent_to_rgb(torch.cat([ycc[:, :1], donor], dim=1)).clamp(0.0, 1.0)
+    if space == "linear":
+        moved = linear_to_srgb(moved).clamp(0.0, 1.0)
+    return torch.where(hit.view(-1, 1, 1, 1), moved, rgb)
+
+
 def dead_leaves(
     colours: torch.Tensor, centres: torch.Tensor, radii: torch.Tensor, size: tuple[int, int]
 ) -> torch.Tensor:
@@ -170,6 +190,10 @@ class ColourMix:
         leaves: Probability that a patch is replaced by a dead-leaves scene (0: never; drawn
             after, and instead of, the chroma augmentation).
         space: ``srgb`` (move chroma in the display values) or ``linear`` (in linear light).
+        swap: Probability that a patch keeps its luma and takes the chroma of the next patch of
+            the batch, scaled by a factor in ``[1, chroma_max]`` (drawn after the chroma
+            moves, before the dead leaves): colour edges where the luma has none, and luma
+            edges with no colour edge, as saturated scenes have and muted photos rarely.
     """
 
     chroma: float = 0.0
@@ -177,9 +201,10 @@ class ColourMix:
     permute: bool = True
     leaves: float = 0.0
     space: str = "srgb"
+    swap: float = 0.0
 
     def __post_init__(self) -> None:
-        for name in ("chroma", "leaves"):
+        for name in ("chroma", "leaves", "swap"):
             value = getattr(self, name)
             if not 0.0 <= value <= 1.0:
                 raise ValueError(f"{name} must be a probability in [0, 1], got {value}")
@@ -191,7 +216,7 @@ class ColourMix:
     @property
     def active(self) -> bool:
         """Whether it changes anything (an inactive mix draws nothing)."""
-        return self.chroma > 0 or self.leaves > 0
+        return self.chroma > 0 or self.leaves > 0 or self.swap > 0
 
     def __call__(self, batch: torch.Tensor, generator: torch.Generator) -> torch.Tensor:
         """The batch with the mix applied; every draw on ``generator`` (CPU), a fixed number
@@ -220,6 +245,11 @@ class ColourMix:
                 if self.space == "linear":
                     changed = linear_to_srgb(changed).clamp(0.0, 1.0)
                 out = out.index_copy(0, pick, changed)
+        if self.swap > 0:
+            hit = torch.rand(b, generator=generator) < self.swap
+            scale = 1 + torch.rand(b, generator=generator) * (self.chroma_max - 1)
+            if bool(hit.any()) and b > 1:
+                out = swap_chroma(out, hit.to(batch.device), scale.to(batch.device), self.space)
         if self.leaves > 0:
             hit = torch.rand(b, generator=generator) < self.leaves
             k = disc_count(h, w)

@@ -196,6 +196,12 @@ class DataConfig:
         "(splitcam.data.colour)",
     )
     colour_chroma_max: float = _opt(2.2, "largest chroma factor of --colour-chroma (>= 1)")
+    colour_swap: float = _opt(
+        0.0,
+        "probability that a patch keeps its luma and takes the chroma of another patch of the "
+        "batch, scaled by up to --colour-chroma-max: colour edges where the luma has none "
+        "(splitcam.data.colour)",
+    )
     colour_statistics: bool = _opt(
         False,
         "a new run's LMMSE inside the physics and universal networks uses image statistics of "
@@ -236,9 +242,12 @@ class DataConfig:
             ),
             (self.batch_size >= 1, "data.batch_size must be >= 1"),
             (
-                0 <= self.colour_chroma <= 1 and 0 <= self.colour_leaves <= 1,
-                "data.colour_chroma and data.colour_leaves must be probabilities in [0, 1], "
-                f"got {self.colour_chroma} and {self.colour_leaves}",
+                all(
+                    0 <= p <= 1 for p in (self.colour_chroma, self.colour_leaves, self.colour_swap)
+                ),
+                "data.colour_chroma, data.colour_leaves and data.colour_swap must be "
+                f"probabilities in [0, 1], got {self.colour_chroma}, {self.colour_leaves} and "
+                f"{self.colour_swap}",
             ),
             (
                 self.colour_chroma_max >= 1,

@@ -370,6 +370,7 @@ def _patch_sampler(
             chroma=config.data.colour_chroma,
             chroma_max=config.data.colour_chroma_max,
             leaves=config.data.colour_leaves,
+            swap=config.data.colour_swap,
             space=config.data.domain,
         ),
         # A new pattern every step: cut into periods of up to 4 (the largest drawn) instead.
