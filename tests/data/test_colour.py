@@ -19,6 +19,7 @@ from splitcam.data.colour import (
     opponent_to_rgb,
     power_law_radii,
     rgb_to_opponent,
+    swap_chroma,
 )
 from splitcam.data.patches import ImageCache, PatchSampler
 from splitcam.physics.light import linear_to_srgb, srgb_to_linear
@@ -66,6 +67,25 @@ def test_identity_and_channel_orders() -> None:
     out = augment_chroma(rgb, zero, torch.ones(6), orders)
     for k, perm in enumerate(PERMUTATIONS):
         torch.testing.assert_close(out[k], rgb[k, list(perm)], rtol=0, atol=2e-6)
+
+
+def test_swap_keeps_luma_and_takes_the_next_patch_s_chroma() -> None:
+    """Per pixel, against the opponent transform written out: a hit patch's luma is its own,
+    its colour differences the next patch's times the scale; others are untouched."""
+    gen = torch.Generator().manual_seed(4)
+    rgb = 0.5 + 0.1 * (torch.rand(3, 3, 5, 6, generator=gen, dtype=torch.float64) - 0.5)
+    hit = torch.tensor([True, False, True])
+    scale = torch.tensor([1.5, 2.0, 1.2], dtype=torch.float64)
+    out = swap_chroma(rgb, hit, scale)
+    assert torch.equal(out[1], rgb[1])
+    for b, donor in ((0, 1), (2, 0)):
+        for i, j in [(0, 0), (4, 5), (2, 3)]:
+            y, _, _ = _naive_ycc(*rgb[b, :, i, j].tolist())
+            _, cb, cr = _naive_ycc(*rgb[donor, :, i, j].tolist())
+            k = float(scale[b])
+            r2, b2 = y + 1.402 * k * cr, y + 1.772 * k * cb
+            g2 = (y - 0.299 * r2 - 0.114 * b2) / 0.587
+            assert out[b, :, i, j].tolist() == pytest.approx([r2, g2, b2], abs=1e-12)
 
 
 def test_saturation_pushed_out_is_clipped_to_the_gamut() -> None:
@@ -133,7 +153,7 @@ def test_mix_draws_a_fixed_number_per_batch() -> None:
     states = []
     for p in (0.01, 0.99):
         gen = torch.Generator().manual_seed(5)
-        ColourMix(chroma=p, leaves=p)(batch, gen)
+        ColourMix(chroma=p, leaves=p, swap=p)(batch, gen)
         states.append(gen.get_state())
     assert torch.equal(*states)
 
@@ -158,6 +178,7 @@ def test_bad_settings_refused() -> None:
     for kwargs, message in [
         ({"chroma": 1.5}, "chroma must be a probability"),
         ({"leaves": -0.1}, "leaves must be a probability"),
+        ({"swap": 2.0}, "swap must be a probability"),
         ({"chroma_max": 0.5}, "chroma_max must be >= 1"),
         ({"space": "xyz"}, "space must be"),
     ]:
