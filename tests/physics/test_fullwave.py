@@ -282,3 +282,21 @@ def test_the_command_solves_with_fmmax_and_says_so(tmp_path, capsys):
     assert "fmmax-fft, 37 terms" in pattern.provenance
     assert main([*args, "--terms", "40", "--out", str(tmp_path / "x")]) == 1
     assert "for an fmmax solver" in capsys.readouterr().err and not (tmp_path / "x").exists()
+
+
+def test_a_missing_extra_is_said_before_any_work(tmp_path, capsys, monkeypatch):
+    """Without the solver's extra the command says so in one line, with the install command,
+    before a progress bar or any file (the line once came after a 0 % bar)."""
+    import importlib.util
+
+    from splitcam.cli import main
+
+    real = importlib.util.find_spec
+    monkeypatch.setattr(
+        importlib.util, "find_spec", lambda name, *a: None if name == "torcwa" else real(name, *a)
+    )
+    out = tmp_path / "o"
+    assert main(["optics", "rcwa", str(DESIGNS / "zou2022-16x16.csv"), "--out", str(out)]) == 1
+    err = capsys.readouterr().err.strip()
+    assert "pip install 'splitcam[fullwave]'" in err and len(err.splitlines()) == 1
+    assert "%" not in err and not out.exists()

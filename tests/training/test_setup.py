@@ -120,10 +120,10 @@ def test_colour_statistics_give_the_network_a_prior_of_free_colour(tmp_path) -> 
     """data.colour_statistics: the LMMSE inside the network is solved from the statistics of
     the photos and their chroma-moved copies: red and green correlate less than in the photos'
     own statistics (estimated independently here), and a resumed run keeps them."""
+    from PIL import Image
+
     from splitcam.data.patches import ImageCache
     from splitcam.recon.closed_form import estimate_image_statistics
-
-    from PIL import Image
 
     # Muted photos: one texture in every channel, a little colour (red and green correlate).
     data = tmp_path / "img"

@@ -88,11 +88,13 @@ def run(args: argparse.Namespace) -> int:
         FullwaveError,
         RouterDesign,
         band_efficiencies,
+        check_solver,
         cone_directions,
         quadrant_spectra,
         read_design,
     )
 
+    check_solver(args.solver)  # a missing extra, before anything is read or shown
     lams = wavelengths_of(args.wavelengths)
     grid = read_design(args.design)
     design = RouterDesign(

@@ -45,6 +45,7 @@ __all__ = [
     "FullwaveError",
     "RouterDesign",
     "band_efficiencies",
+    "check_solver",
     "cone_directions",
     "index_of",
     "quadrant_spectra",
@@ -175,6 +176,24 @@ def cone_directions(f_number: float) -> list[tuple[float, float, float]]:
     for k in range(6):
         out.append((math.asin(r), k * math.pi / 3.0, 0.125))
     return out
+
+
+def check_solver(solver: str) -> None:
+    """Refuse a solver whose optional extra is not installed, before any work (the message
+    gives the install command); nothing is imported.
+
+    Raises:
+        FullwaveError: ``torcwa`` without ``splitcam[fullwave]``, or an fmmax solver without
+            ``splitcam[fmmax]``.
+    """
+    import importlib.util
+
+    if solver == "torcwa" and importlib.util.find_spec("torcwa") is None:
+        raise FullwaveError(f"the full-wave solver is an optional extra: {INSTALL}")
+    if solver.startswith("fmmax") and (
+        importlib.util.find_spec("fmmax") is None or importlib.util.find_spec("jax") is None
+    ):
+        raise FullwaveError(f"the fmmax solver is an optional extra: {INSTALL_FMMAX}")
 
 
 def _solver():
