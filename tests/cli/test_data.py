@@ -35,3 +35,16 @@ def test_cli_download_and_list(
     out = capsys.readouterr().out
     assert re.search(r"mcmaster\s+complete", out)
     assert re.search(r"kodak24\s+not downloaded", out)
+
+
+def test_data_list_checks_content_not_only_names(tmp_path, capsys) -> None:
+    """A dataset with a damaged file is not 'complete' (it once was: only names were counted)."""
+    from splitcam.data.download import dataset_state
+
+    files = registry.datasets()["mcmaster"].files
+    folder = tmp_path / "mcmaster"
+    folder.mkdir()
+    assert dataset_state(folder, files) == "not downloaded"
+    for entry in files[:3]:
+        (folder / entry.name).write_bytes(b"not the image")
+    assert dataset_state(folder, files) == f"3/{len(files)} files, 3 damaged"

@@ -60,7 +60,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..data.download import download
+    from ..data.download import dataset_state, download
 
     if args.data_action == "download":
         names = args.names or registry.dataset_names()
@@ -77,14 +77,7 @@ def run(args: argparse.Namespace) -> int:
     root = registry.data_root(args.root)
     print(f"data root: {root}")
     for dataset in registry.datasets().values():
-        folder = root / dataset.name
-        present = sum(1 for f in dataset.files if (folder / f.name).is_file())
-        state = (
-            "complete"
-            if present == len(dataset.files)
-            else f"{present}/{len(dataset.files)} files"
-            if present
-            else "not downloaded"
-        )
+        # Every file's content is checked: a damaged file is not "complete" (download repairs).
+        state = dataset_state(root / dataset.name, dataset.files)
         print(f"  {dataset.name:10s} {state:16s} {dataset.description}")
     return 0

@@ -91,6 +91,20 @@ def _file_sha256(path: Path) -> str:
     return digest.hexdigest()
 
 
+def dataset_state(folder: Path, files: list[DatasetFile] | tuple[DatasetFile, ...]) -> str:
+    """What a dataset's folder holds, in words: ``complete`` when every file is there with
+    the expected content, else how many are there and how many of those are damaged, or
+    ``not downloaded``."""
+    present = [f for f in files if (folder / f.name).is_file()]
+    damaged = [f for f in present if not _is_verified(folder / f.name, f)]
+    if not present:
+        return "not downloaded"
+    if len(present) == len(files) and not damaged:
+        return "complete"
+    text = f"{len(present)}/{len(files)} files"
+    return f"{text}, {len(damaged)} damaged" if damaged else text
+
+
 def _is_verified(path: Path, entry: DatasetFile) -> bool:
     """Whether an existing dataset file has the expected content.
 
