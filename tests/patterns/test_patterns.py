@@ -18,6 +18,7 @@ def test_registry_names_and_case_insensitive_lookup():
         "bayer",
         "rgbw",
         "quad",
+        "xtrans",
         "router-zou",
         "router-best",
         "router-best-fullwave",

@@ -153,11 +153,11 @@ def test_model_for_any_pattern_needs_a_pattern_and_names_a_bad_file(tiny_univers
     missing = tmp_path / "mine.toml"
     with pytest.raises(patterns.PatternError, match="mine.toml"):
         build_model(model, pattern=str(missing))
-    # A pattern file: the label names the file, the reconstruction is that pattern's.
+    # A pattern file: the label is the pattern's own name, the reconstruction that pattern's.
     mine = random_pattern(np.random.default_rng(3))
     patterns.save(mine, tmp_path / "mine.toml")
     method = build_method(str(model), pattern=str(tmp_path / "mine.toml"), precision="fp32")
-    assert method.name == "net-uni-mine.toml" and method.pattern.equals(mine)
+    assert method.name == f"net-uni-{mine.name}" and method.pattern.equals(mine)
     raw = SplitterSensor(mine)(_universal_scene(1, 21, 19))
     assert method.reconstruct(raw, 5.0).shape == (1, 3, 21, 19)
     other = build_method(str(model), pattern="D", precision="fp32")

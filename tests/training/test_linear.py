@@ -133,7 +133,7 @@ def test_a_linear_run_trains_validates_and_exports_in_linear(linear_run, images,
     lmmse = mean_psnr(closed_form_lmmse("D", domain="linear"), held_out, [0.0], domain="linear")
     assert rows[0]["val_psnr_0"] == pytest.approx(lmmse[0.0], abs=1e-3)
     # The last row is what the evaluation protocol scores for the trained run, in linear.
-    method = build_method(linear_run, domain="linear")
+    method = build_method(linear_run / "checkpoint.safetensors", domain="linear")  # the latest
     assert method.domain == "linear"
     final = mean_psnr(method, held_out, [0.0, 15.0], domain="linear")
     assert rows[-1]["val_psnr_0"] == pytest.approx(final[0.0], abs=1e-6)
@@ -207,7 +207,7 @@ def test_photon_noise_in_linear_light_from_the_command_line(images, tmp_path, ca
     )
     assert rows[0]["val_psnr_N30"] == pytest.approx(lmmse[levels[0]], abs=1e-3)
     assert rows[0]["val_psnr_N1000"] == pytest.approx(lmmse[levels[1]], abs=1e-3)
-    trained = build_method(out, domain="linear")
+    trained = build_method(out / "checkpoint.safetensors", domain="linear")  # the latest
     final = mean_psnr(trained, val_images(config), levels, domain="linear")
     assert rows[-1]["val_psnr_N30"] == pytest.approx(final[levels[0]], abs=1e-6)
 

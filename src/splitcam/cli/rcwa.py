@@ -85,9 +85,7 @@ def run(args: argparse.Namespace) -> int:
     from ..patterns.files import save_transmission
     from ..patterns.spectral import SpectralPattern
     from ..physics.fullwave import (
-        FullwaveError,
         RouterDesign,
-        band_efficiencies,
         check_solver,
         cone_directions,
         quadrant_spectra,
@@ -165,22 +163,31 @@ def run(args: argparse.Namespace) -> int:
     out.mkdir(parents=True, exist_ok=True)
     pattern_file = save_transmission(out / f"{stem}.toml", name, lams, t, **info)
     spectra = _write_spectra(out, stem, lams, {**result, "transmission": t})
-    chart = out / f"{stem}-spectra.png"
+    chart = _say_roles(
+        lams, t, result["reflection"], out / f"{stem}-spectra.png", f"{name}: {where}"
+    )
+    print(f"wrote {spectra}, {chart} and {pattern_file}")
+    return 0
+
+
+def _say_roles(lams, t, reflection, chart: Path, title: str) -> Path:
+    """Print which pixel collects which colour and the band efficiencies (or, where blue and
+    red peak in one pixel, say so with the numbers), and draw the chart accordingly."""
+    from ..physics.fullwave import FullwaveError, band_efficiencies
+
     try:
         eff = band_efficiencies(t, lams)
     except FullwaveError as exc:
         print(f"warning: {exc}", file=sys.stderr)
-        _chart(lams, t, result["reflection"], None, chart, f"{name}: {where}")
-    else:
-        _chart(lams, t, result["reflection"], eff["quadrants"], chart, f"{name}: {where}")
-        print(
-            f"blue peaks in quadrant (row, col) {divmod(eff['quadrants']['blue'], 2)}, red in "
-            f"{divmod(eff['quadrants']['red'], 2)}; band efficiency blue {eff['blue']:.3f}, "
-            f"green {eff['green']:.3f}, red {eff['red']:.3f}; reflection "
-            f"{result['reflection'].mean():.3f}"
-        )
-    print(f"wrote {spectra}, {chart} and {pattern_file}")
-    return 0
+        _chart(lams, t, reflection, None, chart, title)
+        return chart
+    _chart(lams, t, reflection, eff["quadrants"], chart, title)
+    print(
+        f"blue peaks in quadrant (row, col) {divmod(eff['quadrants']['blue'], 2)}, red in "
+        f"{divmod(eff['quadrants']['red'], 2)}; band efficiency blue {eff['blue']:.3f}, "
+        f"green {eff['green']:.3f}, red {eff['red']:.3f}; reflection {reflection.mean():.3f}"
+    )
+    return chart
 
 
 def _write_spectra(out: Path, stem: str, lams, result: dict) -> Path:
