@@ -11,6 +11,7 @@ from splitcam.io import weights as io_weights
 from splitcam.training.models import export_model
 
 
+@pytest.mark.slow
 @pytest.mark.integration
 def test_sweep_skips_an_experiment_whose_model_ships_with_its_budget(
     trained_run, run_images, tmp_path, monkeypatch, capsys

@@ -49,6 +49,7 @@ def _why_deepinv_cannot_run() -> str | None:
     return torchvision_mismatch()
 
 
+@pytest.mark.slow
 @pytest.mark.integration
 @pytest.mark.parametrize("script", sorted(FIGURES))
 def test_script_runs_tiny_and_writes_its_figures(script, tmp_path):
@@ -84,6 +85,7 @@ def test_script_runs_tiny_and_writes_its_figures(script, tmp_path):
     assert not (tmp_path / "examples-out").exists()  # --out is where everything goes
 
 
+@pytest.mark.slow
 @pytest.mark.integration
 def test_default_output_folder_is_examples_out_under_the_working_directory(tmp_path):
     env = {**os.environ, "OMP_NUM_THREADS": "1", "MPLBACKEND": "Agg"}

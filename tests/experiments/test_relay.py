@@ -65,6 +65,7 @@ def relayed(photos, tmp_path_factory) -> Path:
     return out
 
 
+@pytest.mark.slow
 def test_relay_trains_exports_and_tables_within_its_minutes(relayed) -> None:
     candidate = json.loads((relayed / "candidates" / "D.json").read_text())
     segment = candidate["provenance"]["segments"][-1]
@@ -82,6 +83,7 @@ def test_relay_trains_exports_and_tables_within_its_minutes(relayed) -> None:
     assert learned["start_pattern"]["name"] == "A" and learned["pattern"]["name"] == "A-learned"
 
 
+@pytest.mark.slow
 def test_gate_ships_exactly_what_its_table_says(relayed, photos, tmp_path) -> None:
     relay = _relay()
     ship_to = tmp_path / "models"
@@ -102,6 +104,7 @@ def test_gate_ships_exactly_what_its_table_says(relayed, photos, tmp_path) -> No
         assert cells[1] == "12"
 
 
+@pytest.mark.slow
 def test_bad_input_gets_one_line_and_changes_nothing(relayed, photos, tmp_path, capsys) -> None:
     relay = _relay()
     fresh = tmp_path / "fresh"

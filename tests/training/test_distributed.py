@@ -82,6 +82,7 @@ def _torchrun(images, out, steps, *extra):
     return proc
 
 
+@pytest.mark.slow
 @pytest.mark.integration
 def test_two_processes_train_in_sync_and_resume(images, tmp_path):
     out = tmp_path / "ddp"

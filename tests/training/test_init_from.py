@@ -155,6 +155,7 @@ def test_init_from_an_ambiguous_name_is_refused(tmp_path, monkeypatch):
         train(config, progress=False)
 
 
+@pytest.mark.slow
 def test_init_from_auto_tries_each_start_and_continues_from_the_best(
     image_folder, tmp_path, capsys
 ):

@@ -42,7 +42,9 @@ def test_export_round_trip_matches_the_run(trained_run, tmp_path, storage):
         torch.testing.assert_close(mine, value, rtol=tol, atol=tol)
     images = _images()
     ours = mean_psnr(build_model(path), images, [0.0, 10.0])
-    theirs = mean_psnr(build_method(str(trained_run / "checkpoint.safetensors")), images, [0.0, 10.0])
+    theirs = mean_psnr(
+        build_method(str(trained_run / "checkpoint.safetensors")), images, [0.0, 10.0]
+    )
     for sigma in ours:
         assert abs(ours[sigma] - theirs[sigma]) < (1e-9 if storage == "float32" else 0.01)
     if storage == "float16":  # half the bytes of the weights (the statistics stay float64)

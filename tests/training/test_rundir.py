@@ -71,6 +71,7 @@ def _wait_for_step(out, step, proc, timeout=120.0):
     raise AssertionError("training subprocess made no progress")
 
 
+@pytest.mark.slow
 @pytest.mark.integration
 def test_sigkill_loses_only_the_steps_since_the_last_checkpoint(image_folder, tmp_path):
     out = tmp_path / "killed"
@@ -88,6 +89,7 @@ def test_sigkill_loses_only_the_steps_since_the_last_checkpoint(image_folder, tm
     assert steps == sorted(set(steps)) and steps[-1] == saved + 2  # no duplicated steps
 
 
+@pytest.mark.slow
 @pytest.mark.integration
 def test_ctrl_c_saves_and_exits_cleanly(image_folder, tmp_path):
     out = tmp_path / "interrupted"
@@ -107,6 +109,7 @@ def test_ctrl_c_saves_and_exits_cleanly(image_folder, tmp_path):
     )
 
 
+@pytest.mark.slow
 @pytest.mark.integration
 def test_a_second_run_on_the_same_folder_is_refused_and_a_killed_one_leaves_no_lock(
     image_folder, tmp_path

@@ -30,6 +30,7 @@ def _logged_lr(run_dir):
     return {r["step"]: r["lr"] for r in rows if "lr" in r}
 
 
+@pytest.mark.slow
 @pytest.mark.integration
 def test_sweep_runs_skips_finished_and_resumes_interrupted(run_images, tmp_path):
     exps = tmp_path / "experiments"
@@ -64,6 +65,7 @@ def test_sweep_runs_skips_finished_and_resumes_interrupted(run_images, tmp_path)
     assert all("done already" in s for s in said) and len(said) == 2
 
 
+@pytest.mark.slow
 @pytest.mark.integration
 def test_sweep_snapshots_carry_an_unfinished_run_to_a_machine_without_its_folder(
     run_images, tmp_path, monkeypatch
@@ -110,6 +112,7 @@ def test_sweep_snapshots_carry_an_unfinished_run_to_a_machine_without_its_folder
     assert any("done already" in s for s in said)
 
 
+@pytest.mark.slow
 @pytest.mark.integration
 def test_a_background_sweep_ended_by_sigterm_stops_its_jobs_and_writes_snapshots(
     run_images, tmp_path
