@@ -124,6 +124,7 @@ def test_the_shipped_universal_model_beats_the_lmmse_of_every_library_pattern(sh
 BORDER_LOSS = 0.2
 
 
+@pytest.mark.slow  # about 10 s a model on 2 cores: CI runs it (-m slow), with the data folder
 @pytest.mark.parametrize("name", _one_pattern_models())
 def test_every_shipped_model_is_right_at_every_image_border(name, shared_data):
     """On held-out training photos (never trained on) whole (481x321 or 321x481: odd sides) and
