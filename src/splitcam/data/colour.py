@@ -115,22 +115,16 @@ def augment_chroma(
     return opponent_to_rgb(turned).clamp(0.0, 1.0)
 
 
-def swap_chroma(
-    rgb: torch.Tensor, hit: torch.Tensor, scale: torch.Tensor, space: str = "srgb"
-) -> torch.Tensor:
+def swap_chroma(rgb: torch.Tensor, hit: torch.Tensor, scale: torch.Tensor) -> torch.Tensor:
     """Patches ``hit`` keep their luma and take the chroma of the next patch of the batch
-    (the last takes the first's), multiplied by ``scale``; clipped to [0, 1]. ``space``
-    ``linear``: in linear light, handed back encoded.
+    (the last takes the first's), multiplied by ``scale``; clipped to [0, 1].
 
     Shape:
         rgb: ``(B, 3, H, W)``; hit: ``(B,)`` bool; scale: ``(B,)``; output: like ``rgb``.
     """
-    values = srgb_to_linear(rgb) if space == "linear" else rgb
-    ycc = rgb_to_opponent(values)
+    ycc = rgb_to_opponent(rgb)
     donor = ycc.roll(-1, dims=0)[:, 1:] * scale.to(rgb).view(-1, 1, 1, 1)
     moved = opponent_to_rgb(torch.cat([ycc[:, :1], donor], dim=1)).clamp(0.0, 1.0)
-    if space == "linear":
-        moved = linear_to_srgb(moved).clamp(0.0, 1.0)
     return torch.where(hit.view(-1, 1, 1, 1), moved, rgb)
 
 
@@ -228,7 +222,12 @@ class ColourMix:
         if not self.active:
             return batch
         b, _, h, w = batch.shape
-        out = batch
+        dev = batch.device
+        # In linear light the whole batch is decoded once, moved, and encoded once; patches no
+        # lever touched are handed back as they came, bit for bit.
+        linear = self.space == "linear"
+        values = srgb_to_linear(batch) if linear else batch
+        touched = torch.zeros(b, dtype=torch.bool)
         if self.chroma > 0:
             hit = torch.rand(b, generator=generator) < self.chroma
             angle = torch.rand(b, generator=generator) * (2 * math.pi)
@@ -237,19 +236,16 @@ class ColourMix:
             if not self.permute:
                 order = torch.zeros_like(order)
             if bool(hit.any()):
-                pick = hit.nonzero().squeeze(1).to(batch.device)
-                chosen = out[pick]
-                if self.space == "linear":
-                    chosen = srgb_to_linear(chosen)
-                changed = augment_chroma(chosen, angle[hit], scale[hit], order[hit])
-                if self.space == "linear":
-                    changed = linear_to_srgb(changed).clamp(0.0, 1.0)
-                out = out.index_copy(0, pick, changed)
+                pick = hit.nonzero().squeeze(1).to(dev)
+                moved = augment_chroma(values[pick], angle[hit], scale[hit], order[hit])
+                values = values.index_copy(0, pick, moved)
+            touched |= hit
         if self.swap > 0:
             hit = torch.rand(b, generator=generator) < self.swap
             scale = 1 + torch.rand(b, generator=generator) * (self.chroma_max - 1)
             if bool(hit.any()) and b > 1:
-                out = swap_chroma(out, hit.to(batch.device), scale.to(batch.device), self.space)
+                values = swap_chroma(values, hit.to(dev), scale.to(dev))
+                touched |= hit
         if self.leaves > 0:
             hit = torch.rand(b, generator=generator) < self.leaves
             k = disc_count(h, w)
@@ -262,10 +258,11 @@ class ColourMix:
             )
             if bool(hit.any()):
                 pick = hit.nonzero().squeeze(1)
-                scenes = dead_leaves(
-                    *(t[pick].to(batch.device) for t in (colours, centres, radii)), (h, w)
-                )
-                if self.space == "linear":  # free colour in linear light, handed out encoded
-                    scenes = linear_to_srgb(scenes).clamp(0.0, 1.0)
-                out = out.index_copy(0, pick.to(batch.device), scenes.to(batch.dtype))
-        return out
+                scenes = dead_leaves(*(t[pick].to(dev) for t in (colours, centres, radii)), (h, w))
+                values = values.index_copy(0, pick.to(dev), scenes.to(values.dtype))
+            touched |= hit
+        if not bool(touched.any()):
+            return batch
+        if linear:
+            values = linear_to_srgb(values).clamp(0.0, 1.0)
+        return torch.where(touched.to(dev).view(-1, 1, 1, 1), values, batch)
