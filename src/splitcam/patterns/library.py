@@ -147,51 +147,53 @@ for _c in range(3):
     _FILTERS[1 + _c, _c] = 1.0
 
 
-def _pattern_rgbw() -> Pattern:
-    layout = [[_W, _B, _W, _G], [_B, _W, _G, _W], [_W, _G, _W, _R], [_G, _W, _R, _W]]
+def _filter_array(name: str, layout: list[list[int]], description: str, reference: str) -> Pattern:
+    """An array of the ideal filters :data:`_FILTERS` (W, R, G, B) in ``layout``."""
     return Pattern(
-        name="rgbw",
+        name=name,
         layout=np.array(layout),
         kernels=_FILTERS.copy(),
         provenance="standard",
-        description="RGBW colour filter array: panchromatic (W) pixels on a checkerboard, half "
-        "of all pixels, ideal filters; collects 2/3 of white light, twice a Bayer filter",
-        reference="Compton & Hamilton (Kodak): image sensor with improved light sensitivity "
-        "('CFA 2.0')",
+        description=description,
+        reference=reference,
+    )
+
+
+def _pattern_rgbw() -> Pattern:
+    return _filter_array(
+        "rgbw",
+        [[_W, _B, _W, _G], [_B, _W, _G, _W], [_W, _G, _W, _R], [_G, _W, _R, _W]],
+        "RGBW colour filter array: panchromatic (W) pixels on a checkerboard, half of all "
+        "pixels, ideal filters; collects 2/3 of white light, twice a Bayer filter",
+        "Compton & Hamilton (Kodak): image sensor with improved light sensitivity ('CFA 2.0')",
     )
 
 
 def _pattern_quad() -> Pattern:
-    layout = [[_R, _R, _G, _G], [_R, _R, _G, _G], [_G, _G, _B, _B], [_G, _G, _B, _B]]
-    return Pattern(
-        name="quad",
-        layout=np.array(layout),
-        kernels=_FILTERS.copy(),
-        provenance="standard",
-        description="Quad Bayer (Tetracell) filter array: each colour of the RGGB arrangement on "
-        "a 2x2 block of pixels, ideal filters; collects 1/3 of white light, as a Bayer filter",
-        reference="Sony Quad Bayer / Samsung Tetracell image sensors",
+    return _filter_array(
+        "quad",
+        [[_R, _R, _G, _G], [_R, _R, _G, _G], [_G, _G, _B, _B], [_G, _G, _B, _B]],
+        "Quad Bayer (Tetracell) filter array: each colour of the RGGB arrangement on a 2x2 "
+        "block of pixels, ideal filters; collects 1/3 of white light, as a Bayer filter",
+        "Sony Quad Bayer / Samsung Tetracell image sensors",
     )
 
 
 def _pattern_xtrans() -> Pattern:
     g, r, b = _G, _R, _B
-    layout = [
-        [g, b, g, g, r, g],
-        [r, g, r, b, g, b],
-        [g, b, g, g, r, g],
-        [g, r, g, g, b, g],
-        [b, g, b, r, g, r],
-        [g, r, g, g, b, g],
-    ]
-    return Pattern(
-        name="xtrans",
-        layout=np.array(layout),
-        kernels=_FILTERS.copy(),
-        provenance="standard",
-        description="X-Trans colour filter array: a 6x6 cell with every row and column holding "
-        "all three colours (20 G, 8 R, 8 B), ideal filters; collects 1/3 of white light",
-        reference="Fujifilm X-Trans CMOS sensor (2012)",
+    return _filter_array(
+        "xtrans",
+        [
+            [g, b, g, g, r, g],
+            [r, g, r, b, g, b],
+            [g, b, g, g, r, g],
+            [g, r, g, g, b, g],
+            [b, g, b, r, g, r],
+            [g, r, g, g, b, g],
+        ],
+        "X-Trans colour filter array: a 6x6 cell with every row and column holding all three "
+        "colours (20 G, 8 R, 8 B), ideal filters; collects 1/3 of white light",
+        "Fujifilm X-Trans CMOS sensor (2012)",
     )
 
 
