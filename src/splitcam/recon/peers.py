@@ -206,26 +206,28 @@ class Demosaicnet:
 
     def demosaic(self, raw: torch.Tensor) -> torch.Tensor:
         """Demosaic whole images at once (what :meth:`reconstruct` applies to each tile)."""
-        n, _, h, w = raw.shape
+        h, w = raw.shape[-2:]
         ph, pw = self.pattern.period
         margin = self.network.MARGIN
         # Padded sides: at least the margin past the far edges, and even for Bayer's packing.
         bottom = margin + (h + self._top + margin) % 2 if ph == 2 else margin
         right = margin + (w + self._left + margin) % 2 if pw == 2 else margin
+        # The network runs where the raw image is, in the float32 of its weights.
+        dev = raw.device
         values = extend_mosaic(
-            raw.detach().float().cpu()[:, 0], (self._top, bottom, self._left, right), (ph, pw)
+            raw.detach().float()[:, 0], (self._top, bottom, self._left, right), (ph, pw)
         )
         hp, wp = values.shape[-2:]
         # The colour site of each padded pixel: the period's layout, from the padded origin.
-        rows = (torch.arange(hp) - self._top).remainder(ph)
-        cols = (torch.arange(wp) - self._left).remainder(pw)
-        site = self._sites[rows][:, cols]
+        rows = (torch.arange(hp, device=dev) - self._top).remainder(ph)
+        cols = (torch.arange(wp, device=dev) - self._left).remainder(pw)
+        site = self._sites.to(dev)[rows][:, cols]
         mosaic = torch.stack([values * (site == c) for c in range(3)], dim=1)
         with torch.inference_mode():
-            out = self.network(mosaic)
+            out = self.network.to(dev)(mosaic)
         # Output pixel (i, j) lies at padded (i + margin, j + margin).
         top, left = self._top - margin, self._left - margin
-        return out[:, :, top : top + h, left : left + w].to(device=raw.device, dtype=raw.dtype)
+        return out[:, :, top : top + h, left : left + w].to(dtype=raw.dtype)
 
     def __repr__(self) -> str:
         return f"Demosaicnet({self.pattern.name!r})"
