@@ -82,3 +82,24 @@ def test_the_first_snapshot_predates_the_first_update() -> None:
     for _ in range(guard.every + 1):
         guard.applied(1.0, model, optimizer)
     assert guard.settled
+
+
+def test_a_continued_schedule_that_diverges_says_no_checkpoint_was_kept(tmp_path):
+    """A new run that continues another's schedule starts past step 0 with nothing on disk: its
+    failure must not claim a kept checkpoint."""
+    data = blocky_images(tmp_path / "img", 5)
+    first = tiny_config(data, tmp_path / "a", **{"optim.steps": 10, "run.val_every": 1000})
+    assert train(first, progress=False).failure is None
+    wild = {
+        "optim.steps": 400,
+        # A factor below 1: every step once the window is full is a divergence, so the guard
+        # gives up.
+        "optim.divergence_factor": 1e-9,
+        "run.init_from": str(tmp_path / "a"),
+        "run.continue_schedule": True,
+        "run.checkpoint_every": 1000,
+        "run.val_every": 1000,
+    }
+    failed = train(tiny_config(data, tmp_path / "b", **wild), progress=False)
+    assert failed.failure and "no checkpoint had been saved" in failed.failure
+    assert not (tmp_path / "b" / "checkpoint.safetensors").exists()

@@ -237,9 +237,10 @@ def _steps(
     whether a request stopped it."""
     window = _Window()
     state.guard.start(state.system, state.optimizer)
-    if state.step > 0:  # resumed: the guard compares with the losses logged before
+    if run.checkpoint_path.is_file():  # resumed: the state on disk is the one loaded
         state.saved_step = state.step
-        state.guard.seed(logged_losses(run.run_dir / METRICS_NAME, GUARD_WINDOW_SEED))
+    # A resumed run's guard compares with the losses it logged before (none for a new run).
+    state.guard.seed(logged_losses(run.run_dir / METRICS_NAME, GUARD_WINDOW_SEED))
     # A resumed run whose time limit is already spent does no more steps.
     limit = run.time_limit_s
     state.timed_out = limit is not None and state.train_seconds >= limit
