@@ -130,14 +130,17 @@ def _train(config: TrainConfig, run_dir: Path, resume: bool, progress: bool) -> 
     try:
         with _StopFlag() as stop:
             interrupted = _steps(state, run, model, log, bar, stop)
-            if not state.gave_up:  # a diverged state never replaces the last good one
+            failure = _failure(state, run, interrupted)
+            # A failed run's state (diverged, or far below where it began) never replaces the
+            # last resumable one saved while it was healthy.
+            if not agree(failure is not None, run.dist):
                 save_checkpoint(state, run)
     finally:
         if bar is not None:
             bar.close()
         if log is not None:
             log.close()
-    return _result(state, run, interrupted)
+    return _result(state, run, interrupted, failure)
 
 
 def _nothing_to_train(state: TrainState, run: Run) -> bool:
@@ -463,12 +466,34 @@ def _show(bar: Any, row: dict[str, float]) -> None:
     bar.set_postfix(post, refresh=False)
 
 
-def _result(state: TrainState, run: Run, interrupted: bool) -> TrainResult:
-    """What the run came to: where it stopped and, for a run that ran to its end, whether it
-    failed (:func:`~splitcam.training.rundir.failure_of`)."""
-    failure = None
+def _failure(state: TrainState, run: Run, interrupted: bool) -> str | None:
+    """Why a run that ran to its end failed (:func:`~splitcam.training.rundir.failure_of`, or
+    the guard gave up), and which resumable state is kept; None for a run that did not fail or
+    was interrupted (and on ranks other than the main one)."""
+    if interrupted or not run.dist.is_main:
+        return None
+    if state.gave_up:
+        failure = (
+            f"the loss diverged at step {state.step} and kept diverging after the guard halved "
+            f"the learning rate {GUARD_GIVES_UP} times"
+        )
+    else:
+        failure = failure_of(run.run_dir / METRICS_NAME, state.last_metrics, state.guard.lr_scale)
+    if failure is None:
+        return None
+    kept = (
+        f"the resumable checkpoint of step {state.saved_step} is kept (nothing of the failed "
+        "steps after it was saved): --resume with a lower --lr continues from it"
+        if state.saved_step is not None
+        else "no checkpoint had been saved: start again with a lower --lr"
+    )
+    return f"{failure}; {kept}"
+
+
+def _result(state: TrainState, run: Run, interrupted: bool, failure: str | None) -> TrainResult:
+    """What the run came to: where it stopped, and why it failed (:func:`_failure`)."""
     if run.dist.is_main:
-        if state.timed_out:
+        if state.timed_out and failure is None:
             logger.info(
                 f"time limit reached ({run.config.run.time_limit:g} min of training): saved step "
                 f"{state.step} to {run.checkpoint_path}; to train further, --resume with a "
@@ -478,22 +503,6 @@ def _result(state: TrainState, run: Run, interrupted: bool) -> TrainResult:
             logger.info(
                 f"interrupted: saved step {state.step} to {run.checkpoint_path}; continue with "
                 f"--resume"
-            )
-        if not interrupted:
-            failure = failure_of(
-                run.run_dir / METRICS_NAME, state.last_metrics, state.guard.lr_scale
-            )
-        if state.gave_up:
-            kept = (
-                f"the resumable checkpoint of step {state.saved_step} (saved before the "
-                f"divergence) is kept: --resume with a lower --lr continues from it"
-                if state.saved_step is not None
-                else "no checkpoint had been saved: start again with a lower --lr"
-            )
-            failure = (
-                f"the loss diverged at step {state.step} and kept diverging after the guard "
-                f"halved the learning rate {GUARD_GIVES_UP} times; nothing of the diverged "
-                f"steps was saved; {kept}"
             )
     return TrainResult(run.run_dir, state.step, interrupted, state.last_metrics, failure)
 
