@@ -90,6 +90,119 @@ def test_oblique_light_is_conserved():
     assert out["transmission"].sum() + out["reflection"][0] == pytest.approx(1.0, abs=1e-6)
 
 
+def test_a_tilted_cone_is_the_pupil_disk_moved_to_the_chief_ray():
+    """Off the centre of the field the cone's direction sines fill the same disk, centred on
+    the chief ray's sines: the weighted mean is the chief ray, the spread about it the pupil's
+    (1/4 of the radius squared per axis, as in the centre)."""
+    radius = 1 / (2 * 1.4)
+    chief, azimuth = math.radians(25), math.radians(45)
+    points = cone_directions(1.4, chief, azimuth)
+    w = np.array([p[2] for p in points])
+    u = np.array([math.sin(t) * math.cos(f) for t, f, _ in points])
+    v = np.array([math.sin(t) * math.sin(f) for t, f, _ in points])
+    cu, cv = math.sin(chief) * math.cos(azimuth), math.sin(chief) * math.sin(azimuth)
+    assert float(w @ u) == pytest.approx(cu, abs=1e-12)
+    assert float(w @ v) == pytest.approx(cv, abs=1e-12)
+    assert float(w @ (u - cu) ** 2) == pytest.approx(radius**2 / 4, abs=1e-12)
+    assert float(w @ ((u - cu) * (v - cv))) == pytest.approx(0.0, abs=1e-12)
+    # Without a lens: the chief ray alone.
+    assert cone_directions(None, chief, azimuth) == [(pytest.approx(chief), azimuth, 1.0)]
+    assert cone_directions(None) == [(0.0, 0.0, 1.0)]
+    for bad, message in [
+        ((1.4, math.radians(50)), "reaches grazing incidence"),
+        ((None, math.radians(90)), r"in \[0, 90\) degrees"),
+        ((2.0, -0.1), r"in \[0, 90\) degrees"),
+    ]:
+        with pytest.raises(FullwaveError, match=message):
+            cone_directions(*bad)
+
+
+def test_a_chief_ray_along_y_sees_the_transposed_design_as_one_along_x_sees_the_design():
+    """Mirror symmetry across the diagonal: the design transposed (x and y swapped) lit from
+    azimuth 90 degrees sends into each quadrant what the design lit from azimuth 0 sends into
+    the transposed quadrant. A check of the azimuth's convention, and light is conserved."""
+    rng = np.random.default_rng(3)
+    grid = (rng.random((6, 6)) > 0.5).astype(float)
+    # Collimated: the 7-point cone is not symmetric under the swap (its points sit at
+    # multiples of 60 degrees about the chief ray).
+    along_x = cone_directions(None, math.radians(20), 0.0)
+    along_y = cone_directions(None, math.radians(20), math.pi / 2)
+    a = quadrant_spectra(RouterDesign(grid, thickness=0.4, depth=0.5), [560.0], order=2,
+                         samples=16, directions=along_x)
+    b = quadrant_spectra(RouterDesign(grid.T, thickness=0.4, depth=0.5), [560.0], order=2,
+                         samples=16, directions=along_y)
+    np.testing.assert_allclose(b["transmission"][..., 0], a["transmission"][..., 0].T, atol=1e-9)
+    assert a["transmission"].sum() + a["reflection"][0] == pytest.approx(1.0, abs=1e-6)
+    # and the tilt matters: normal incidence sends the light elsewhere
+    c = quadrant_spectra(RouterDesign(grid, thickness=0.4, depth=0.5), [560.0], order=2,
+                         samples=16)
+    assert np.abs(c["transmission"] - a["transmission"]).max() > 1e-3
+
+
+def test_an_interrupted_solve_continues_from_its_log(tmp_path, monkeypatch):
+    """Every solve is appended to the log as it finishes: a run stopped part-way is continued
+    by the next with the same log, which solves only what is missing and returns what an
+    unlogged run returns; a line cut short by the interruption is skipped; another setting
+    (here the order) solves afresh."""
+    import splitcam.physics.fullwave as fw
+
+    design = RouterDesign(np.eye(6), thickness=0.4, depth=0.5)
+    lams = [470.0, 560.0, 650.0]
+    directions = cone_directions(3.0)[:2]
+    plain = quadrant_spectra(design, lams, order=2, samples=16, directions=directions)
+    log = tmp_path / "solves.jsonl"
+    real = fw._torcwa_solver
+    calls = []
+
+    def stopping(*a, **k):
+        solve, count = real(*a, **k)
+
+        def once(*args):
+            calls.append(args)
+            if len(calls) == 4:
+                raise KeyboardInterrupt
+            return solve(*args)
+
+        return once, count
+
+    monkeypatch.setattr(fw, "_torcwa_solver", stopping)
+    with pytest.raises(KeyboardInterrupt):
+        quadrant_spectra(design, lams, order=2, samples=16, directions=directions, cache=log)
+    assert len(log.read_text().splitlines()) == 3
+    with log.open("a") as f:
+        f.write('{"setting": "cut sh')  # killed mid-line
+    calls.clear()
+    again = quadrant_spectra(design, lams, order=2, samples=16, directions=directions, cache=log)
+    assert len(calls) == 3 and again["cost"] == {**again["cost"], "solves": 6, "reused": 3}
+    for key in ("transmission", "by_polarisation", "reflection"):
+        np.testing.assert_array_equal(again[key], plain[key])
+    calls.clear()
+    quadrant_spectra(design, lams[:1], order=1, samples=16, directions=directions, cache=log)
+    assert len(calls) == 2
+
+
+def test_the_command_at_a_chief_ray_continues_an_interrupted_run(tmp_path, capsys):
+    """--chief-ray tilts the cone; a second run of the same command takes every solve from
+    the first's log and writes the same spectra; a cone that reaches grazing is refused in
+    one line and writes nothing."""
+    from splitcam.cli import main
+
+    out = tmp_path / "o"
+    args = ["optics", "rcwa", str(DESIGNS / "zou2022-16x16.csv"), "--order", "1", "--quiet",
+            "--wavelengths", "450,650", "--f-number", "2.8", "--chief-ray", "25",
+            "--chief-ray-azimuth", "45", "--out", str(out)]
+    assert main(args) == 0
+    first = (out / "zou2022-16x16-spectra.csv").read_text()
+    assert "chief ray 25 degrees" in (out / "zou2022-16x16.toml").read_text()
+    capsys.readouterr()
+    assert main(args) == 0
+    assert "14 of 14 solves taken from" in capsys.readouterr().out
+    assert (out / "zou2022-16x16-spectra.csv").read_text() == first
+    bad = tmp_path / "bad"
+    assert main([*args[:-1], str(bad), "--chief-ray", "70"]) == 1
+    assert "reaches grazing incidence" in capsys.readouterr().err and not bad.exists()
+
+
 @pytest.mark.parametrize(
     ("text", "message"),
     [
@@ -144,6 +257,7 @@ def test_the_command_writes_spectra_a_chart_and_a_pattern_file(tmp_path, capsys)
     assert main([*args, "--order", "5", "--wavelengths", "450,550,650", "--quiet"]) == 0
     # Named after the design (the file's stem here).
     written = {"zou2022-16x16-spectra.csv", "zou2022-16x16-spectra.png", "zou2022-16x16.toml"}
+    written.add("zou2022-16x16-solves.jsonl")  # every solve, kept as it finishes
     assert {p.name for p in out.iterdir()} == written
     rows = (out / "zou2022-16x16-spectra.csv").read_text().splitlines()
     assert len(rows) == 4 and rows[0].startswith("wavelength_nm,T_row0_col0")

@@ -4,6 +4,7 @@ spectral pattern file."""
 from __future__ import annotations
 
 import argparse
+import math
 import re
 import sys
 from pathlib import Path
@@ -18,7 +19,9 @@ def register(optics_sub: argparse._SubParsersAction) -> None:
         "the transmission into each pixel quadrant per wavelength and polarisation "
         "(NAME-spectra.csv, NAME-spectra.png) and the spectral pattern file (NAME.toml) that every "
         "other command takes as --pattern. Cost: about (2 order + 1)^6 per wavelength and "
-        "direction (order 9: 20 s, order 12: 90 s on one CPU core).",
+        "direction (order 9: 20 s, order 12: 90 s on one CPU core). Every solve is kept in "
+        "NAME-solves.jsonl as it finishes: the same command run again after an interruption "
+        "continues where it stopped.",
     )
     p.add_argument("design", help="CSV grid of 0/1 or densities in [0, 1]; rows along y")
     p.add_argument("--out", required=True, help="folder for the spectra and NAME.toml")
@@ -56,6 +59,20 @@ def register(optics_sub: argparse._SubParsersAction) -> None:
         type=float,
         help="average over the cone of light of a lens at this f-number, > 0.5 (7 directions); "
         "default: normal incidence",
+    )
+    p.add_argument(
+        "--chief-ray",
+        type=float,
+        default=0.0,
+        help="degrees off the normal of the light's central direction (the chief ray: 0 at the "
+        "centre of a lens's field, about 25-30 at the corner of a phone camera's; default 0)",
+    )
+    p.add_argument(
+        "--chief-ray-azimuth",
+        type=float,
+        default=0.0,
+        help="degrees: the direction the chief ray tilts towards in the design's plane (0 along "
+        "its columns, x; 45 along its diagonal, towards a corner of the field; default 0)",
     )
     p.add_argument("--threads", type=int, help="CPU threads (default: torch's)")
     p.add_argument("--quiet", action="store_true")
@@ -114,7 +131,10 @@ def run(args: argparse.Namespace) -> int:
     if args.threads:
         torch.set_num_threads(args.threads)
     # 0 is refused with the other impossible f-numbers (it once meant normal incidence).
-    directions = cone_directions(args.f_number) if args.f_number is not None else [(0.0, 0.0, 1.0)]
+    directions = cone_directions(
+        args.f_number, math.radians(args.chief_ray), math.radians(args.chief_ray_azimuth)
+    )
+    log = out / f"{stem}-solves.jsonl"
     bar = None
     if not args.quiet:
         from tqdm import tqdm
@@ -128,9 +148,13 @@ def run(args: argparse.Namespace) -> int:
         solver=args.solver,
         terms=args.terms,
         progress=(lambda n: bar.update(n - bar.n)) if bar else None,
+        cache=log,
     )
     if bar:
         bar.close()
+    cost = result["cost"]
+    if cost["reused"]:
+        print(f"{cost['reused']} of {cost['solves']} solves taken from {log} (an earlier run)")
     t = result["transmission"]
     # A quadrant that receives almost nothing can come out a rounding error below zero; a
     # clearly negative net flux means the solve is not converged (raise --order).
@@ -153,6 +177,12 @@ def run(args: argparse.Namespace) -> int:
         if args.f_number is not None
         else "normal incidence"
     )
+    if args.chief_ray:
+        where = (
+            f"{where.replace('normal incidence', 'collimated light')}, chief ray "
+            f"{args.chief_ray:g} degrees off the normal towards azimuth "
+            f"{args.chief_ray_azimuth:g} degrees"
+        )
     info = {
         "provenance": f"full-wave (RCWA, {_solved_by(args, result['terms'])}, {where})",
         "description": f"metasurface router {Path(args.design).name}: pitch {args.pitch:g} µm, "
@@ -166,7 +196,10 @@ def run(args: argparse.Namespace) -> int:
     chart = _say_roles(
         lams, t, result["reflection"], out / f"{stem}-spectra.png", f"{name}: {where}"
     )
-    print(f"wrote {spectra}, {chart} and {pattern_file}")
+    print(
+        f"wrote {spectra}, {chart} and {pattern_file} ({cost['solves']} solves, "
+        f"{cost['seconds']:.0f} s of solving)"
+    )
     return 0
 
 

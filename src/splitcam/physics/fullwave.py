@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import math
 import os
+import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -161,20 +162,48 @@ def read_design(path: str | os.PathLike) -> np.ndarray:
     return grid
 
 
-def cone_directions(f_number: float) -> list[tuple[float, float, float]]:
+def cone_directions(
+    f_number: float | None, chief_ray: float = 0.0, azimuth: float = 0.0
+) -> list[tuple[float, float, float]]:
     """``(polar angle, azimuth, weight)`` (radians) of the light a lens of ``f_number`` sends
-    to a pixel: a 7-point quadrature of its exit pupil, a disk of uniform irradiance. The
-    direction sines ``sin(theta) (cos phi, sin phi)`` fill a disk of radius
-    ``sin(theta_max) = 1 / (2 N)``; the rule (the centre, weight 1/4, and six points at
-    ``sqrt(2/3)`` of the radius, 1/8 each) integrates polynomials up to degree 5 over the disk
-    exactly (tests/physics/test_fullwave.py)."""
-    if not f_number > 0.5:
+    to a pixel whose chief ray arrives ``chief_ray`` (radians) off the normal, tilted towards
+    ``azimuth`` (0: along x, the design's columns; pi/4: along the diagonal, towards a corner
+    of the field).
+
+    The exit pupil is a disk of uniform irradiance, and a lens that obeys the sine condition
+    fills a disk of direction sines ``sin(theta) (cos phi, sin phi)`` of radius
+    ``1 / (2 N)`` centred on the chief ray's sines. The 7-point rule (the centre, weight 1/4,
+    and six points at ``sqrt(2/3)`` of the radius, 1/8 each) integrates polynomials up to
+    degree 5 over the disk exactly (tests/physics/test_fullwave.py). ``f_number`` None: a
+    collimated beam along the chief ray (one direction).
+
+    Raises:
+        FullwaveError: An f-number of 0.5 or less, or a chief ray whose cone reaches grazing
+            incidence (direction sines of 1 or more) or points outside [0, 90) degrees.
+    """
+    if f_number is not None and not f_number > 0.5:
         raise FullwaveError(f"f-number must be > 0.5, got {f_number}")
-    radius = 1.0 / (2.0 * f_number)
-    out = [(0.0, 0.0, 0.25)]
-    r = math.sqrt(2.0 / 3.0) * radius
-    for k in range(6):
-        out.append((math.asin(r), k * math.pi / 3.0, 0.125))
+    if not 0.0 <= chief_ray < math.pi / 2:
+        raise FullwaveError(
+            f"chief-ray angle must be in [0, 90) degrees, got {math.degrees(chief_ray):g}"
+        )
+    radius = 0.0 if f_number is None else 1.0 / (2.0 * f_number)
+    if math.sin(chief_ray) + radius >= 1.0:
+        raise FullwaveError(
+            f"a chief ray of {math.degrees(chief_ray):g} degrees with an f/{f_number:g} cone "
+            f"reaches grazing incidence (sine {math.sin(chief_ray) + radius:.3f} >= 1)"
+        )
+    # (sine, azimuth, weight) of each point about the disk's centre.
+    points = [(0.0, 0.0, 0.25 if f_number is not None else 1.0)]
+    if f_number is not None:
+        points += [(math.sqrt(2.0 / 3.0) * radius, k * math.pi / 3.0, 0.125) for k in range(6)]
+    if chief_ray == 0.0:
+        return [(math.asin(r), phi, w) for r, phi, w in points]
+    cu, cv = math.sin(chief_ray) * math.cos(azimuth), math.sin(chief_ray) * math.sin(azimuth)
+    out = []
+    for r, phi, weight in points:
+        u, v = cu + r * math.cos(phi), cv + r * math.sin(phi)
+        out.append((math.asin(math.hypot(u, v)), math.atan2(v, u), weight))
     return out
 
 
@@ -214,6 +243,7 @@ def quadrant_spectra(
     solver: str = "torcwa",
     terms: int | None = None,
     progress: Callable[[int], None] | None = None,
+    cache: str | os.PathLike | None = None,
 ) -> dict[str, Any]:
     """Transmission into each pixel quadrant of the monitor plane, per wavelength.
 
@@ -228,12 +258,19 @@ def quadrant_spectra(
         terms: fmmax only: about this many Fourier terms in a circular truncation (default
             ``(2 order + 1)^2``).
         progress: Called with the number of wavelengths done.
+        cache: A JSON-lines file where every solve (one wavelength, one direction, both
+            polarisations) is appended as soon as it finishes, with the seconds it took; solves
+            of the same design and setting found there are not repeated. An interrupted run
+            given the same file continues where it stopped (at most the solve in progress is
+            lost), and several runs may share one file.
 
     Returns:
         ``transmission``: ``(2, 2, L)`` the share of the light arriving on the period crossing
         each quadrant (rows along y, as the design), averaged over the two polarisations and
         the directions; ``by_polarisation``: ``(2, 2, 2, L)`` for the two polarisations
-        (direction-averaged); ``reflection``: ``(L,)``; ``terms``: the Fourier terms solved.
+        (direction-averaged); ``reflection``: ``(L,)``; ``terms``: the Fourier terms solved;
+        ``cost``: ``solves`` (wavelengths times directions), ``reused`` (of them, found in
+        ``cache``) and ``seconds`` (of solving all of them, earlier runs' included).
 
     Raises:
         FullwaveError: A bad order, direction weights or solver name; the solver not installed
@@ -254,11 +291,24 @@ def quadrant_spectra(
     else:
         formulation = "JONES_DIRECT" if solver == "fmmax-jones" else "FFT"
         solve, count = _fmmax_solver(design, terms or (2 * order + 1) ** 2, formulation, samples)
+    log = _SolveLog(cache, design, solver, count, samples) if cache is not None else None
     by_pol = np.zeros((2, 2, 2, len(wavelengths)))
     reflection = np.zeros(len(wavelengths))
+    cost = {"solves": 0, "reused": 0, "seconds": 0.0}
     for li, lam in enumerate(wavelengths):
         for (theta, phi, _), weight in zip(directions, weights, strict=True):
-            quads, reflected = solve(lam, theta, phi)
+            found = log.get(lam, theta, phi) if log is not None else None
+            if found is None:
+                start = time.perf_counter()
+                quads, reflected = solve(lam, theta, phi)
+                seconds = time.perf_counter() - start
+                if log is not None:
+                    log.add(lam, theta, phi, quads, reflected, seconds)
+            else:
+                quads, reflected, seconds = found
+                cost["reused"] += 1
+            cost["solves"] += 1
+            cost["seconds"] += seconds
             by_pol[..., li] += weight * quads
             reflection[li] += weight * reflected
         if progress is not None:
@@ -268,7 +318,67 @@ def quadrant_spectra(
         "by_polarisation": by_pol,
         "reflection": reflection,
         "terms": count,
+        "cost": cost,
     }
+
+
+class _SolveLog:
+    """The solves of one design at one solver setting, kept in a JSON-lines file shared with
+    other settings and designs: each line is one solve, tagged with a digest of its setting."""
+
+    def __init__(self, path, design: RouterDesign, solver: str, terms: int, samples: int) -> None:
+        import hashlib
+        import json
+
+        setting = {
+            "grid": hashlib.sha256(
+                repr(design.grid.shape).encode() + design.grid.tobytes()
+            ).hexdigest(),
+            **{k: getattr(design, k) for k in ("pitch", "thickness", "depth")},
+            **{k: str(getattr(design, k)) for k in ("pillar", "background", "substrate")},
+            "solver": solver,
+            "terms": int(terms),
+            "samples": int(samples),
+        }
+        self.setting = hashlib.sha256(json.dumps(setting, sort_keys=True).encode()).hexdigest()[:16]
+        self.path = Path(path)
+        self.done: dict[tuple[str, str, str], tuple[np.ndarray, float, float]] = {}
+        if self.path.is_file():
+            for line in self.path.read_text(encoding="utf-8").splitlines():
+                try:
+                    rec = json.loads(line)
+                    if rec["setting"] == self.setting:
+                        key = self._key(rec["wavelength"], rec["theta"], rec["phi"])
+                        quads = np.asarray(rec["quadrants"], dtype=np.float64).reshape(2, 2, 2)
+                        self.done[key] = (quads, float(rec["reflection"]), float(rec["seconds"]))
+                except (ValueError, KeyError, TypeError):
+                    continue  # a line cut short by an interrupted run, or not ours
+
+    @staticmethod
+    def _key(lam: float, theta: float, phi: float) -> tuple[str, str, str]:
+        return tuple(f"{float(v):.12g}" for v in (lam, theta, phi))
+
+    def get(self, lam: float, theta: float, phi: float):
+        return self.done.get(self._key(lam, theta, phi))
+
+    def add(self, lam, theta, phi, quads: np.ndarray, reflected: float, seconds: float) -> None:
+        import json
+
+        rec = {
+            "setting": self.setting,
+            "wavelength": float(lam),
+            "theta": float(theta),
+            "phi": float(phi),
+            "quadrants": np.asarray(quads, dtype=np.float64).tolist(),
+            "reflection": float(reflected),
+            "seconds": round(seconds, 2),
+        }
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        with self.path.open("a", encoding="utf-8") as f:
+            f.write(json.dumps(rec) + "\n")
+            f.flush()
+            os.fsync(f.fileno())
+        self.done[self._key(lam, theta, phi)] = (np.asarray(quads), float(reflected), seconds)
 
 
 #: One solve: ``(wavelength nm, polar angle, azimuth)`` → ``((2, 2, 2)`` quadrant transmissions
