@@ -34,6 +34,23 @@ def test_patterns_show_and_export(tmp_path, capsys):
     assert main(["patterns", "show", str(toml), "--out", str(tmp_path / "e.png")]) == 0
 
 
+def test_exporting_again_never_undoes_a_users_edits(tmp_path, capsys):
+    """An exported pattern file is there to be edited: exporting over it again is refused in
+    one line (the edits kept) unless --force; over the same pattern it is a no-op."""
+    toml = tmp_path / "mine.toml"
+    assert main(["patterns", "export", "D", "--out", str(toml)]) == 0
+    assert main(["patterns", "export", "D", "--out", str(toml)]) == 0
+    assert "already holds this pattern" in capsys.readouterr().out
+    edited = toml.read_text().replace('name = "D"', 'name = "mine"')
+    assert edited != toml.read_text()
+    toml.write_text(edited)
+    assert main(["patterns", "export", "B", "--out", str(toml)]) == 1
+    assert "--force replaces it" in capsys.readouterr().err
+    assert toml.read_text() == edited
+    assert main(["patterns", "export", "B", "--out", str(toml), "--force"]) == 0
+    assert patterns.load(toml).equals(patterns.get("B"))
+
+
 def test_patterns_show_a_shipped_models_learned_pattern(tmp_path):
     from splitcam import patterns
     from splitcam.recon.loading import load_model

@@ -25,6 +25,11 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="an action (default list) and pattern names or files: `patterns D E` lists D and E",
     )
     p.add_argument("--out", help="output file (PNG for show, .json/.toml for export)")
+    p.add_argument(
+        "--force",
+        action="store_true",
+        help="export: replace an existing --out that holds something else (your edits)",
+    )
     p.set_defaults(handler=run)
 
 
@@ -53,6 +58,17 @@ def run(args: argparse.Namespace) -> int:
         print(f"wrote {out}")
     else:
         out = Path(args.out or f"{pattern.name}.toml")
+        if out.exists() and not args.force:
+            # An exported file is there to be edited: exporting again must not undo the edits.
+            import tempfile
+
+            with tempfile.TemporaryDirectory() as tmp:
+                fresh = Path(tmp) / out.name
+                patterns.save(pattern, fresh)
+                if fresh.read_bytes() == out.read_bytes():
+                    print(f"{out} already holds this pattern")
+                    return 0
+            raise ValueError(f"{out} exists and holds something else; --force replaces it")
         patterns.save(pattern, out)
         print(f"wrote {out}")
     return 0
