@@ -265,6 +265,29 @@ def _(sh):
     check(sh.path("raw.png").read_bytes() == before, "the raw image was replaced")
 
 
+@case("reconstruct-tiled", "a network by tiles gives the whole image's reconstruction")
+def _(sh):
+    photo(sh, size=(201, 263))
+    sh("splitcam simulate photo.png --pattern A --sigma 5 --out raw.png")
+    sh("splitcam reconstruct --model A --raw raw.png --sigma 5 --precision fp32 --out a.png")
+    sh("splitcam reconstruct --model A --raw raw.png --sigma 5 --precision fp32 --tile 128 "
+       "--out b.png")
+    diff = np.abs(image_of(sh.path("a.png")) - image_of(sh.path("b.png"))).max() * 255
+    check(diff <= 1, f"tiles differ from the whole by {diff:.0f} levels")
+
+
+@case("reconstruct-lmmse-borders", "the closed-form LMMSE of a router right at the border")
+def _(sh):
+    photo(sh)
+    sh("splitcam simulate photo.png --pattern router-zou --sigma 0 --out raw.png")
+    sh("splitcam reconstruct --method lmmse --pattern router-zou --raw raw.png --sigma 0 "
+       "--out lm.png")
+    err = ((image_of(sh.path("lm.png")) - image_of(sh.path("photo.png"))) ** 2).mean(axis=2)
+    whole, inner = -10 * np.log10(err.mean()), -10 * np.log10(err[4:-4, 4:-4].mean())
+    check(inner - whole < 1.0, f"the 4-pixel border costs {inner - whole:.1f} dB "
+          f"(whole {whole:.2f}, interior {inner:.2f})")
+
+
 # --------------------------------------------------------------------------------- evaluate
 EVAL = "--max-images 2 --crop 64 --sigmas 0 10 --quiet"
 
@@ -337,6 +360,13 @@ def _(sh):
     sh(f"splitcam evaluate --method lmmse --patterns b-mine.toml,c-mine.toml {EVAL} --out r")
     text = (sh.path("r") / "table.md").read_text()
     check(text.count("lmmse-") >= 2, "the two patterns are not told apart")
+
+
+@case("evaluate-whole-odd", "whole photos (one with odd sides), the paper's protocol")
+def _(sh):
+    sh("splitcam evaluate --model bayer --method lmmse --patterns bayer --max-size 0 "
+       "--sigmas 0 --quiet --out r", timeout=1200)
+    check(len(table_rows(sh.path("r") / "table.md")) > 3, "no rows")
 
 
 @case("report", "an evaluation beside the paper's numbers")
@@ -414,6 +444,23 @@ def _(sh):
     check("best" in (out.stdout + out.stderr).lower(), "which network is not said")
 
 
+@case("train-export-evaluate", "a run exported as a model, evaluated by its file")
+def _(sh):
+    d = data_dir(sh)
+    sh(f"splitcam train --pattern B --data {d} --steps 10 --val-every 5 {TRAIN} --out r")
+    sh("splitcam models export r --name mine")
+    sh(f"splitcam evaluate --model models/mine.json {EVAL} --out e")
+    check("mine" in (sh.path("e") / "table.md").read_text(), "no row for the exported model")
+    r = sh("splitcam models export r --name mine", code=1)
+    one_line_error(r, "--force")
+
+
+@case("train-resume-nothing", "--resume where no run is: one line")
+def _(sh):
+    r = sh("splitcam train --out nothing --resume", code=1)
+    one_line_error(r, "nothing")
+
+
 @case("train-bad-data", "a missing data folder: one line")
 def _(sh):
     r = sh("splitcam train --pattern D --data nowhere --steps 10 --out r", code=1)
@@ -446,6 +493,16 @@ def _(sh):
 def _(sh):
     sh("splitcam design --pattern D --steps 20 --out designed.toml --quiet")
     sh("splitcam patterns show designed.toml --out designed.png")
+
+
+@case("design-search", "a search of the design settings, or the extra's install command")
+def _(sh):
+    r = sh("splitcam design --pattern D --search 2 --steps 5 --study st --out best.toml --quiet",
+           code=None)
+    if r.returncode != 0:
+        one_line_error(r, "pip install")
+    else:
+        check(sh.path("best.toml").exists(), "no pattern written")
 
 
 @case("optics-lens", "kernels of a metasurface lens")
