@@ -188,6 +188,16 @@ def test_the_map_against_another_reference_equals_computing_it_again(tiny) -> No
             assert mine["difference"] is None
         else:
             assert mine["difference"] == pytest.approx(theirs["difference"], abs=1e-9)
+            # the per-image differences, and so the intervals over images, too
+            assert np.allclose(mine["difference_images"], theirs["difference_images"], atol=1e-9)
+            assert (mine["interval"] is None) == (theirs["interval"] is None)
+            if theirs["interval"] is not None:
+                assert mine["interval"] == pytest.approx(theirs["interval"], rel=1e-6)
+    # One image: every resample is that image, so the interval is the crossing itself.
+    below = [c for m in (first, direct) for c in m["cells"] if c["verdict"] == "below"]
+    assert below
+    for c in below:
+        assert c["interval"] == pytest.approx([c["break_even"]] * 2)
     # back against the first reference: the first map again
     again = against(rebased, "rgbw", tiny)
     assert [c["verdict"] for c in again["cells"]] == [c["verdict"] for c in first["cells"]]

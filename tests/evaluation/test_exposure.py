@@ -73,15 +73,15 @@ def test_write_study_states_crossovers_against_both_references(tmp_path) -> None
     assert "| pattern | vs bayer: PSNR | vs bayer: CIEDE2000 | vs rgbw: PSNR |" in text
     table = text.split("## Crossover")[1].splitlines()
     row = next(line for line in table if line.startswith("| router |"))
-    assert row.count("N ≈ 316") == 2 and row.count("N ≈ 31.6") == 2
+    assert row.count("N ≈ 320 ") == 2 and row.count("N ≈ 32 ") == 2
     quad = next(line for line in table if line.startswith("| quad |"))
-    assert "never below; above N ≈ 31.6" in quad
+    assert "never below; above N ≈ 32" in quad
     # a window: loses at the lowest exposure, wins between two crossings
     r["window"] = {n: {**v, "psnr": v["psnr"] + d} for (n, v), d in zip(
         r["rgbw"].items(), (-0.5, 1.0, 1.0, -1.0), strict=True)}  # fmt: skip
     text = write_study(r, None, tmp_path / "three", references=("rgbw",)).read_text()
     window = next(x for x in text.split("## Crossover")[1].splitlines() if "| window |" in x)
-    assert "never below; between N ≈ 2.15 and 316" in window
+    assert "never below; between N ≈ 2.2 and 320" in window
     # the default: the Bayer filter only, as before
     text = write_study(r, None, tmp_path / "one").read_text()
     assert "beats the Bayer filter" in text and "vs rgbw" not in text
@@ -147,3 +147,96 @@ def test_exposure_study_continues_an_interrupted_run(tmp_path) -> None:
                        out=tmp_path, progress=False)  # fmt: skip
     assert more.calls == 2 and c["net-count-A"][10.0] == a["net-count-A"][10.0]
     assert c["A"][100.0]["psnr"] > c["A"][10.0]["psnr"]  # the LMMSE: more light, better
+
+
+def test_two_significant_figures_are_written_plainly() -> None:
+    from splitcam.evaluation.exposure import two_figures
+
+    assert [two_figures(v) for v in (242.0, 72.9, 1931.0, 3.16, 12345.0, 0.0456)] == [
+        "240", "73", "1900", "3.2", "12000", "0.046"
+    ]
+
+
+def test_the_crossover_interval_is_the_bootstrap_of_the_images_shifts() -> None:
+    """Difference curves linear in log exposure, one shift per image: the mean curve crosses at
+    log10 N = 2 + mean(shift) / slope, so each resample's crossover follows from its mean shift
+    alone. The interval must be the percentiles of those, computed here independently, with
+    the same resamples."""
+    import numpy as np
+
+    from splitcam.evaluation.exposure import crossover_interval
+
+    photons = [1.0, 10.0, 100.0, 1000.0, 10000.0]
+    logs = np.log10(photons)
+    shifts = np.array([-0.6, -0.2, 0.1, 0.3, 0.5, 0.9, -0.4, 0.2])
+    slope = 2.0  # dB per decade
+    candidate = 30.0 + slope * (2.0 - logs)[None, :] + shifts[:, None]  # wins below ~100
+    reference = np.full_like(candidate, 30.0)
+    out = crossover_interval(candidate, reference, photons, draws=500, seed=7)
+    assert out["crossover"] == pytest.approx(10 ** (2 + shifts.mean() / slope))
+    picks = np.random.default_rng(7).integers(0, len(shifts), size=(500, len(shifts)))
+    expected = 10 ** (2 + shifts[picks].mean(1) / slope)
+    lo, hi = np.quantile(expected, [0.05, 0.95], method="inverted_cdf")
+    assert out["low"] == pytest.approx(lo) and out["high"] == pytest.approx(hi)
+    assert out["low"] < out["crossover"] < out["high"]
+    assert out["never"] == 0.0 and out["everywhere"] == 0.0
+    # Lower is better (CIEDE2000): the same answer from negated scores.
+    flipped = crossover_interval(-candidate, -reference, photons, higher_is_better=False,
+                                 draws=500, seed=7)
+    assert flipped["low"] == pytest.approx(lo) and flipped["high"] == pytest.approx(hi)
+    # Identical images: no spread.
+    same = crossover_interval(candidate[:1].repeat(5, 0), reference[:5], photons)
+    assert same["low"] == same["high"] == pytest.approx(same["crossover"])
+    with pytest.raises(ValueError, match="per-image scores"):
+        crossover_interval(candidate, reference[:, :3], photons)
+
+
+def test_an_interval_that_reaches_past_the_exposures_studied_says_so() -> None:
+    """Half the images always favour the candidate by far, half never: resamples that never
+    win or win everywhere give the ends ``<1`` and ``>10000``, and their shares are kept."""
+    import numpy as np
+
+    from splitcam.evaluation.exposure import crossover_interval, interval_text
+
+    photons = [1.0, 100.0, 10000.0]
+    good = np.full((4, 3), 10.0)
+    bad = np.full((4, 3), -10.0)
+    out = crossover_interval(np.vstack([good, bad]), np.zeros((8, 3)), photons, draws=400)
+    assert 0.02 < out["never"] < 0.98 and 0.02 < out["everywhere"] < 0.98
+    assert out["never"] + out["everywhere"] == pytest.approx(1.0)  # no resample crosses
+    assert interval_text(out, photons) == "[<1, >10000]"
+
+
+def test_a_study_writes_intervals_per_scene_set(tmp_path) -> None:
+    """A study of two scene sets writes each crossover with its interval, pooled and per set,
+    into exposure.md and exposure.json; the pooled crossover lies within its interval."""
+    import json
+
+    import numpy as np
+
+    from splitcam.evaluation.exposure import write_study
+
+    photons = [1.0, 10.0, 100.0, 1000.0]
+    names = [f"kodak24/k{i}" for i in range(5)] + [f"mcmaster/m{i}" for i in range(4)]
+    rng = np.random.default_rng(0)
+
+    def result(offset, slope):
+        per = {n: offset + slope * math.log10(n) + rng.normal(0, 0.3, len(names))
+               for n in photons}
+        return {n: {"psnr": float(v.mean()), "ssim": 0.5, "ciede2000": float(40 - v.mean()),
+                    "per_image": {"psnr": v.tolist(), "ssim": [0.5] * len(names),
+                                  "ciede2000": (40 - v).tolist()},
+                    "images": names} for n, v in per.items()}
+
+    results = {"rgbw": result(10.0, 6.0), "router": result(13.0, 4.0)}
+    text = write_study(results, None, tmp_path, references=("rgbw",)).read_text()
+    assert "kodak24 only" in text and "mcmaster only" in text
+    crossing = text.split("## Crossover")[1]
+    row = next(ln for ln in crossing.splitlines() if ln.startswith("| router |"))
+    assert row.count("[") == 2  # PSNR and CIEDE2000, each with its interval
+    data = json.loads((tmp_path / "exposure.json").read_text())
+    pooled = [c for c in data["crossovers"] if c["scene_set"] == "all" and c["metric"] == "psnr"]
+    assert len(pooled) == 1 and pooled[0]["low"] <= pooled[0]["crossover"] <= pooled[0]["high"]
+    assert pooled[0]["crossover"] == pytest.approx(10 ** 1.5, rel=0.2)
+    assert {c["scene_set"] for c in data["crossovers"]} == {"all", "kodak24", "mcmaster"}
+    assert {c["images"] for c in data["crossovers"]} == {9, 5, 4}

@@ -23,7 +23,7 @@ from ..io.domains import LINEAR
 from ..patterns import Pattern, get, router
 from ..recon.base import Reconstructor
 from ..recon.closed_form import closed_form_lmmse
-from .exposure import crossings, default_exposures, exposure_study
+from .exposure import crossings, crossover_interval, default_exposures, exposure_study, two_figures
 from .protocol import Images
 from .tables import markdown_table
 
@@ -140,6 +140,7 @@ def break_even(
     # the map's reconstruction, named as the reference's without the pattern: net-universal-photon
     label = "closed-form LMMSE" if method is None else ref_method.name.removesuffix(f"-{ref.name}")
     ref_values = [ref_curve[n][metric] for n in photons]
+    ref_images = _images(ref_curve, photons, metric)
     grid = [(float(e), float(x)) for e in etas for x in chis]
     bar = None
     if progress:
@@ -155,6 +156,9 @@ def break_even(
             curve = curve_of(reconstruct(make(eta, chi)))
             diff = [sign * (curve[n][metric] - r) for n, r in zip(photons, ref_values, strict=True)]
             cell.update(verdict(photons, diff, tol), difference=diff)
+            ours = _images(curve, photons, metric)
+            if ours is not None and ref_images is not None:
+                cell.update(_interval(photons, sign * (ours - ref_images), cell))
         cells.append(cell)
         if bar is not None:
             bar.update(1)
@@ -171,6 +175,7 @@ def break_even(
         "etas": [float(e) for e in etas],
         "chis": [float(x) for x in chis],
         "reference_curve": ref_values,
+        "reference_images": ref_images.tolist() if ref_images is not None else None,
         "cells": cells,
     }
 
@@ -203,6 +208,7 @@ def against(
     values = [curve[rec.name][n][result["metric"]] for n in photons]
     sign = -1.0 if result["metric"] == "ciede2000" else 1.0
     shift = [sign * (old - new) for old, new in zip(result["reference_curve"], values, strict=True)]
+    theirs = _images(curve[rec.name], photons, result["metric"])
     cells = []
     for cell in result["cells"]:
         if cell["difference"] is None:
@@ -210,8 +216,38 @@ def against(
             continue
         diff = [d + s for d, s in zip(cell["difference"], shift, strict=True)]
         where = {k: cell[k] for k in ("eta", "chi", "label")}
-        cells.append({**where, **verdict(photons, diff, result["tol"]), "difference": diff})
-    return {**result, "reference": ref.name, "reference_curve": values, "cells": cells}
+        new = {**where, **verdict(photons, diff, result["tol"]), "difference": diff}
+        old_images = result.get("reference_images")
+        if cell.get("difference_images") is not None and theirs is not None and old_images:
+            # per image: router − new reference = (router − old) + (old − new)
+            per_shift = sign * (np.asarray(old_images) - theirs)
+            new.update(_interval(photons, np.asarray(cell["difference_images"]) + per_shift, new))
+        cells.append(new)
+    return {
+        **result,
+        "reference": ref.name,
+        "reference_curve": values,
+        "reference_images": theirs.tolist() if theirs is not None else None,
+        "cells": cells,
+    }
+
+
+def _images(curve: dict, photons: Sequence[float], metric: str) -> np.ndarray | None:
+    """``(images, exposures)`` per-image scores of an exposure-study curve, or None."""
+    if "per_image" not in curve[photons[0]]:
+        return None
+    return np.array([curve[n]["per_image"][metric] for n in photons]).T
+
+
+def _interval(photons: Sequence[float], diff_images: np.ndarray, cell: dict) -> dict[str, Any]:
+    """The per-image differences of a cell, kept (for :func:`against`), and where the router
+    wins below a break-even exposure, its 90 % bootstrap interval over the images
+    (:func:`~splitcam.evaluation.exposure.crossover_interval`)."""
+    out: dict[str, Any] = {"difference_images": diff_images.tolist(), "interval": None}
+    if cell["verdict"] == "below":
+        iv = crossover_interval(diff_images, np.zeros_like(diff_images), list(photons))
+        out["interval"] = [iv["low"], iv["high"]]
+    return out
 
 
 def _closed_form(domain: str) -> Callable[[Pattern], Reconstructor]:
@@ -264,9 +300,35 @@ def write_break_even(
         ["η \\ χ", *(f"{x:g}" for x in result["chis"])],
         ([f"{e:g}", *(cell_text(cells[(e, x)]) for x in result["chis"])] for e in result["etas"]),
     )
+    if any(c.get("interval") for c in result["cells"]):
+        lines += [
+            "",
+            "90 % intervals over the images of the break-even exposures `<N` (bootstrap, 2000 "
+            "resamples; `<1`: in some resamples the router never wins, `>N`: in some it wins "
+            "at every exposure studied):",
+            "",
+        ]
+        lines += markdown_table(
+            ["η \\ χ", *(f"{x:g}" for x in result["chis"])],
+            (
+                [f"{e:g}", *(_interval_cell(cells[(e, x)], result["photons"])
+                             for x in result["chis"])]
+                for e in result["etas"]
+            ),
+        )
     lines += ["", "Router presets (mean η, χ over R, G, B):", ""]
     lines += [f"- {name}: η = {e:.3f}, χ = {x:.3f}" for name, (e, x) in presets.items()]
     lines += ["", f"![break-even map]({chart.name})", ""]
     path = out / "breakeven.md"
     write_text(path, "\n".join(lines))
     return path
+
+
+def _interval_cell(cell: dict, photons: Sequence[float]) -> str:
+    interval = cell.get("interval")
+    if not interval:
+        return ""
+    lo, hi = interval
+    low = f"<{two_figures(min(photons))}" if lo == 0.0 else two_figures(lo)
+    high = f">{two_figures(max(photons))}" if np.isinf(hi) else two_figures(hi)
+    return f"{low}–{high}"

@@ -42,7 +42,10 @@ from .tables import domain_line, markdown_table
 __all__ = [
     "crossings",
     "crossover",
+    "crossover_interval",
     "describe_crossover",
+    "interval_text",
+    "two_figures",
     "exposure_study",
     "raw_snr_check",
     "write_study",
@@ -102,17 +105,101 @@ def exposure_study(
         progress=progress,
         domain=domain,
     )
-    results: dict[str, dict[float, dict[str, float]]] = {}
+    results: dict[str, dict[float, dict[str, Any]]] = {}
     for method in todo:
         mine = [r for r in rows if r.method == method.name]
         results[lmmse.get(method.name, method.name)] = {
-            n: {
-                key: mean_over_images(getattr(r, key) for r in mine if r.level == level).mean
-                for key in ("psnr", "ssim", "ciede2000")
-            }
+            n: _level_scores([r for r in mine if r.level == level])
             for n, level in zip(photons, map(level_label, exposures), strict=True)
         }
     return results
+
+
+METRICS = ("psnr", "ssim", "ciede2000")
+
+
+def _level_scores(rows: list) -> dict[str, Any]:
+    """The means over images of one method at one exposure, and ``per_image``: each metric's
+    values in the order of ``images`` (``dataset/image`` names), for intervals over images."""
+    rows = sorted(rows, key=lambda r: (r.dataset, r.image))
+    out: dict[str, Any] = {key: mean_over_images(getattr(r, key) for r in rows).mean
+                           for key in METRICS}
+    out["per_image"] = {key: [float(getattr(r, key)) for r in rows] for key in METRICS}
+    out["images"] = [f"{r.dataset}/{r.image}" for r in rows]
+    return out
+
+
+def two_figures(value: float) -> str:
+    """``value`` to two significant figures, written plainly: 242 → ``240``, 72.9 → ``73``,
+    1931 → ``1900``, 3.16 → ``3.2``."""
+    return f"{float(f'{value:.2g}'):g}"
+
+
+def crossover_interval(
+    curves: Any,
+    reference: Any,
+    photons: Sequence[float],
+    *,
+    higher_is_better: bool = True,
+    level: float = 0.9,
+    draws: int = 2000,
+    seed: int = 0,
+) -> dict[str, Any]:
+    """The crossover of :func:`crossover` with a bootstrap interval over images.
+
+    Args:
+        curves, reference: ``(images, exposures)`` per-image scores of the candidate and the
+            reference on the same images (same order), at ``photons``.
+        level: The interval's coverage (0.9: the 5th and 95th percentiles of the crossovers of
+            ``draws`` resamples of the images, with replacement).
+
+    Returns:
+        ``{"crossover", "low", "high", "never", "everywhere", "images", "draws", "level"}``:
+        the crossover of the mean curves (None: never wins; inf: wins at every exposure), the
+        interval's ends (0: the lower end lies below the lowest exposure studied, never
+        winning; inf: above the highest), and the shares of resamples in which the candidate
+        never wins or wins everywhere.
+    """
+    a = np.asarray(curves, dtype=np.float64)
+    b = np.asarray(reference, dtype=np.float64)
+    if a.shape != b.shape or a.ndim != 2 or a.shape[1] != len(photons) or a.shape[0] < 1:
+        raise ValueError(
+            f"expected per-image scores (images, {len(photons)}) of one shape, got "
+            f"{a.shape} and {b.shape}"
+        )
+    sign = 1.0 if higher_is_better else -1.0
+    diff = sign * (a - b)
+    zero = dict.fromkeys(photons, 0.0)
+
+    def cross(mean_diff: np.ndarray) -> float:
+        v = crossover(dict(zip(photons, mean_diff.tolist(), strict=True)), zero)
+        return 0.0 if v is None else v
+
+    point = crossover(dict(zip(photons, diff.mean(0).tolist(), strict=True)), zero)
+    rng = np.random.default_rng(seed)
+    picks = rng.integers(0, diff.shape[0], size=(draws, diff.shape[0]))
+    values = np.array([cross(diff[idx].mean(0)) for idx in picks])
+    tail = (1.0 - level) / 2.0
+    low, high = np.quantile(values, [tail, 1.0 - tail], method="inverted_cdf")
+    return {
+        "crossover": point,
+        "low": float(low),
+        "high": float(high),
+        "never": float(np.mean(values == 0.0)),
+        "everywhere": float(np.mean(np.isinf(values))),
+        "images": int(diff.shape[0]),
+        "draws": draws,
+        "level": level,
+    }
+
+
+def interval_text(interval: dict[str, Any], photons: Sequence[float]) -> str:
+    """``[140, 520]``: a :func:`crossover_interval` as the tables write it (two significant
+    figures; ``<1`` or ``>10000`` where an end lies outside the exposures studied)."""
+    lo, hi = interval["low"], interval["high"]
+    low = f"<{two_figures(min(photons))}" if lo == 0.0 else two_figures(lo)
+    high = f">{two_figures(max(photons))}" if math.isinf(hi) else two_figures(hi)
+    return f"[{low}, {high}]"
 
 
 def crossover(
@@ -159,39 +246,59 @@ def describe_crossover(curve: dict[float, float], ref: dict[float, float]) -> st
     >>> describe_crossover({1: 2.0, 100: 0.0}, {1: 1.0, 100: 1.0})
     'N ≈ 10'
     >>> describe_crossover({1: 0.0, 10: 2.0, 100: 0.0}, {1: 1.0, 10: 1.0, 100: 1.0})
-    'never below; between N ≈ 3.16 and 31.6'
+    'never below; between N ≈ 3.2 and 32'
     """
     v = crossover(curve, ref)
     if v is not None:
-        return "every exposure studied" if math.isinf(v) else f"N ≈ {v:.3g}"
+        return "every exposure studied" if math.isinf(v) else f"N ≈ {two_figures(v)}"
     xs = sorted(curve)
     found = crossings(xs, [curve[x] - ref[x] for x in xs])
     if not found:
         return "never"
     if found[-1][1] == "up":
-        return f"never below; above N ≈ {found[-1][0]:.3g}"
+        return f"never below; above N ≈ {two_figures(found[-1][0])}"
     lo = next(n for n, way in reversed(found) if way == "up")
-    return f"never below; between N ≈ {lo:.3g} and {found[-1][0]:.3g}"
+    return f"never below; between N ≈ {two_figures(lo)} and {two_figures(found[-1][0])}"
+
+
+def _per_image(result: dict, key: str, photons: list[float], subset: str | None):
+    """``(images, exposures)`` scores of one result (only the images of dataset ``subset``),
+    with the image names; None where the result holds no per-image scores."""
+    first = result[photons[0]]
+    if "per_image" not in first:
+        return None, None
+    names = first["images"]
+    keep = [i for i, n in enumerate(names) if subset is None or n.split("/")[0] == subset]
+    values = np.array([[result[n]["per_image"][key][i] for n in photons] for i in keep])
+    return values, [names[i] for i in keep]
 
 
 def _crossover_table(
-    results: dict[str, dict[float, dict[str, float]]],
+    results: dict[str, dict[float, dict[str, Any]]],
     photons: list[float],
     refs: list[str],
     references_of: dict[str, dict[str, str]] | None = None,
     title_suffix: str = "",
+    subset: str | None = None,
+    record: list | None = None,
 ) -> list[str]:
     """A crossover section of ``exposure.md``: one row per label of ``results`` (a pattern's,
     or a network's), PSNR and CIEDE2000 columns per reference; ``references_of[label][ref]``:
     the label ``label`` is compared with for reference pattern ``ref`` (default ``ref``
-    itself); a reference a row has none of shows ``—``."""
+    itself); a reference a row has none of shows ``—``. Where the results hold per-image
+    scores, each crossover is followed by its 90 % bootstrap interval over the images
+    (:func:`crossover_interval`), appended to ``record`` as data; ``subset``: only the images
+    of that dataset."""
     if refs == ["bayer"]:
         title = "## Crossover: the exposure below which each pattern beats the Bayer filter"
         head = ["pattern", "PSNR", "CIEDE2000"]
     else:
         title = "## Crossover: the exposure below which each pattern beats " + " and ".join(refs)
         head = ["pattern", *(f"vs {r}: {m}" for r in refs for m in ("PSNR", "CIEDE2000"))]
+    if subset is not None:
+        title += f", {subset} only"
     rows = []
+    intervals = False
     for p, r in results.items():
         mine = (references_of or {}).get(p, {name: name for name in refs})
         if len(refs) == 1 and mine.get(refs[0]) == p:
@@ -203,11 +310,35 @@ def _crossover_table(
                 row += ["—", "—"]
                 continue
             for key, sign in (("psnr", 1), ("ciede2000", -1)):
-                curve = {n: sign * r[n][key] for n in photons}
-                ref = {n: sign * results[against][n][key] for n in photons}
-                row.append(describe_crossover(curve, ref))
+                ours, names = _per_image(r, key, photons, subset)
+                theirs, their_names = _per_image(results[against], key, photons, subset)
+                if ours is not None and names == their_names and len(names):
+                    curve = {n: sign * v for n, v in zip(photons, ours.mean(0), strict=True)}
+                    ref = {n: sign * v for n, v in zip(photons, theirs.mean(0), strict=True)}
+                    interval = crossover_interval(
+                        ours, theirs, photons, higher_is_better=sign > 0
+                    )
+                    text = f"{describe_crossover(curve, ref)} {interval_text(interval, photons)}"
+                    intervals = True
+                    if record is not None:
+                        record.append({"candidate": p, "reference": against, "metric": key,
+                                       "scene_set": subset or "all", "text": text, **interval})
+                else:
+                    curve = {n: sign * r[n][key] for n in photons}
+                    ref = {n: sign * results[against][n][key] for n in photons}
+                    text = describe_crossover(curve, ref)
+                row.append(text)
         rows.append([p, *row])
-    return ["", title + title_suffix, "", *markdown_table(head, rows)]
+    lines = ["", title + title_suffix, ""]
+    if intervals:
+        lines += [
+            "Each crossover with its 90 % interval over the images (bootstrap: the 5th and "
+            "95th percentiles of the crossovers of 2000 resamples of the images); `<1`: the "
+            "candidate never wins in a share of resamples, `>10000`: it wins at every "
+            "exposure studied in a share of them.",
+            "",
+        ]
+    return [*lines, *markdown_table(head, rows)]
 
 
 def network_references(networks: dict[str, str], refs: Sequence[str]) -> dict[str, dict[str, str]]:
@@ -320,18 +451,6 @@ def write_study(
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    write_text(
-        out / "exposure.json",
-        json.dumps(
-            {
-                "results": {p: {f"{n:g}": v for n, v in r.items()} for p, r in results.items()},
-                "raw_snr": snr,
-                "domain": domain,
-            },
-            indent=1,
-        )
-        + "\n",
-    )
     chart = exposure_chart(results, out / "exposure.png", networks=networks)
     photons = sorted(next(iter(results.values())))
     head = ["pattern", *(f"N={n:.3g}" if n < 1000 else f"N={n:.0f}" for n in photons)]
@@ -364,19 +483,28 @@ def write_study(
     networks = networks or {}
     lmmse = {k: v for k, v in results.items() if k not in networks}
     refs = [r for r in references if r in lmmse]
-    if refs:
-        suffix = " (closed-form LMMSE)" if networks else ""
-        lines += _crossover_table(lmmse, photons, refs, title_suffix=suffix)
     net_refs = [r for r in references if r in networks.values()]
-    if net_refs:
-        nets = {k: v for k, v in results.items() if k in networks}
-        lines += _crossover_table(
-            nets,
-            photons,
-            net_refs,
-            network_references(networks, net_refs),
-            title_suffix=" (networks, each against the reference's network)",
-        )
+    nets = {k: v for k, v in results.items() if k in networks}
+    crossovers: list[dict] = []
+    # Pooled over every image, then each scene set apart where there are several.
+    first = next(iter(results.values()))[photons[0]]
+    sets = sorted({n.split("/")[0] for n in first.get("images", [])})
+    for subset in [None, *sets] if len(sets) > 1 else [None]:
+        if refs:
+            suffix = " (closed-form LMMSE)" if networks else ""
+            lines += _crossover_table(
+                lmmse, photons, refs, title_suffix=suffix, subset=subset, record=crossovers
+            )
+        if net_refs:
+            lines += _crossover_table(
+                nets,
+                photons,
+                net_refs,
+                network_references(networks, net_refs),
+                title_suffix=" (networks, each against the reference's network)",
+                subset=subset,
+                record=crossovers,
+            )
     if snr:
         lines += [
             "",
@@ -399,6 +527,19 @@ def write_study(
             ),
         )
     lines += ["", f"![exposure]({chart.name})", ""]
+    write_text(
+        out / "exposure.json",
+        json.dumps(
+            {
+                "results": {p: {f"{n:g}": v for n, v in r.items()} for p, r in results.items()},
+                "crossovers": crossovers,
+                "raw_snr": snr,
+                "domain": domain,
+            },
+            indent=1,
+        )
+        + "\n",
+    )
     path = out / "exposure.md"
     write_text(path, "\n".join(lines))
     return path
