@@ -148,10 +148,14 @@ def crossover_interval(
     """The crossover of :func:`crossover` with a bootstrap interval over images.
 
     Args:
-        curves, reference: ``(images, exposures)`` per-image scores of the candidate and the
-            reference on the same images (same order), at ``photons``.
+        curves: ``(images, exposures)`` per-image scores of the candidate at ``photons``.
+        reference: The same of the reference, on the same images in the same order.
+        photons: The exposures.
+        higher_is_better: False for CIEDE2000.
         level: The interval's coverage (0.9: the 5th and 95th percentiles of the crossovers of
             ``draws`` resamples of the images, with replacement).
+        draws: The number of resamples.
+        seed: Of the resampling.
 
     Returns:
         ``{"crossover", "low", "high", "never", "everywhere", "images", "draws", "level"}``:
