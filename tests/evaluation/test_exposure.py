@@ -240,3 +240,43 @@ def test_a_study_writes_intervals_per_scene_set(tmp_path) -> None:
     assert pooled[0]["crossover"] == pytest.approx(10 ** 1.5, rel=0.2)
     assert {c["scene_set"] for c in data["crossovers"]} == {"all", "kodak24", "mcmaster"}
     assert {c["images"] for c in data["crossovers"]} == {9, 5, 4}
+
+
+def test_difference_curves_band_the_mean_and_the_chart_draws_them(tmp_path) -> None:
+    """The band holds the mean difference at every exposure and closes when every image is
+    the same; the crossover is the interval of :func:`crossover_interval`; CIEDE2000 is taken
+    reference − candidate (positive: the candidate is better)."""
+    import numpy as np
+
+    from splitcam.evaluation.exposure import crossover_interval, difference_curves
+    from splitcam.viz.charts import difference_chart
+
+    photons = [1.0, 10.0, 100.0, 1000.0]
+    names = [f"s/i{i}" for i in range(6)]
+    rng = np.random.default_rng(1)
+
+    def result(values):
+        return {n: {"psnr": float(v.mean()), "ssim": 0.5, "ciede2000": float((40 - v).mean()),
+                    "per_image": {"psnr": v.tolist(), "ssim": [0.5] * len(v),
+                                  "ciede2000": (40 - v).tolist()}, "images": names}
+                for n, v in zip(photons, values.T, strict=True)}
+
+    ref = 10 + 6 * np.log10(photons)[None, :] + rng.normal(0, 0.2, (6, 4))
+    router = 12 + 5 * np.log10(photons)[None, :] + rng.normal(0, 0.4, (6, 4))
+    flat = np.tile(router[:1], (6, 1))
+    results = {"rgbw": result(ref), "router": result(router), "flat": result(flat),
+               "flat-ref": result(np.tile(ref[:1], (6, 1)))}
+    curves = difference_curves(results, [("router", "rgbw"), ("flat", "flat-ref")])
+    c = curves[0]
+    mean = np.array(c["mean"])
+    assert np.allclose(mean, (router - ref).mean(0))
+    assert np.all(np.array(c["low"]) <= mean) and np.all(mean <= np.array(c["high"]))
+    assert c["crossover"] == crossover_interval(router, ref, photons)
+    same = curves[1]
+    assert same["low"] == pytest.approx(same["mean"]) and same["high"] == pytest.approx(same["mean"])
+    ciede = difference_curves(results, [("router", "rgbw")], metric="ciede2000")[0]
+    assert np.allclose(ciede["mean"], mean)  # 40 − v: the same difference, the same sign
+    path = difference_chart(curves, tmp_path / "d.png", title="test")
+    assert path.stat().st_size > 10_000
+    with pytest.raises(ValueError, match="per-image scores"):
+        difference_curves({"a": {1.0: {"psnr": 1.0}}, "b": {1.0: {"psnr": 1.0}}}, [("a", "b")])

@@ -44,6 +44,7 @@ __all__ = [
     "crossover",
     "crossover_interval",
     "describe_crossover",
+    "difference_curves",
     "interval_text",
     "two_figures",
     "exposure_study",
@@ -195,6 +196,52 @@ def crossover_interval(
         "draws": draws,
         "level": level,
     }
+
+
+def difference_curves(
+    results: dict[str, dict[float, dict[str, Any]]],
+    pairs: Sequence[tuple[str, str]],
+    *,
+    metric: str = "psnr",
+    level: float = 0.9,
+    draws: int = 2000,
+    seed: int = 0,
+) -> list[dict[str, Any]]:
+    """For each ``(candidate, reference)`` of ``pairs`` (labels of an exposure study's
+    results with per-image scores): the mean difference candidate − reference at each
+    exposure, its ``level`` bootstrap band over the images (percentiles of the resampled
+    means, exposure by exposure) and the crossover with its interval
+    (:func:`crossover_interval`); what :func:`splitcam.viz.charts.difference_chart` draws.
+    CIEDE2000 differences are reference − candidate, so that positive always means the
+    candidate is better."""
+    photons = sorted(next(iter(results.values())))
+    sign = -1.0 if metric == "ciede2000" else 1.0
+    tail = (1.0 - level) / 2.0
+    out = []
+    for candidate, reference in pairs:
+        ours, names = _per_image(results[candidate], metric, photons, None)
+        theirs, their_names = _per_image(results[reference], metric, photons, None)
+        if ours is None or theirs is None or names != their_names:
+            raise ValueError(
+                f"{candidate} against {reference}: per-image scores of the same images needed"
+            )
+        diff = sign * (ours - theirs)
+        picks = np.random.default_rng(seed).integers(0, len(diff), size=(draws, len(diff)))
+        means = diff[picks].mean(axis=1)  # (draws, exposures)
+        out.append({
+            "candidate": candidate,
+            "reference": reference,
+            "metric": metric,
+            "photons": photons,
+            "mean": diff.mean(0).tolist(),
+            "low": np.quantile(means, tail, axis=0, method="inverted_cdf").tolist(),
+            "high": np.quantile(means, 1 - tail, axis=0, method="inverted_cdf").tolist(),
+            "crossover": crossover_interval(
+                ours, theirs, photons, higher_is_better=sign > 0, level=level, draws=draws,
+                seed=seed,
+            ),
+        })
+    return out
 
 
 def interval_text(interval: dict[str, Any], photons: Sequence[float]) -> str:

@@ -9,7 +9,7 @@ from pathlib import Path
 from ..physics.noise import level_key, parse_level_label
 from ._save import save_figure
 
-__all__ = ["exposure_chart", "sigma_chart"]
+__all__ = ["difference_chart", "exposure_chart", "sigma_chart"]
 
 
 def method_kind(label: str) -> str:
@@ -161,5 +161,57 @@ def exposure_chart(
         title += " at equal exposure (photon model)"
     ax1.set_title(title, fontsize=10)
     ax2.legend(fontsize=7 if len(results) > 8 else 8, loc="upper right")
+    fig.tight_layout()
+    return save_figure(fig, path, dpi=120)
+
+
+def difference_chart(
+    curves: Sequence[Mapping],
+    path: str | os.PathLike,
+    *,
+    title: str | None = None,
+    xlabel: str = "exposure N: photo-electrons of a lossless full-light pixel",
+) -> Path:
+    """Candidate − reference against exposure (log axis), one panel per reference: the mean
+    over images as a line, its bootstrap band shaded, and each crossover (the exposure below
+    which the candidate wins) marked with its interval as a bar on the zero line.
+
+    ``curves``: what :func:`splitcam.evaluation.exposure.difference_curves` returns."""
+    import matplotlib
+    from matplotlib.figure import Figure
+
+    references = list(dict.fromkeys(c["reference"] for c in curves))
+    candidates = list(dict.fromkeys(c["candidate"] for c in curves))
+    cycle = matplotlib.rcParams["axes.prop_cycle"].by_key()["color"]
+    colour = {c: cycle[i % len(cycle)] for i, c in enumerate(candidates)}
+    fig = Figure(figsize=(5.2 * len(references), 4.4))
+    axes = fig.subplots(1, len(references), squeeze=False)[0]
+    for ax, reference in zip(axes, references, strict=True):
+        mine = [c for c in curves if c["reference"] == reference]
+        for k, c in enumerate(mine):
+            xs, col = c["photons"], colour[c["candidate"]]
+            cross = c["crossover"]
+            point = cross["crossover"]
+            where = "never" if point is None else (
+                "always" if point == float("inf") else f"{float(f'{point:.2g}'):g}")
+            ax.plot(xs, c["mean"], "-o", ms=3, color=col,
+                    label=f"{c['candidate']} (wins below {where})")
+            ax.fill_between(xs, c["low"], c["high"], color=col, alpha=0.18, lw=0)
+            if point is not None and point != float("inf"):
+                lo = cross["low"] if cross["low"] > 0 else xs[0]
+                hi = min(cross["high"], xs[-1])
+                y = -0.08 * (k + 1)
+                ax.plot([lo, hi], [y, y], color=col, lw=3, alpha=0.7, solid_capstyle="butt")
+                ax.plot([point], [y], "|", color="black", ms=9)
+        ax.axhline(0.0, color="black", lw=0.8)
+        ax.set_xscale("log")
+        ax.set_xlabel(xlabel)
+        metric = mine[0]["metric"].upper() if mine else ""
+        ax.set_ylabel(f"{metric}: candidate − {reference}" + (" (dB)" if metric == "PSNR" else ""))
+        ax.set_title(f"against {reference}", fontsize=10)
+        ax.grid(alpha=0.3, which="both")
+        ax.legend(fontsize=7, loc="upper right")
+    if title:
+        fig.suptitle(title, fontsize=10)
     fig.tight_layout()
     return save_figure(fig, path, dpi=120)
