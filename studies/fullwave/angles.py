@@ -22,7 +22,7 @@ band into its own pixels (:func:`splitcam.physics.fullwave.band_efficiencies`).
 Every solve (one wavelength, one direction, both polarisations) is appended to
 ``OUT/solves.jsonl`` the moment it finishes, with its seconds; a run interrupted at any point
 continues from there when started again, and the summary (``OUT/angles.json``,
-``OUT/README-tables.md``) is rewritten after every finished setting, so partial results can be
+``OUT/angles.md``) is rewritten after every finished setting, so partial results can be
 read while the rest runs.
 """
 
@@ -51,7 +51,7 @@ from splitcam.physics.fullwave import (
 ROOT = Path(__file__).resolve().parents[2]
 DESIGNS = ROOT / "experiments" / "fullwave" / "designs"
 WAVELENGTHS = (433.0, 467.0, 533.0, 567.0, 633.0, 667.0)
-TERMS = (121, 221, 357, 621, 997)
+TERMS = (121, 221, 357, 621, 797, 997)
 REFERENCE = 997
 TOLERANCE = 0.02
 #: (f-number or None for the chief ray alone, chief-ray angle in degrees), in the order run:
@@ -104,7 +104,7 @@ def main() -> None:
 
     def save() -> None:
         summary_path.write_text(json.dumps(summary, indent=1) + "\n", encoding="utf-8")
-        (args.out / "README-tables.md").write_text(tables(summary), encoding="utf-8")
+        (args.out / "angles.md").write_text(tables(summary), encoding="utf-8")
 
     if args.stage in ("convergence", "all"):
         if "best/997" not in summary["convergence"]:

@@ -104,7 +104,6 @@ def run(args: argparse.Namespace) -> int:
     from ..physics.fullwave import (
         RouterDesign,
         check_solver,
-        cone_directions,
         quadrant_spectra,
         read_design,
     )
@@ -130,10 +129,7 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError(f"--out {out} is a file, not a folder")
     if args.threads:
         torch.set_num_threads(args.threads)
-    # 0 is refused with the other impossible f-numbers (it once meant normal incidence).
-    directions = cone_directions(
-        args.f_number, math.radians(args.chief_ray), math.radians(args.chief_ray_azimuth)
-    )
+    directions, where = _incidence(args)
     log = out / f"{stem}-solves.jsonl"
     bar = None
     if not args.quiet:
@@ -172,17 +168,6 @@ def run(args: argparse.Namespace) -> int:
             "written for a look)"
         )
     t = np.clip(t, 0.0, None)
-    where = (
-        f"{len(directions)} directions of an f/{args.f_number:g} cone"
-        if args.f_number is not None
-        else "normal incidence"
-    )
-    if args.chief_ray:
-        where = (
-            f"{where.replace('normal incidence', 'collimated light')}, chief ray "
-            f"{args.chief_ray:g} degrees off the normal towards azimuth "
-            f"{args.chief_ray_azimuth:g} degrees"
-        )
     info = {
         "provenance": f"full-wave (RCWA, {_solved_by(args, result['terms'])}, {where})",
         "description": f"metasurface router {Path(args.design).name}: pitch {args.pitch:g} µm, "
@@ -201,6 +186,29 @@ def run(args: argparse.Namespace) -> int:
         f"{cost['seconds']:.0f} s of solving)"
     )
     return 0
+
+
+def _incidence(args: argparse.Namespace) -> tuple[list, str]:
+    """The directions of the light (:func:`~splitcam.physics.fullwave.cone_directions`;
+    checked before any work) and their description for the pattern's provenance."""
+    from ..physics.fullwave import cone_directions
+
+    # 0 is refused with the other impossible f-numbers (it once meant normal incidence).
+    directions = cone_directions(
+        args.f_number, math.radians(args.chief_ray), math.radians(args.chief_ray_azimuth)
+    )
+    where = (
+        f"{len(directions)} directions of an f/{args.f_number:g} cone"
+        if args.f_number is not None
+        else "normal incidence"
+    )
+    if args.chief_ray:
+        where = (
+            f"{where.replace('normal incidence', 'collimated light')}, chief ray "
+            f"{args.chief_ray:g} degrees off the normal towards azimuth "
+            f"{args.chief_ray_azimuth:g} degrees"
+        )
+    return directions, where
 
 
 def _say_roles(lams, t, reflection, chart: Path, title: str) -> Path:
