@@ -72,11 +72,19 @@ class Shell:
         self.log: list[str] = []
 
     def __call__(self, command: str, *, code: int | None = 0, timeout: int = 600):
-        line = command.replace("splitcam ", "python -m splitcam ", 1) if command.startswith(
-            "splitcam ") else command
+        line = (
+            command.replace("splitcam ", "python -m splitcam ", 1)
+            if command.startswith("splitcam ")
+            else command
+        )
         self.log.append(command)
         result = subprocess.run(
-            line, shell=True, cwd=self.folder, env=self.env, capture_output=True, text=True,
+            line,
+            shell=True,
+            cwd=self.folder,
+            env=self.env,
+            capture_output=True,
+            text=True,
             timeout=timeout,
         )
         out = result.stdout + result.stderr
@@ -174,7 +182,7 @@ def _(sh):
 
 @case("patterns-measured", "a filter array of measured camera curves")
 def _(sh):
-    out = sh("splitcam patterns show bayer-d5100 --out b.png").stdout + ""
+    sh("splitcam patterns show bayer-d5100 --out b.png")
     check(sh.path("b.png").exists(), "no chart")
 
 
@@ -237,8 +245,10 @@ def _(sh):
 @case("reconstruct-demosaicnet", "the GPU-trained peer on a Bayer raw image (extra installed)")
 def _(sh):
     photo(sh)
-    r = sh("splitcam reconstruct --method demosaicnet --pattern bayer --image photo.png "
-           "--out dm.png", code=None)
+    r = sh(
+        "splitcam reconstruct --method demosaicnet --pattern bayer --image photo.png --out dm.png",
+        code=None,
+    )
     if r.returncode != 0:
         one_line_error(r, "pip install")
         return
@@ -270,8 +280,10 @@ def _(sh):
     photo(sh, size=(201, 263))
     sh("splitcam simulate photo.png --pattern A --sigma 5 --out raw.png")
     sh("splitcam reconstruct --model A --raw raw.png --sigma 5 --precision fp32 --out a.png")
-    sh("splitcam reconstruct --model A --raw raw.png --sigma 5 --precision fp32 --tile 128 "
-       "--out b.png")
+    sh(
+        "splitcam reconstruct --model A --raw raw.png --sigma 5 --precision fp32 --tile 128 "
+        "--out b.png"
+    )
     diff = np.abs(image_of(sh.path("a.png")) - image_of(sh.path("b.png"))).max() * 255
     check(diff <= 1, f"tiles differ from the whole by {diff:.0f} levels")
 
@@ -280,12 +292,17 @@ def _(sh):
 def _(sh):
     photo(sh)
     sh("splitcam simulate photo.png --pattern router-zou --sigma 0 --out raw.png")
-    sh("splitcam reconstruct --method lmmse --pattern router-zou --raw raw.png --sigma 0 "
-       "--out lm.png")
+    sh(
+        "splitcam reconstruct --method lmmse --pattern router-zou --raw raw.png --sigma 0 "
+        "--out lm.png"
+    )
     err = ((image_of(sh.path("lm.png")) - image_of(sh.path("photo.png"))) ** 2).mean(axis=2)
     whole, inner = -10 * np.log10(err.mean()), -10 * np.log10(err[4:-4, 4:-4].mean())
-    check(inner - whole < 1.0, f"the 4-pixel border costs {inner - whole:.1f} dB "
-          f"(whole {whole:.2f}, interior {inner:.2f})")
+    check(
+        inner - whole < 1.0,
+        f"the 4-pixel border costs {inner - whole:.1f} dB "
+        f"(whole {whole:.2f}, interior {inner:.2f})",
+    )
 
 
 # --------------------------------------------------------------------------------- evaluate
@@ -295,8 +312,11 @@ EVAL = "--max-images 2 --crop 64 --sigmas 0 10 --quiet"
 @case("evaluate-side-by-side", "a network against its LMMSE, one table")
 def _(sh):
     sh(f"splitcam evaluate --model D --method lmmse --patterns D {EVAL} --out r")
-    per = json.loads((sh.path("r") / "results.json").read_text()) if (
-        sh.path("r") / "results.json").exists() else None
+    per = (
+        json.loads((sh.path("r") / "results.json").read_text())
+        if (sh.path("r") / "results.json").exists()
+        else None
+    )
     rows = table_rows(sh.path("r") / "table.md")
     check(any(" D " in r or "| D" in r for r in rows), "no row for D")
     check(per is None or per, "empty results")
@@ -314,16 +334,20 @@ def _(sh):
 def _(sh):
     if "SPLITCAM_DATA" not in sh.env:
         raise Wrong("no SPLITCAM_DATA")
-    sh("splitcam evaluate --method lmmse --patterns bayer --datasets kodak24,mcmaster "
-       "--max-images 1 --sigmas 0 --quiet --out r")
+    sh(
+        "splitcam evaluate --method lmmse --patterns bayer --datasets kodak24,mcmaster "
+        "--max-images 1 --sigmas 0 --quiet --out r"
+    )
     text = (sh.path("r") / "table.md").read_text()
     check("kodak24" in text.lower() and "mcmaster" in text.lower(), "a dataset is missing")
 
 
 @case("evaluate-photon", "a photon-trained network in linear light")
 def _(sh):
-    sh("splitcam evaluate --model D-photon --domain linear --photons 10 1000 --read-noise 2 "
-       "--max-images 1 --crop 64 --quiet --out r")
+    sh(
+        "splitcam evaluate --model D-photon --domain linear --photons 10 1000 --read-noise 2 "
+        "--max-images 1 --crop 64 --quiet --out r"
+    )
     check("D-photon" in (sh.path("r") / "table.md").read_text(), "no row")
 
 
@@ -334,8 +358,11 @@ def _(sh):
 
 @case("evaluate-gaussian-net-on-photons", "a Gaussian-trained network on photon noise is said")
 def _(sh):
-    r = sh("splitcam evaluate --model D --domain linear --photons 100 --max-images 1 --crop 64 "
-           "--quiet --out r", code=None)
+    r = sh(
+        "splitcam evaluate --model D --domain linear --photons 100 --max-images 1 --crop 64 "
+        "--quiet --out r",
+        code=None,
+    )
     text = (r.stdout + r.stderr).lower()
     check("gaussian" in text or r.returncode != 0, "silently evaluated on other noise")
 
@@ -364,8 +391,11 @@ def _(sh):
 
 @case("evaluate-whole-odd", "whole photos (one with odd sides), the paper's protocol")
 def _(sh):
-    sh("splitcam evaluate --model bayer --method lmmse --patterns bayer --max-size 0 "
-       "--sigmas 0 --quiet --out r", timeout=1200)
+    sh(
+        "splitcam evaluate --model bayer --method lmmse --patterns bayer --max-size 0 "
+        "--sigmas 0 --quiet --out r",
+        timeout=1200,
+    )
     check(len(table_rows(sh.path("r") / "table.md")) > 3, "no rows")
 
 
@@ -405,10 +435,14 @@ def _(sh):
     before = (sh.path("r") / "checkpoint.safetensors").read_bytes()
     r = sh("splitcam train --out r --resume --steps 200 --lr 1000 --quiet", code=None)
     check(r.returncode != 0, "a diverged run exited 0")
-    check("kept" in (r.stdout + r.stderr).lower() or "keep" in (r.stdout + r.stderr).lower(),
-          "the failure does not say which state is kept")
-    check((sh.path("r") / "checkpoint.safetensors").read_bytes() == before,
-          "the resumable checkpoint was replaced by the diverged one")
+    check(
+        "kept" in (r.stdout + r.stderr).lower() or "keep" in (r.stdout + r.stderr).lower(),
+        "the failure does not say which state is kept",
+    )
+    check(
+        (sh.path("r") / "checkpoint.safetensors").read_bytes() == before,
+        "the resumable checkpoint was replaced by the diverged one",
+    )
     sh("splitcam train --out r --resume --steps 30 --lr 0.001 --quiet")
 
 
@@ -416,16 +450,20 @@ def _(sh):
 def _(sh):
     d = data_dir(sh)
     sh("splitcam patterns export E --out mine.toml")
-    sh(f"splitcam train --pattern mine.toml --init-from universal --data {d} --steps 10 {TRAIN} "
-       "--out r")
+    sh(
+        f"splitcam train --pattern mine.toml --init-from universal --data {d} --steps 10 {TRAIN} "
+        "--out r"
+    )
     sh("splitcam models export r --name mine")
 
 
 @case("train-photon", "a network for photons in linear light")
 def _(sh):
     d = data_dir(sh)
-    sh(f"splitcam train --pattern D --noise photon --photons 10 10000 --read-noise 2 "
-       f"--domain linear --data {d} --steps 10 {TRAIN} --out r")
+    sh(
+        f"splitcam train --pattern D --noise photon --photons 10 10000 --read-noise 2 "
+        f"--domain linear --data {d} --steps 10 {TRAIN} --out r"
+    )
 
 
 @case("train-plot", "the curves of a run")
@@ -476,8 +514,10 @@ def _(sh):
 @case("train-config", "an experiment file of the repository, shortened")
 def _(sh):
     d = data_dir(sh)
-    sh(f"splitcam train --config {sh.clone}/experiments/D.toml --data {d} --steps 4 {TRAIN} "
-       "--out r")
+    sh(
+        f"splitcam train --config {sh.clone}/experiments/D.toml --data {d} --steps 4 {TRAIN} "
+        "--out r"
+    )
 
 
 # ----------------------------------------------------------------------------------- models
@@ -497,8 +537,10 @@ def _(sh):
 
 @case("design-search", "a search of the design settings, or the extra's install command")
 def _(sh):
-    r = sh("splitcam design --pattern D --search 2 --steps 5 --study st --out best.toml --quiet",
-           code=None)
+    r = sh(
+        "splitcam design --pattern D --search 2 --steps 5 --study st --out best.toml --quiet",
+        code=None,
+    )
     if r.returncode != 0:
         one_line_error(r, "pip install")
     else:
@@ -517,8 +559,10 @@ def _(sh):
     sh(f"splitcam optics rcwa {design} --order 2 --wavelengths 450,550,650 --quiet --out z")
     photo(sh)
     sh("splitcam simulate photo.png --pattern z/zou2022-16x16.toml --sigma 0 --out raw.png")
-    sh("splitcam reconstruct --method lmmse --pattern z/zou2022-16x16.toml --raw raw.png "
-       "--sigma 0 --out rec.png")
+    sh(
+        "splitcam reconstruct --method lmmse --pattern z/zou2022-16x16.toml --raw raw.png "
+        "--sigma 0 --out rec.png"
+    )
     truth = image_of(sh.path("photo.png"))
     flat = psnr(np.broadcast_to(truth.mean(axis=(0, 1)), truth.shape), truth)
     rec = psnr(image_of(sh.path("rec.png")), truth)
@@ -552,8 +596,10 @@ def _(sh):
 
 @case("study-breakeven", "where a router ties the RGBW array")
 def _(sh):
-    sh("splitcam study breakeven --max-images 1 --crop 64 --points 3 --eta 0.5 0.9 --chi 0 0.3 "
-       "--quiet --out b")
+    sh(
+        "splitcam study breakeven --max-images 1 --crop 64 --points 3 --eta 0.5 0.9 --chi 0 0.3 "
+        "--quiet --out b"
+    )
     check(any(sh.path("b").glob("*.md")), "no table")
 
 
@@ -577,8 +623,10 @@ def _(sh):
 def _(sh):
     if "SPLITCAM_DATA" not in sh.env:
         raise Wrong("no SPLITCAM_DATA")
-    sh("splitcam reproduce --max-images 1 --sigmas 0 --no-baselines --quiet --out rep",
-       timeout=1200)
+    sh(
+        "splitcam reproduce --max-images 1 --sigmas 0 --no-baselines --quiet --out rep",
+        timeout=1200,
+    )
     check(any(sh.path("rep").glob("*.md")), "no tables")
 
 
@@ -611,8 +659,9 @@ def main() -> None:
         shutil.rmtree(args.work)
     clone = args.work / "clone"
     subprocess.run(["git", "clone", "-q", str(ROOT), str(clone)], check=True)
-    commit = subprocess.run(["git", "-C", str(clone), "rev-parse", "--short", "HEAD"],
-                            capture_output=True, text=True).stdout.strip()
+    commit = subprocess.run(
+        ["git", "-C", str(clone), "rev-parse", "--short", "HEAD"], capture_output=True, text=True
+    ).stdout.strip()
     sys.path.insert(0, str(clone / "src"))
     results = []
     for name, what, fn in CASES:
@@ -634,19 +683,31 @@ def main() -> None:
         except Exception:  # a fault of the battery itself
             verdict, detail = "battery error", traceback.format_exc().strip().splitlines()[-1]
         seconds = time.perf_counter() - start
-        results.append({"case": name, "what": what, "commands": sh.log, "verdict": verdict,
-                        "detail": detail, "seconds": round(seconds, 1)})
+        results.append(
+            {
+                "case": name,
+                "what": what,
+                "commands": sh.log,
+                "verdict": verdict,
+                "detail": detail,
+                "seconds": round(seconds, 1),
+            }
+        )
         print(f"{verdict:9s} {name} ({seconds:.0f} s) {detail}", flush=True)
-    counts = {v: sum(r["verdict"] == v for r in results) for v in
-              ("ok", "wrong", "traceback", "battery error")}
+    counts = {
+        v: sum(r["verdict"] == v for r in results)
+        for v in ("ok", "wrong", "traceback", "battery error")
+    }
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "battery.json").write_text(
-        json.dumps({"commit": commit, "counts": counts, "cases": results}, indent=1) + "\n")
+        json.dumps({"commit": commit, "counts": counts, "cases": results}, indent=1) + "\n"
+    )
     lines = [
         "# A new user's battery",
         "",
         f"{len(results)} cases on a fresh clone (commit {commit}): "
-        + ", ".join(f"{n} {v}" for v, n in counts.items()) + ".",
+        + ", ".join(f"{n} {v}" for v, n in counts.items())
+        + ".",
         "",
         "```bash",
         "SPLITCAM_DATA=DIR python studies/battery/battery.py",
@@ -657,8 +718,10 @@ def main() -> None:
     ]
     for r in results:
         cmds = "<br>".join(f"`{c}`" for c in r["commands"])
-        lines.append(f"| {r['case']} | {r['what']} | {cmds} | {r['verdict']} | "
-                     f"{r['seconds']:.0f} | {r['detail'].replace('|', '/')} |")
+        lines.append(
+            f"| {r['case']} | {r['what']} | {cmds} | {r['verdict']} | "
+            f"{r['seconds']:.0f} | {r['detail'].replace('|', '/')} |"
+        )
     (args.out / "README.md").write_text("\n".join(lines) + "\n")
     print(counts)
 

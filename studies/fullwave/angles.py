@@ -69,8 +69,12 @@ def designs() -> dict[str, RouterDesign]:
 
 def solve(design, terms, directions, cache) -> dict:
     out = quadrant_spectra(
-        design, list(WAVELENGTHS), solver="fmmax-jones", terms=terms,
-        directions=directions, cache=cache,
+        design,
+        list(WAVELENGTHS),
+        solver="fmmax-jones",
+        terms=terms,
+        directions=directions,
+        cache=cache,
     )
     bands = band_efficiencies(out["transmission"], WAVELENGTHS)
     return {
@@ -117,8 +121,11 @@ def main() -> None:
                     continue
                 start = time.perf_counter()
                 summary["convergence"][key] = solve(design, terms, [(0.0, 0.0, 1.0)], cache)
-                print(f"{key}: {fmt(summary['convergence'][key])} "
-                      f"({time.perf_counter() - start:.0f} s)", flush=True)
+                print(
+                    f"{key}: {fmt(summary['convergence'][key])} "
+                    f"({time.perf_counter() - start:.0f} s)",
+                    flush=True,
+                )
                 save()
         summary["chosen"] = choose(summary["convergence"])
         save()
@@ -134,8 +141,10 @@ def main() -> None:
                     continue
                 start = time.perf_counter()
                 summary["angles"][key] = solve(design, terms, directions, cache)
-                print(f"{key}: {fmt(summary['angles'][key])} "
-                      f"({time.perf_counter() - start:.0f} s)", flush=True)
+                print(
+                    f"{key}: {fmt(summary['angles'][key])} ({time.perf_counter() - start:.0f} s)",
+                    flush=True,
+                )
                 save()
 
 
@@ -151,9 +160,17 @@ def earlier_best() -> dict:
         seconds += sum(run["seconds"].values())
     t = np.stack([quads[lam] for lam in WAVELENGTHS], axis=-1)
     bands = band_efficiencies(t, WAVELENGTHS)
-    return {"terms": terms, "blue": bands["blue"], "green": bands["green"], "red": bands["red"],
-            "reflection": None, "seconds": round(seconds, 1), "solves": len(WAVELENGTHS),
-            "transmission": t.tolist(), "from": "docs/results/fullwave/best-fmmax/"}
+    return {
+        "terms": terms,
+        "blue": bands["blue"],
+        "green": bands["green"],
+        "red": bands["red"],
+        "reflection": None,
+        "seconds": round(seconds, 1),
+        "solves": len(WAVELENGTHS),
+        "transmission": t.tolist(),
+        "from": "docs/results/fullwave/best-fmmax/",
+    }
 
 
 def fmt(r: dict) -> str:
@@ -182,24 +199,41 @@ def refl(r: dict) -> str:
 
 
 def tables(summary: dict) -> str:
-    lines = ["## Convergence (normal incidence, fmmax Jones-direct)", "",
-             "| design | terms | blue | green | red | reflection | seconds (6 wavelengths) |",
-             "|---|---|---|---|---|---|---|"]
-    for key, r in sorted(summary["convergence"].items(),
-                         key=lambda kv: (kv[0].split("/")[0], int(kv[0].split("/")[1]))):
-        lines.append(f"| {key.split('/')[0]} | {r['terms']} | {r['blue']:.3f} | {r['green']:.3f} "
-                     f"| {r['red']:.3f} | {refl(r)} | {r['seconds']:.0f} |")
+    lines = [
+        "## Convergence (normal incidence, fmmax Jones-direct)",
+        "",
+        "| design | terms | blue | green | red | reflection | seconds (6 wavelengths) |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for key, r in sorted(
+        summary["convergence"].items(),
+        key=lambda kv: (kv[0].split("/")[0], int(kv[0].split("/")[1])),
+    ):
+        lines.append(
+            f"| {key.split('/')[0]} | {r['terms']} | {r['blue']:.3f} | {r['green']:.3f} "
+            f"| {r['red']:.3f} | {refl(r)} | {r['seconds']:.0f} |"
+        )
     chosen = summary.get("chosen")
     if chosen:
-        lines += ["", f"Chosen: {chosen['terms']} terms (largest band error against "
-                  f"{REFERENCE} terms: {chosen['largest_error']:.3f})."]
-    lines += ["", "## Angles", "",
-              "| design | lens | chief ray | blue | green | red | seconds |", "|---|---|---|---|---|---|---|"]
+        lines += [
+            "",
+            f"Chosen: {chosen['terms']} terms (largest band error against "
+            f"{REFERENCE} terms: {chosen['largest_error']:.3f}).",
+        ]
+    lines += [
+        "",
+        "## Angles",
+        "",
+        "| design | lens | chief ray | blue | green | red | seconds |",
+        "|---|---|---|---|---|---|---|",
+    ]
     for key, r in summary["angles"].items():
         name, _, lens, cra = key.split("/")
         lens = "collimated" if lens == "fnone" else lens.replace("f", "f/")
-        lines.append(f"| {name} | {lens} | {cra[3:]}° | {r['blue']:.3f} | {r['green']:.3f} | "
-                     f"{r['red']:.3f} | {r['seconds']:.0f} |")
+        lines.append(
+            f"| {name} | {lens} | {cra[3:]}° | {r['blue']:.3f} | {r['green']:.3f} | "
+            f"{r['red']:.3f} | {r['seconds']:.0f} |"
+        )
     return "\n".join(lines) + "\n"
 
 

@@ -153,7 +153,12 @@ def test_two_significant_figures_are_written_plainly() -> None:
     from splitcam.evaluation.exposure import two_figures
 
     assert [two_figures(v) for v in (242.0, 72.9, 1931.0, 3.16, 12345.0, 0.0456)] == [
-        "240", "73", "1900", "3.2", "12000", "0.046"
+        "240",
+        "73",
+        "1900",
+        "3.2",
+        "12000",
+        "0.046",
     ]
 
 
@@ -181,8 +186,9 @@ def test_the_crossover_interval_is_the_bootstrap_of_the_images_shifts() -> None:
     assert out["low"] < out["crossover"] < out["high"]
     assert out["never"] == 0.0 and out["everywhere"] == 0.0
     # Lower is better (CIEDE2000): the same answer from negated scores.
-    flipped = crossover_interval(-candidate, -reference, photons, higher_is_better=False,
-                                 draws=500, seed=7)
+    flipped = crossover_interval(
+        -candidate, -reference, photons, higher_is_better=False, draws=500, seed=7
+    )
     assert flipped["low"] == pytest.approx(lo) and flipped["high"] == pytest.approx(hi)
     # Identical images: no spread.
     same = crossover_interval(candidate[:1].repeat(5, 0), reference[:5], photons)
@@ -221,12 +227,21 @@ def test_a_study_writes_intervals_per_scene_set(tmp_path) -> None:
     rng = np.random.default_rng(0)
 
     def result(offset, slope):
-        per = {n: offset + slope * math.log10(n) + rng.normal(0, 0.3, len(names))
-               for n in photons}
-        return {n: {"psnr": float(v.mean()), "ssim": 0.5, "ciede2000": float(40 - v.mean()),
-                    "per_image": {"psnr": v.tolist(), "ssim": [0.5] * len(names),
-                                  "ciede2000": (40 - v).tolist()},
-                    "images": names} for n, v in per.items()}
+        per = {n: offset + slope * math.log10(n) + rng.normal(0, 0.3, len(names)) for n in photons}
+        return {
+            n: {
+                "psnr": float(v.mean()),
+                "ssim": 0.5,
+                "ciede2000": float(40 - v.mean()),
+                "per_image": {
+                    "psnr": v.tolist(),
+                    "ssim": [0.5] * len(names),
+                    "ciede2000": (40 - v).tolist(),
+                },
+                "images": names,
+            }
+            for n, v in per.items()
+        }
 
     results = {"rgbw": result(10.0, 6.0), "router": result(13.0, 4.0)}
     text = write_study(results, None, tmp_path, references=("rgbw",)).read_text()
@@ -237,7 +252,7 @@ def test_a_study_writes_intervals_per_scene_set(tmp_path) -> None:
     data = json.loads((tmp_path / "exposure.json").read_text())
     pooled = [c for c in data["crossovers"] if c["scene_set"] == "all" and c["metric"] == "psnr"]
     assert len(pooled) == 1 and pooled[0]["low"] <= pooled[0]["crossover"] <= pooled[0]["high"]
-    assert pooled[0]["crossover"] == pytest.approx(10 ** 1.5, rel=0.2)
+    assert pooled[0]["crossover"] == pytest.approx(10**1.5, rel=0.2)
     assert {c["scene_set"] for c in data["crossovers"]} == {"all", "kodak24", "mcmaster"}
     assert {c["images"] for c in data["crossovers"]} == {9, 5, 4}
 
@@ -256,16 +271,30 @@ def test_difference_curves_band_the_mean_and_the_chart_draws_them(tmp_path) -> N
     rng = np.random.default_rng(1)
 
     def result(values):
-        return {n: {"psnr": float(v.mean()), "ssim": 0.5, "ciede2000": float((40 - v).mean()),
-                    "per_image": {"psnr": v.tolist(), "ssim": [0.5] * len(v),
-                                  "ciede2000": (40 - v).tolist()}, "images": names}
-                for n, v in zip(photons, values.T, strict=True)}
+        return {
+            n: {
+                "psnr": float(v.mean()),
+                "ssim": 0.5,
+                "ciede2000": float((40 - v).mean()),
+                "per_image": {
+                    "psnr": v.tolist(),
+                    "ssim": [0.5] * len(v),
+                    "ciede2000": (40 - v).tolist(),
+                },
+                "images": names,
+            }
+            for n, v in zip(photons, values.T, strict=True)
+        }
 
     ref = 10 + 6 * np.log10(photons)[None, :] + rng.normal(0, 0.2, (6, 4))
     router = 12 + 5 * np.log10(photons)[None, :] + rng.normal(0, 0.4, (6, 4))
     flat = np.tile(router[:1], (6, 1))
-    results = {"rgbw": result(ref), "router": result(router), "flat": result(flat),
-               "flat-ref": result(np.tile(ref[:1], (6, 1)))}
+    results = {
+        "rgbw": result(ref),
+        "router": result(router),
+        "flat": result(flat),
+        "flat-ref": result(np.tile(ref[:1], (6, 1))),
+    }
     curves = difference_curves(results, [("router", "rgbw"), ("flat", "flat-ref")])
     c = curves[0]
     mean = np.array(c["mean"])
@@ -273,7 +302,9 @@ def test_difference_curves_band_the_mean_and_the_chart_draws_them(tmp_path) -> N
     assert np.all(np.array(c["low"]) <= mean) and np.all(mean <= np.array(c["high"]))
     assert c["crossover"] == crossover_interval(router, ref, photons)
     same = curves[1]
-    assert same["low"] == pytest.approx(same["mean"]) and same["high"] == pytest.approx(same["mean"])
+    assert same["low"] == pytest.approx(same["mean"]) and same["high"] == pytest.approx(
+        same["mean"]
+    )
     ciede = difference_curves(results, [("router", "rgbw")], metric="ciede2000")[0]
     assert np.allclose(ciede["mean"], mean)  # 40 − v: the same difference, the same sign
     path = difference_chart(curves, tmp_path / "d.png", title="test")

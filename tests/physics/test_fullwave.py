@@ -127,15 +127,24 @@ def test_a_chief_ray_along_y_sees_the_transposed_design_as_one_along_x_sees_the_
     # multiples of 60 degrees about the chief ray).
     along_x = cone_directions(None, math.radians(20), 0.0)
     along_y = cone_directions(None, math.radians(20), math.pi / 2)
-    a = quadrant_spectra(RouterDesign(grid, thickness=0.4, depth=0.5), [560.0], order=2,
-                         samples=16, directions=along_x)
-    b = quadrant_spectra(RouterDesign(grid.T, thickness=0.4, depth=0.5), [560.0], order=2,
-                         samples=16, directions=along_y)
+    a = quadrant_spectra(
+        RouterDesign(grid, thickness=0.4, depth=0.5),
+        [560.0],
+        order=2,
+        samples=16,
+        directions=along_x,
+    )
+    b = quadrant_spectra(
+        RouterDesign(grid.T, thickness=0.4, depth=0.5),
+        [560.0],
+        order=2,
+        samples=16,
+        directions=along_y,
+    )
     np.testing.assert_allclose(b["transmission"][..., 0], a["transmission"][..., 0].T, atol=1e-9)
     assert a["transmission"].sum() + a["reflection"][0] == pytest.approx(1.0, abs=1e-6)
     # and the tilt matters: normal incidence sends the light elsewhere
-    c = quadrant_spectra(RouterDesign(grid, thickness=0.4, depth=0.5), [560.0], order=2,
-                         samples=16)
+    c = quadrant_spectra(RouterDesign(grid, thickness=0.4, depth=0.5), [560.0], order=2, samples=16)
     assert np.abs(c["transmission"] - a["transmission"]).max() > 1e-3
 
 
@@ -188,9 +197,24 @@ def test_the_command_at_a_chief_ray_continues_an_interrupted_run(tmp_path, capsy
     from splitcam.cli import main
 
     out = tmp_path / "o"
-    args = ["optics", "rcwa", str(DESIGNS / "zou2022-16x16.csv"), "--order", "1", "--quiet",
-            "--wavelengths", "450,650", "--f-number", "2.8", "--chief-ray", "25",
-            "--chief-ray-azimuth", "45", "--out", str(out)]
+    args = [
+        "optics",
+        "rcwa",
+        str(DESIGNS / "zou2022-16x16.csv"),
+        "--order",
+        "1",
+        "--quiet",
+        "--wavelengths",
+        "450,650",
+        "--f-number",
+        "2.8",
+        "--chief-ray",
+        "25",
+        "--chief-ray-azimuth",
+        "45",
+        "--out",
+        str(out),
+    ]
     assert main(args) == 0
     first = (out / "zou2022-16x16-spectra.csv").read_text()
     assert "chief ray 25 degrees" in (out / "zou2022-16x16.toml").read_text()

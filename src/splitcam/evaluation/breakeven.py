@@ -311,8 +311,10 @@ def write_break_even(
         lines += markdown_table(
             ["η \\ χ", *(f"{x:g}" for x in result["chis"])],
             (
-                [f"{e:g}", *(_interval_cell(cells[(e, x)], result["photons"])
-                             for x in result["chis"])]
+                [
+                    f"{e:g}",
+                    *(_interval_cell(cells[(e, x)], result["photons"]) for x in result["chis"]),
+                ]
                 for e in result["etas"]
             ),
         )

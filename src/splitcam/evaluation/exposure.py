@@ -123,8 +123,9 @@ def _level_scores(rows: list) -> dict[str, Any]:
     """The means over images of one method at one exposure, and ``per_image``: each metric's
     values in the order of ``images`` (``dataset/image`` names), for intervals over images."""
     rows = sorted(rows, key=lambda r: (r.dataset, r.image))
-    out: dict[str, Any] = {key: mean_over_images(getattr(r, key) for r in rows).mean
-                           for key in METRICS}
+    out: dict[str, Any] = {
+        key: mean_over_images(getattr(r, key) for r in rows).mean for key in METRICS
+    }
     out["per_image"] = {key: [float(getattr(r, key)) for r in rows] for key in METRICS}
     out["images"] = [f"{r.dataset}/{r.image}" for r in rows]
     return out
@@ -228,19 +229,26 @@ def difference_curves(
         diff = sign * (ours - theirs)
         picks = np.random.default_rng(seed).integers(0, len(diff), size=(draws, len(diff)))
         means = diff[picks].mean(axis=1)  # (draws, exposures)
-        out.append({
-            "candidate": candidate,
-            "reference": reference,
-            "metric": metric,
-            "photons": photons,
-            "mean": diff.mean(0).tolist(),
-            "low": np.quantile(means, tail, axis=0, method="inverted_cdf").tolist(),
-            "high": np.quantile(means, 1 - tail, axis=0, method="inverted_cdf").tolist(),
-            "crossover": crossover_interval(
-                ours, theirs, photons, higher_is_better=sign > 0, level=level, draws=draws,
-                seed=seed,
-            ),
-        })
+        out.append(
+            {
+                "candidate": candidate,
+                "reference": reference,
+                "metric": metric,
+                "photons": photons,
+                "mean": diff.mean(0).tolist(),
+                "low": np.quantile(means, tail, axis=0, method="inverted_cdf").tolist(),
+                "high": np.quantile(means, 1 - tail, axis=0, method="inverted_cdf").tolist(),
+                "crossover": crossover_interval(
+                    ours,
+                    theirs,
+                    photons,
+                    higher_is_better=sign > 0,
+                    level=level,
+                    draws=draws,
+                    seed=seed,
+                ),
+            }
+        )
     return out
 
 
@@ -366,14 +374,20 @@ def _crossover_table(
                 if ours is not None and names == their_names and len(names):
                     curve = {n: sign * v for n, v in zip(photons, ours.mean(0), strict=True)}
                     ref = {n: sign * v for n, v in zip(photons, theirs.mean(0), strict=True)}
-                    interval = crossover_interval(
-                        ours, theirs, photons, higher_is_better=sign > 0
-                    )
+                    interval = crossover_interval(ours, theirs, photons, higher_is_better=sign > 0)
                     text = f"{describe_crossover(curve, ref)} {interval_text(interval, photons)}"
                     intervals = True
                     if record is not None:
-                        record.append({"candidate": p, "reference": against, "metric": key,
-                                       "scene_set": subset or "all", "text": text, **interval})
+                        record.append(
+                            {
+                                "candidate": p,
+                                "reference": against,
+                                "metric": key,
+                                "scene_set": subset or "all",
+                                "text": text,
+                                **interval,
+                            }
+                        )
                 else:
                     curve = {n: sign * r[n][key] for n in photons}
                     ref = {n: sign * results[against][n][key] for n in photons}

@@ -51,6 +51,7 @@ __all__ = [
     "index_of",
     "quadrant_spectra",
     "read_design",
+    "torcwa_quadrants",
 ]
 
 INSTALL = "pip install 'splitcam[fullwave]'"
@@ -402,32 +403,64 @@ def _permittivities(design: RouterDesign, lam: float) -> tuple[float, float, flo
 def _torcwa_solver(design: RouterDesign, order: int, samples: int) -> tuple[_Solve, int]:
     import torch
 
+    density = torch.from_numpy(design.grid)
+
+    def solve(lam: float, theta: float, phi: float) -> tuple[np.ndarray, float]:
+        with torch.no_grad():
+            quads, reflected = torcwa_quadrants(design, density, lam, theta, phi, order, samples)
+        return quads.numpy(), float(reflected)
+
+    return solve, (2 * order + 1) ** 2
+
+
+def torcwa_quadrants(
+    design: RouterDesign,
+    density: Any,
+    lam: float,
+    theta: float = 0.0,
+    phi: float = 0.0,
+    order: int = 9,
+    samples: int = 64,
+) -> tuple[Any, Any]:
+    """One torcwa solve of ``design``'s stack with its layer's cells set to ``density`` (a
+    float64 tensor of the grid's shape, values in [0, 1]), differentiable with respect to it:
+    ``((2, 2, 2)`` quadrant transmissions per polarisation ``[p, row, column]``, the reflection
+    averaged over the polarisations``)`` as tensors. What :func:`quadrant_spectra` computes
+    with torcwa, exposed for designs optimised through Maxwell's equations
+    (:mod:`splitcam.design.fullwave`)."""
+    import torch
+
     torcwa = _solver()
     period = 2.0 * design.pitch
     n = 2 * samples
     coords = (torch.arange(n, dtype=torch.float64) + 0.5) / n * period
-    fine = _fine_grid(design)
+    fine = _fine_density(design, density)
+    um = _off_grazing(lam, period, design) / 1000.0
+    eps_p, eps_b, eps_s = _permittivities(design, lam)
+    layer = (eps_b + (eps_p - eps_b) * fine.T).to(torch.complex128)  # [x, y]
+    sim = _stack(torcwa, um, order, period, (eps_b, eps_s), (theta, phi), design, layer)
+    # The incident flux of each source: through an empty stack of the background.
+    empty = _stack(torcwa, um, 0, period, (eps_b, eps_b), (theta, phi))
+    quads = []
+    reflected = 0.0
+    for amplitude in ([1.0, 0.0], [0.0, 1.0]):
+        empty.source_planewave(amplitude=amplitude, direction="forward")
+        incident = _flux(empty.field_xy(-1, coords[:1], coords[:1])).mean()
+        sim.source_planewave(amplitude=amplitude, direction="forward")
+        sz = _flux(sim.field_xy(1, coords, coords, z_prop=design.depth)) / incident
+        quads.append(sz.reshape(2, samples, 2, samples).mean(dim=(1, 3)) / 4.0)
+        top = _flux(sim.field_xy(-1, coords, coords, z_prop=0.0)) / incident
+        reflected = reflected + 0.5 * (1.0 - top.mean())
+    return torch.stack(quads), reflected
 
-    def solve(lam: float, theta: float, phi: float) -> tuple[np.ndarray, float]:
-        um = _off_grazing(lam, period, design) / 1000.0
-        eps_p, eps_b, eps_s = _permittivities(design, lam)
-        layer = torch.tensor(eps_b + (eps_p - eps_b) * fine.T, dtype=torch.complex128)  # [x, y]
-        sim = _stack(torcwa, um, order, period, (eps_b, eps_s), (theta, phi), design, layer)
-        # The incident flux of each source: through an empty stack of the background.
-        empty = _stack(torcwa, um, 0, period, (eps_b, eps_b), (theta, phi))
-        quads = np.zeros((2, 2, 2))
-        reflected = 0.0
-        for p, amplitude in enumerate(([1.0, 0.0], [0.0, 1.0])):
-            empty.source_planewave(amplitude=amplitude, direction="forward")
-            incident = float(_flux(empty.field_xy(-1, coords[:1], coords[:1])).mean())
-            sim.source_planewave(amplitude=amplitude, direction="forward")
-            sz = _flux(sim.field_xy(1, coords, coords, z_prop=design.depth)) / incident
-            quads[p] = sz.reshape(2, samples, 2, samples).mean(axis=(1, 3)) / 4.0
-            top = _flux(sim.field_xy(-1, coords, coords, z_prop=0.0)) / incident
-            reflected += 0.5 * (1.0 - float(top.mean()))
-        return quads, reflected
 
-    return solve, (2 * order + 1) ** 2
+def _fine_density(design: RouterDesign, density: Any) -> Any:
+    """:func:`_fine_grid` of a density tensor (the same sampling, differentiable)."""
+    rows, cols = design.grid.shape
+    if tuple(density.shape) != (rows, cols):
+        raise FullwaveError(f"density of shape {tuple(density.shape)} for a {rows}x{cols} design")
+    up = max(1, math.ceil(256 / max(rows, cols)))
+    return density.repeat_interleave(up, 0).repeat_interleave(up, 1)
 
 
 def _fmmax_solver(
@@ -535,11 +568,11 @@ def _stack(torcwa, um, order, period, media, angles, design=None, layer=None):
     return sim
 
 
-def _flux(fields) -> np.ndarray:
+def _flux(fields) -> Any:
     """``(y, x)`` time-averaged z Poynting flux ``0.5 Re(Ex Hy* - Ey Hx*)`` of torcwa's fields
-    (``[x, y]`` arrays)."""
+    (``[x, y]`` tensors), a tensor."""
     (ex, ey, _), (hx, hy, _) = fields
-    return (0.5 * (ex * hy.conj() - ey * hx.conj()).real).numpy().T
+    return (0.5 * (ex * hy.conj() - ey * hx.conj()).real).T
 
 
 def band_efficiencies(transmission: Any, wavelengths: Any) -> dict[str, Any]:

@@ -192,10 +192,14 @@ def difference_chart(
             xs, col = c["photons"], colour[c["candidate"]]
             cross = c["crossover"]
             point = cross["crossover"]
-            where = "never" if point is None else (
-                "always" if point == float("inf") else f"{float(f'{point:.2g}'):g}")
-            ax.plot(xs, c["mean"], "-o", ms=3, color=col,
-                    label=f"{c['candidate']} (wins below {where})")
+            where = (
+                "never"
+                if point is None
+                else ("always" if point == float("inf") else f"{float(f'{point:.2g}'):g}")
+            )
+            ax.plot(
+                xs, c["mean"], "-o", ms=3, color=col, label=f"{c['candidate']} (wins below {where})"
+            )
             ax.fill_between(xs, c["low"], c["high"], color=col, alpha=0.18, lw=0)
             if point is not None and point != float("inf"):
                 lo = cross["low"] if cross["low"] > 0 else xs[0]

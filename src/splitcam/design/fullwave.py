@@ -1,0 +1,195 @@
+"""Metasurface routers designed through Maxwell's equations for the image they give.
+
+The chain, every step differentiable (PyTorch autograd through torcwa's RCWA):
+
+1. **Design variables → densities.** A latent array ``theta`` (one value per cell of the
+   layer) goes through a sigmoid into [0, 1], a conic filter of radius ``r`` cells (periodic,
+   as the metasurface is) and a tanh projection of sharpness ``beta`` about 0.5: the standard
+   filter-and-project scheme of density-based inverse design (Wang, Lazarov & Sigmund,
+   *On projection methods, convergence and robust formulations in topology optimization*,
+   Struct. Multidisc. Optim. 43, 2011). The filter removes features narrower than about its
+   radius, so ``r`` times the cell size is the design's minimum feature size; raising ``beta``
+   over the run drives the densities to 0 and 1, and the reported design is the projection
+   thresholded at 0.5 (:meth:`FullwaveDesign.binary`), solved again as a binary layer.
+2. **Densities → spectra.** :func:`splitcam.physics.fullwave.torcwa_quadrants`: the light of
+   each wavelength crossing each pixel quadrant at the monitor depth, averaged over the two
+   polarisations and over the directions of a lens's cone (normal incidence by default).
+3. **Spectra → RGB kernels.** The reduction of :class:`splitcam.patterns.SpectralPattern`
+   (the nearest-copy rule, then the scene basis of linear sRGB), written here in torch:
+   :func:`rgb_kernels`, checked against the pattern class.
+4. **Kernels → image error.** The closed-form LMMSE error of those kernels
+   (:func:`splitcam.recon.closed_form.closed_form_mse`) at a photon-model exposure, with the
+   linear-light image statistics: the expected error of the reconstruction a user would get,
+   at the exposure the router is meant for.
+
+A density of 1 is the pillar material, 0 the background (the permittivity is interpolated
+linearly in between, as :class:`~splitcam.physics.fullwave.RouterDesign` does).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import torch
+
+from ..patterns.spectral import scene_basis
+from ..physics.fullwave import FullwaveError, RouterDesign, torcwa_quadrants
+from ..physics.noise import Exposure
+from ..physics.sensor import pixel_kernels
+from ..recon.closed_form import closed_form_mse, shipped_image_statistics
+
+__all__ = ["FullwaveDesign", "conic_filter", "project", "rgb_kernels"]
+
+
+def conic_filter(x: torch.Tensor, radius: float) -> torch.Tensor:
+    """``x`` ``(rows, cols)`` averaged with weights ``max(0, radius - distance)`` over the
+    cells within ``radius`` (in cells), wrapping around the edges (the layer is periodic).
+    Keeps the mean and maps a constant to itself; radius below 1 returns ``x``."""
+    if radius < 1:
+        return x
+    reach = int(math.ceil(radius)) - 1 if float(radius).is_integer() else int(radius)
+    offsets = torch.arange(-reach, reach + 1, dtype=x.dtype)
+    dist = torch.sqrt(offsets[:, None] ** 2 + offsets[None, :] ** 2)
+    weights = torch.clamp(radius - dist, min=0.0)
+    weights = weights / weights.sum()
+    padded = torch.nn.functional.pad(x[None, None], (reach,) * 4, mode="circular")
+    return torch.nn.functional.conv2d(padded, weights[None, None])[0, 0]
+
+
+def project(x: torch.Tensor, beta: float, eta: float = 0.5) -> torch.Tensor:
+    """The tanh projection of densities ``x`` about ``eta`` with sharpness ``beta``: 0 → 0,
+    1 → 1, ``eta`` → ``eta``; a step at ``eta`` as ``beta`` grows. ``beta`` 0: ``x``."""
+    if beta <= 0:
+        return x
+    a, b = math.tanh(beta * eta), math.tanh(beta * (1.0 - eta))
+    return (a + torch.tanh(beta * (x - eta))) / (a + b)
+
+
+def rgb_kernels(transmission: torch.Tensor, wavelengths: Sequence[float]) -> torch.Tensor:
+    """The RGB splitter kernels ``(4, 3, 3, 3)`` (layout ``[[0, 1], [2, 3]]``) of a 2x2 router
+    whose period sends ``transmission[i, j, l]`` of wavelength ``l`` to pixel ``(i, j)``: the
+    reduction of :meth:`splitcam.patterns.SpectralPattern.from_transmission` (every pixel
+    sends the same shares to the nearest copy of each pixel, split evenly where copies tie)
+    and :meth:`~splitcam.patterns.SpectralPattern.to_pattern` (the scene basis), in torch so
+    that gradients reach the transmissions."""
+    t = transmission
+    if t.shape[:2] != (2, 2) or t.ndim != 3 or t.shape[2] != len(wavelengths):
+        raise FullwaveError(
+            f"transmission must be (2, 2, {len(wavelengths)}), got {tuple(t.shape)}"
+        )
+    basis = torch.from_numpy(scene_basis(list(wavelengths))).to(t)  # (L, 3)
+    rgb = torch.einsum("ijl,lc->ijc", t, basis)  # (2, 2, 3): each pixel's share per colour
+    kernels = []
+    for q in np.ndindex(2, 2):
+        k = t.new_zeros(3, 3, 3)
+        for p in np.ndindex(2, 2):
+            copies = _nearest_copies(q, p)
+            for dy, dx in copies:
+                k[:, dy + 1, dx + 1] = k[:, dy + 1, dx + 1] + rgb[p] / len(copies)
+        kernels.append(k)
+    return torch.stack(kernels)
+
+
+def _nearest_copies(q: tuple[int, int], p: tuple[int, int]) -> list[tuple[int, int]]:
+    """Offsets from pixel ``q`` to the nearest copies of pixel ``p`` in a 2x2 period."""
+    ys = [d for d in (-1, 0, 1) if (q[0] + d) % 2 == p[0]]
+    xs = [d for d in (-1, 0, 1) if (q[1] + d) % 2 == p[1]]
+    return [(dy, dx) for dy in ys for dx in xs]
+
+
+@dataclass
+class FullwaveDesign:
+    """A 2x2-pixel router whose layer is designed for the LMMSE image error at one exposure.
+
+    Args:
+        geometry: The stack (pitch, thickness, depth, materials); its grid sets the number of
+            design cells and is where :meth:`start` begins from.
+        wavelengths: nm, where the spectra are solved (the band's ends and middle at least).
+        photons: The exposure designed for (photo-electrons of a lossless full-light pixel).
+        read_noise: Electrons.
+        directions: ``(polar angle, azimuth, weight)`` of the incident light
+            (:func:`splitcam.physics.fullwave.cone_directions`; default normal incidence).
+        order: torcwa's Fourier order per axis.
+        samples: Flux grid points per pixel and axis.
+        radius: The conic filter's radius in cells (the minimum feature, about radius x cell).
+    """
+
+    geometry: RouterDesign
+    wavelengths: Sequence[float] = (450.0, 550.0, 650.0)
+    photons: float = 100.0
+    read_noise: float = 2.0
+    directions: Sequence[tuple[float, float, float]] = ((0.0, 0.0, 1.0),)
+    order: int = 5
+    samples: int = 16
+    radius: float = 2.0
+    _stats: Any = field(default=None, init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        if not self.photons > 0:
+            raise FullwaveError(
+                f"the target exposure must be > 0 photo-electrons, got {self.photons}"
+            )
+        if self.radius < 0:
+            raise FullwaveError(f"the filter radius must be >= 0 cells, got {self.radius}")
+        self._stats = shipped_image_statistics("linear")
+
+    def start(self) -> torch.Tensor:
+        """Design variables whose densities (``beta`` 0, no filter) are the geometry's grid,
+        moved a little off 0 and 1 so that the sigmoid can move them."""
+        g = np.clip(self.geometry.grid, 0.02, 0.98)
+        return torch.from_numpy(np.log(g / (1 - g)))
+
+    def densities(self, theta: torch.Tensor, beta: float) -> torch.Tensor:
+        """Sigmoid, conic filter, projection: the layer's densities in [0, 1]."""
+        return project(conic_filter(torch.sigmoid(theta), self.radius), beta)
+
+    def binary(self, theta: torch.Tensor, beta: float) -> np.ndarray:
+        """The fabricable design: the projected densities thresholded at 0.5 (0/1 cells)."""
+        with torch.no_grad():
+            return (self.densities(theta, beta) >= 0.5).to(torch.float64).numpy()
+
+    def transmission(self, density: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """``(2, 2, L)`` transmission into each pixel (mean of the polarisations and the
+        directions) and ``(L,)`` reflection, differentiable in ``density``."""
+        weights = torch.tensor([w for _, _, w in self.directions], dtype=torch.float64)
+        weights = weights / weights.sum()
+        spectra, reflection = [], []
+        for lam in self.wavelengths:
+            t = density.new_zeros(2, 2)
+            r = density.new_zeros(())
+            for (theta, phi, _), w in zip(self.directions, weights, strict=True):
+                quads, refl = torcwa_quadrants(
+                    self.geometry, density, lam, theta, phi, self.order, self.samples
+                )
+                t = t + w * quads.mean(0)
+                r = r + w * refl
+            spectra.append(t)
+            reflection.append(r)
+        return torch.stack(spectra, dim=-1), torch.stack(reflection)
+
+    def image_error(self, transmission: torch.Tensor) -> torch.Tensor:
+        """The closed-form LMMSE error (per colour, linear light in [0, 1]) of the router with
+        these spectra at the design exposure."""
+        kernels = pixel_kernels(
+            rgb_kernels(transmission, self.wavelengths), np.arange(4).reshape(2, 2)
+        )
+        exposure = Exposure(self.photons, read_noise=self.read_noise)
+        return closed_form_mse(kernels, exposure, statistics=self._stats)
+
+    def objective(self, theta: torch.Tensor, beta: float) -> tuple[torch.Tensor, dict]:
+        """The design loss (the image error in dB: ``10 log10 mse``, lower is better) and what
+        a report shows: the error, the PSNR it means, each pixel's share of white light."""
+        t, reflection = self.transmission(self.densities(theta, beta))
+        mse = self.image_error(t)
+        loss = 10.0 * torch.log10(mse)
+        info = {
+            "mse": float(mse.detach()),
+            "psnr": float(-loss.detach()),
+            "transmission": t.detach().numpy().tolist(),
+            "reflection": float(reflection.detach().mean()),
+        }
+        return loss, info

@@ -1,0 +1,156 @@
+"""Routers designed through Maxwell's equations (splitcam.design.fullwave): the filter and the
+projection, the torch reduction against the pattern classes, the image error against the
+closed-form LMMSE of the same pattern, and gradients against finite differences."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import torch
+
+pytest.importorskip("torcwa")
+
+from splitcam.design.fullwave import FullwaveDesign, conic_filter, project, rgb_kernels
+from splitcam.patterns.spectral import SpectralPattern
+from splitcam.physics.fullwave import (
+    FullwaveError,
+    RouterDesign,
+    quadrant_spectra,
+    torcwa_quadrants,
+)
+
+
+def test_the_conic_filter_keeps_the_mean_and_spreads_a_cell_over_its_radius():
+    x = torch.zeros(8, 8, dtype=torch.float64)
+    x[0, 0] = 1.0  # at the corner: the filter wraps around
+    y = conic_filter(x, 2.0)
+    assert float(y.sum()) == pytest.approx(1.0)
+    # weights max(0, 2 - distance): centre 2, edge neighbours 1, diagonal 2 - sqrt 2
+    total = 2 + 4 * 1 + 4 * (2 - math.sqrt(2))
+    assert float(y[0, 0]) == pytest.approx(2 / total)
+    assert float(y[7, 0]) == pytest.approx(1 / total)  # wrapped
+    assert float(y[7, 7]) == pytest.approx((2 - math.sqrt(2)) / total)
+    assert float(y[2, 0]) == 0.0  # distance 2: outside
+    const = torch.full((5, 7), 0.3, dtype=torch.float64)
+    assert torch.allclose(conic_filter(const, 2.5), const)
+    assert conic_filter(x, 0.5) is x
+
+
+def test_the_projection_fixes_0_eta_and_1_and_steepens():
+    x = torch.tensor([0.0, 0.25, 0.5, 0.75, 1.0], dtype=torch.float64)
+    for beta in (1.0, 8.0, 64.0):
+        y = project(x, beta)
+        assert float(y[0]) == pytest.approx(0.0, abs=1e-12)
+        assert float(y[2]) == pytest.approx(0.5)
+        assert float(y[4]) == pytest.approx(1.0)
+        assert bool((y[1:] >= y[:-1]).all())
+    assert float(project(x, 64.0)[1]) < 1e-6 and float(project(x, 64.0)[3]) > 1 - 1e-6
+    assert torch.equal(project(x, 0.0), x)
+
+
+def test_rgb_kernels_are_the_spectral_patterns_reduction():
+    """The torch reduction against SpectralPattern.from_transmission(...).to_pattern(), the
+    numpy path every pattern file takes."""
+    rng = np.random.default_rng(2)
+    lams = [420.0, 480.0, 550.0, 610.0, 680.0]
+    t = rng.random((2, 2, len(lams)))
+    t /= t.sum(axis=(0, 1), keepdims=True) * 1.05  # a little light lost
+    ours = rgb_kernels(torch.from_numpy(t), lams).numpy()
+    pattern = SpectralPattern.from_transmission("x", lams, t).to_pattern()
+    assert pattern.layout.tolist() == [[0, 1], [2, 3]]
+    np.testing.assert_allclose(ours, np.asarray(pattern.kernels), atol=1e-12)
+    with pytest.raises(FullwaveError, match="transmission must be"):
+        rgb_kernels(torch.zeros(2, 2, 3), lams)
+
+
+def test_the_image_error_is_the_closed_form_lmmse_of_the_pattern():
+    from splitcam.physics.noise import Exposure
+    from splitcam.recon.closed_form import closed_form_mse, shipped_image_statistics
+
+    rng = np.random.default_rng(3)
+    lams = [450.0, 550.0, 650.0]
+    t = rng.random((2, 2, 3)) / 4.2
+    design = FullwaveDesign(RouterDesign(np.eye(4)), wavelengths=lams, photons=50.0)
+    ours = float(design.image_error(torch.from_numpy(t)))
+    pattern = SpectralPattern.from_transmission("x", lams, t).to_pattern()
+    theirs = float(
+        closed_form_mse(
+            pattern, Exposure(50.0, read_noise=2.0), statistics=shipped_image_statistics("linear")
+        )
+    )
+    assert ours == pytest.approx(theirs, rel=1e-9)
+    # more light, less error
+    brighter = FullwaveDesign(RouterDesign(np.eye(4)), wavelengths=lams, photons=500.0)
+    assert float(brighter.image_error(torch.from_numpy(t))) < ours
+
+
+def test_the_solve_is_the_spectra_solve_and_its_gradient_is_the_finite_difference():
+    """torcwa_quadrants is what quadrant_spectra solves; its gradient with respect to the
+    cell densities matches central differences."""
+    rng = np.random.default_rng(1)
+    grid = rng.random((4, 4))
+    design = RouterDesign(grid, thickness=0.4, depth=0.8)
+    x = torch.tensor(grid, requires_grad=True)
+    quads, _ = torcwa_quadrants(design, x, 550.0, 0.1, 0.3, order=2, samples=8)
+    spectra = quadrant_spectra(design, [550.0], order=2, samples=8, directions=[(0.1, 0.3, 1.0)])
+    np.testing.assert_allclose(
+        quads.mean(0).detach().numpy(), spectra["transmission"][..., 0], atol=1e-12
+    )
+    loss = quads.mean(0)[0, 1] - 0.5 * quads.mean(0)[1, 0]
+    loss.backward()
+    h = 1e-6
+    for i, j in [(0, 0), (1, 2), (3, 1)]:
+        values = []
+        for sign in (1, -1):
+            y = torch.tensor(grid)
+            y[i, j] += sign * h
+            with torch.no_grad():
+                q, _ = torcwa_quadrants(design, y, 550.0, 0.1, 0.3, order=2, samples=8)
+            values.append(float(q.mean(0)[0, 1] - 0.5 * q.mean(0)[1, 0]))
+        fd = (values[0] - values[1]) / (2 * h)
+        assert float(x.grad[i, j]) == pytest.approx(fd, rel=1e-5, abs=1e-9)
+
+
+def test_the_whole_objective_differentiates_to_its_finite_difference():
+    """Design variables → filter → projection → RCWA → kernels → LMMSE error: one gradient,
+    checked against central differences; and a few steps of gradient descent lower it."""
+    rng = np.random.default_rng(4)
+    geometry = RouterDesign(rng.random((6, 6)), thickness=0.5, depth=1.0)
+    design = FullwaveDesign(
+        geometry, wavelengths=[460.0, 620.0], photons=100.0, order=2, samples=8, radius=1.5
+    )
+    theta = design.start().clone().requires_grad_(True)
+    loss, info = design.objective(theta, beta=2.0)
+    loss.backward()
+    assert info["psnr"] == pytest.approx(-float(loss))
+    h = 1e-5
+    for i, j in [(0, 0), (2, 3), (5, 1)]:
+        values = []
+        for sign in (1, -1):
+            y = design.start().clone()
+            y[i, j] += sign * h
+            with torch.no_grad():
+                values.append(float(design.objective(y, beta=2.0)[0]))
+        fd = (values[0] - values[1]) / (2 * h)
+        assert float(theta.grad[i, j]) == pytest.approx(fd, rel=1e-4, abs=1e-8)
+    opt = torch.optim.Adam([theta], lr=0.2)
+    first = float(loss)
+    for _ in range(5):
+        opt.zero_grad()
+        loss, _ = design.objective(theta, beta=2.0)
+        loss.backward()
+        opt.step()
+    assert float(design.objective(theta, beta=2.0)[0]) < first
+    binary = design.binary(theta, beta=2.0)
+    assert set(np.unique(binary)) <= {0.0, 1.0}
+
+
+def test_bad_settings_are_refused():
+    with pytest.raises(FullwaveError, match="exposure must be > 0"):
+        FullwaveDesign(RouterDesign(np.eye(4)), photons=0.0)
+    with pytest.raises(FullwaveError, match="radius"):
+        FullwaveDesign(RouterDesign(np.eye(4)), radius=-1)
+    with pytest.raises(FullwaveError, match="density of shape"):
+        torcwa_quadrants(RouterDesign(np.eye(4)), torch.zeros(3, 3, dtype=torch.float64), 500.0)
