@@ -40,6 +40,8 @@ from typing import Any
 
 import numpy as np
 
+from ..io import appending, read_json_lines
+
 __all__ = [
     "MATERIALS",
     "SOLVERS",
@@ -344,16 +346,15 @@ class _SolveLog:
         self.setting = hashlib.sha256(json.dumps(setting, sort_keys=True).encode()).hexdigest()[:16]
         self.path = Path(path)
         self.done: dict[tuple[str, str, str], tuple[np.ndarray, float, float]] = {}
-        if self.path.is_file():
-            for line in self.path.read_text(encoding="utf-8").splitlines():
-                try:
-                    rec = json.loads(line)
-                    if rec["setting"] == self.setting:
-                        key = self._key(rec["wavelength"], rec["theta"], rec["phi"])
-                        quads = np.asarray(rec["quadrants"], dtype=np.float64).reshape(2, 2, 2)
-                        self.done[key] = (quads, float(rec["reflection"]), float(rec["seconds"]))
-                except (ValueError, KeyError, TypeError):
-                    continue  # a line cut short by an interrupted run, or not ours
+        rows, _ = read_json_lines(self.path)  # a line cut short by a killed run is skipped
+        for _, _, rec in rows:
+            try:
+                if rec["setting"] == self.setting:
+                    key = self._key(rec["wavelength"], rec["theta"], rec["phi"])
+                    quads = np.asarray(rec["quadrants"], dtype=np.float64).reshape(2, 2, 2)
+                    self.done[key] = (quads, float(rec["reflection"]), float(rec["seconds"]))
+            except (ValueError, KeyError, TypeError):
+                continue  # not a solve of this module
 
     @staticmethod
     def _key(lam: float, theta: float, phi: float) -> tuple[str, str, str]:
@@ -375,8 +376,12 @@ class _SolveLog:
             "seconds": round(seconds, 2),
         }
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        with self.path.open("a", encoding="utf-8") as f:
-            f.write(json.dumps(rec) + "\n")
+        # After a line cut short by a killed run, start a new line rather than extend it.
+        cut = (
+            self.path.is_file() and self.path.stat().st_size > 0 and not _ends_in_newline(self.path)
+        )
+        with appending(self.path) as f:
+            f.write(("\n" if cut else "") + json.dumps(rec) + "\n")
             f.flush()
             os.fsync(f.fileno())
         self.done[self._key(lam, theta, phi)] = (np.asarray(quads), float(reflected), seconds)
@@ -529,6 +534,12 @@ def _fmmax_solver(
         return quads, float(-top.mean())
 
     return solve, int(n)
+
+
+def _ends_in_newline(path: Path) -> bool:
+    with path.open("rb") as f:
+        f.seek(-1, os.SEEK_END)
+        return f.read(1) == b"\n"
 
 
 def _off_grazing(lam: float, period: float, design: RouterDesign) -> float:
