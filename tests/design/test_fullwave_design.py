@@ -154,3 +154,88 @@ def test_bad_settings_are_refused():
         FullwaveDesign(RouterDesign(np.eye(4)), radius=-1)
     with pytest.raises(FullwaveError, match="density of shape"):
         torcwa_quadrants(RouterDesign(np.eye(4)), torch.zeros(3, 3, dtype=torch.float64), 500.0)
+
+
+def test_the_design_command_writes_a_solved_binary_design_and_continues_a_stopped_run(
+    tmp_path, capsys, monkeypatch
+):
+    """`optics rcwa-design` from noise: the binary design, its spectra and pattern file, a
+    report; a run stopped after one step and started again ends where an unstopped run ends
+    (the design variables and Adam's moments are saved every step)."""
+    import splitcam.design.fullwave as fd
+    from splitcam import patterns
+    from splitcam.cli import main
+
+    args = [
+        "optics",
+        "rcwa-design",
+        "noise:6x6",
+        "--steps",
+        "3",
+        "--order",
+        "1",
+        "--samples",
+        "8",
+        "--feature",
+        "0.4",
+        "--wavelengths",
+        "460,620",
+        "--quiet",
+    ]
+    assert main([*args, "--out", str(tmp_path / "whole")]) == 0
+    files = {p.name for p in (tmp_path / "whole").iterdir()}
+    assert {
+        "whole.csv",
+        "whole-density.csv",
+        "whole-spectra.csv",
+        "whole.toml",
+        "report.md",
+        "report.png",
+        "state.json",
+        "state.safetensors",
+    } <= files
+    binary = np.loadtxt(tmp_path / "whole" / "whole.csv", delimiter=",")
+    assert binary.shape == (6, 6) and set(np.unique(binary)) <= {0.0, 1.0}
+    assert (
+        "designed through RCWA" in patterns.get(str(tmp_path / "whole" / "whole.toml")).provenance
+    )
+    assert "LMMSE PSNR at N = 100" in capsys.readouterr().out
+
+    real = fd.FullwaveDesign.objective
+    count = {"n": 0}
+
+    def stopping(self, theta, beta):
+        count["n"] += 1
+        if count["n"] == 2:
+            raise KeyboardInterrupt
+        return real(self, theta, beta)
+
+    monkeypatch.setattr(fd.FullwaveDesign, "objective", stopping)
+    assert main([*args, "--out", str(tmp_path / "stopped")]) == 130  # Ctrl-C
+    assert "interrupted" in capsys.readouterr().err
+    assert not (tmp_path / "stopped" / "stopped.csv").exists()
+    monkeypatch.setattr(fd.FullwaveDesign, "objective", real)
+    assert main([*args, "--out", str(tmp_path / "stopped")]) == 0
+    a = np.loadtxt(tmp_path / "whole" / "whole-density.csv", delimiter=",")
+    b = np.loadtxt(tmp_path / "stopped" / "stopped-density.csv", delimiter=",")
+    np.testing.assert_allclose(a, b, atol=1e-4)
+    # Another setting into the same folder is refused, not mixed in.
+    assert main([*args[:-1], "--lr", "0.5", "--quiet", "--out", str(tmp_path / "whole")]) == 1
+    assert "other settings" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    ("extra", "message"),
+    [
+        (["noise:6x6", "--feature", "0.1"], "below the grid step"),
+        (["noise:6x6", "--feature", "0.4", "--photons", "0"], "exposure must be > 0"),
+        (["noise:1x1"], "at least 2x2"),
+        (["nowhere.csv"], "cannot read design"),
+    ],
+)
+def test_bad_design_settings_are_one_line_and_write_nothing(tmp_path, capsys, extra, message):
+    from splitcam.cli import main
+
+    out = tmp_path / "o"
+    assert main(["optics", "rcwa-design", *extra, "--out", str(out), "--quiet"]) == 1
+    assert message in capsys.readouterr().err and not out.exists()

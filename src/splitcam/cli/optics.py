@@ -49,10 +49,13 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--out: the front's trial of highest PSNR)",
     )
     p.set_defaults(handler=run)
-    # `splitcam optics rcwa DESIGN.csv`: the full-wave solver, in its own module.
-    from . import rcwa
+    # `splitcam optics rcwa DESIGN.csv` (the full-wave solver) and `optics rcwa-design` (a
+    # layer designed through it), each in its own module.
+    from . import rcwa, rcwa_design
 
-    rcwa.register(p.add_subparsers(dest="optics_command", metavar="{rcwa}"))
+    sub = p.add_subparsers(dest="optics_command", metavar="{rcwa,rcwa-design}")
+    rcwa.register(sub)
+    rcwa_design.register(sub)
 
 
 #: The settings a metasurface search draws: setting -> (option attribute, default).

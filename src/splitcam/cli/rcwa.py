@@ -29,18 +29,7 @@ def register(optics_sub: argparse._SubParsersAction) -> None:
         "--name",
         help="the pattern's name, and of the files written (default: the design file's stem)",
     )
-    p.add_argument("--pitch", type=float, default=1.0, help="pixel pitch, µm (default 1)")
-    p.add_argument("--thickness", type=float, default=0.6, help="layer, µm (default 0.6)")
-    p.add_argument("--depth", type=float, default=2.4, help="monitor below it, µm (default 2.4)")
-    p.add_argument("--pillar", default="Si3N4", help="material or index (default Si3N4)")
-    p.add_argument("--background", default="vacuum", help="material or index (default vacuum)")
-    p.add_argument("--substrate", default="SiO2", help="material or index (default SiO2)")
-    p.add_argument(
-        "--wavelengths",
-        default="400:700:10",
-        help="nm: FIRST:LAST:STEP or a list A,B,C (default 400:700:10)",
-    )
-    p.add_argument("--order", type=int, default=9, help="Fourier order per axis (default 9)")
+    add_stack_options(p, wavelengths="400:700:10", order=9)
     p.add_argument(
         "--solver",
         choices=["torcwa", "fmmax-fft", "fmmax-jones"],
@@ -79,6 +68,40 @@ def register(optics_sub: argparse._SubParsersAction) -> None:
     p.set_defaults(handler=run)
 
 
+def add_stack_options(p: argparse.ArgumentParser, *, wavelengths: str, order: int) -> None:
+    """The layer stack, the wavelengths and the Fourier order: the options of every command
+    that solves a router (``optics rcwa``, ``optics rcwa-design``)."""
+    p.add_argument("--pitch", type=float, default=1.0, help="pixel pitch, µm (default 1)")
+    p.add_argument("--thickness", type=float, default=0.6, help="layer, µm (default 0.6)")
+    p.add_argument("--depth", type=float, default=2.4, help="monitor below it, µm (default 2.4)")
+    p.add_argument("--pillar", default="Si3N4", help="material or index (default Si3N4)")
+    p.add_argument("--background", default="vacuum", help="material or index (default vacuum)")
+    p.add_argument("--substrate", default="SiO2", help="material or index (default SiO2)")
+    p.add_argument(
+        "--wavelengths",
+        default=wavelengths,
+        help=f"nm: FIRST:LAST:STEP or a list A,B,C (default {wavelengths})",
+    )
+    p.add_argument(
+        "--order", type=int, default=order, help=f"Fourier order per axis (default {order})"
+    )
+
+
+def stack_of(args: argparse.Namespace, grid):
+    """The :class:`~splitcam.physics.fullwave.RouterDesign` of :func:`add_stack_options`."""
+    from ..physics.fullwave import RouterDesign
+
+    return RouterDesign(
+        grid,
+        pitch=args.pitch,
+        thickness=args.thickness,
+        depth=args.depth,
+        pillar=_material(args.pillar),
+        background=_material(args.background),
+        substrate=_material(args.substrate),
+    )
+
+
 def wavelengths_of(text: str) -> list[float]:
     """``400:700:10`` or ``450,540,650`` as a list of nm."""
     try:
@@ -102,7 +125,6 @@ def run(args: argparse.Namespace) -> int:
     from ..patterns.files import save_transmission
     from ..patterns.spectral import SpectralPattern
     from ..physics.fullwave import (
-        RouterDesign,
         check_solver,
         quadrant_spectra,
         read_design,
@@ -111,15 +133,7 @@ def run(args: argparse.Namespace) -> int:
     check_solver(args.solver)  # a missing extra, before anything is read or shown
     lams = wavelengths_of(args.wavelengths)
     grid = read_design(args.design)
-    design = RouterDesign(
-        grid,
-        pitch=args.pitch,
-        thickness=args.thickness,
-        depth=args.depth,
-        pillar=_material(args.pillar),
-        background=_material(args.background),
-        substrate=_material(args.substrate),
-    )
+    design = stack_of(args, grid)
     name = args.name or Path(args.design).stem
     stem = re.sub(r"[^A-Za-z0-9._-]+", "_", name).strip("._") or "router"
     # The pattern's checks (wavelength range) before minutes of solving.

@@ -42,7 +42,7 @@ from ..physics.noise import Exposure
 from ..physics.sensor import pixel_kernels
 from ..recon.closed_form import closed_form_mse, shipped_image_statistics
 
-__all__ = ["FullwaveDesign", "conic_filter", "project", "rgb_kernels"]
+__all__ = ["FullwaveDesign", "beta_at", "conic_filter", "project", "rgb_kernels", "run_design"]
 
 
 def conic_filter(x: torch.Tensor, radius: float) -> torch.Tensor:
@@ -193,3 +193,111 @@ class FullwaveDesign:
             "reflection": float(reflection.detach().mean()),
         }
         return loss, info
+
+
+STATE_FORMAT = "splitcam-fullwave-design"
+
+
+def beta_at(step: int, steps: int, beta_start: float, beta_end: float) -> float:
+    """The projection's sharpness at ``step`` of ``steps``: geometric from ``beta_start`` to
+    ``beta_end`` (the usual continuation: the design settles before it is forced binary)."""
+    if steps <= 1:
+        return beta_end
+    return beta_start * (beta_end / beta_start) ** (step / (steps - 1))
+
+
+def run_design(
+    design: FullwaveDesign,
+    out: Any,
+    *,
+    steps: int,
+    lr: float = 0.1,
+    beta_start: float = 2.0,
+    beta_end: float = 32.0,
+    settings: dict | None = None,
+    progress: Any = None,
+) -> dict[str, Any]:
+    """Gradient descent (Adam) on :meth:`FullwaveDesign.objective`, saved after every step in
+    ``out/state.safetensors`` + ``state.json`` (design variables, optimiser moments, history):
+    the same call after an interruption continues from the last step saved. ``settings``: what
+    the state must match to be continued (a run of other settings in ``out`` is refused).
+
+    Returns ``{"theta", "history", "beta"}``; ``history``: one row per step (``step``, ``beta``,
+    ``psnr``, ``mse``, ``reflection``, ``seconds``).
+
+    Raises:
+        FullwaveError: Steps below 1, a learning rate or sharpness of 0 or less, or ``out``
+            holding a run of other settings.
+    """
+    import time
+    from pathlib import Path
+
+    from ..io.tensorfiles import load_pair, paired_paths, save_pair
+
+    if steps < 1 or not lr > 0 or not 0 < beta_start <= beta_end:
+        raise FullwaveError(
+            f"steps >= 1, lr > 0 and 0 < beta start <= beta end, got {steps}, {lr}, "
+            f"{beta_start}, {beta_end}"
+        )
+    out = Path(out)
+    settings = {**(settings or {}), "steps": steps, "lr": lr, "beta": [beta_start, beta_end]}
+    state_path = out / "state"
+    theta = design.start().clone().requires_grad_(True)
+    opt = torch.optim.Adam([theta], lr=lr)
+    history: list[dict] = []
+    if paired_paths(state_path)[1].exists():
+        tensors, meta, _ = load_pair(state_path, STATE_FORMAT, 1, "design state", FullwaveError)
+        if meta["settings"] != json_safe(settings):
+            raise FullwaveError(f"{out} holds a design run of other settings; give another folder")
+        with torch.no_grad():
+            theta.copy_(tensors["theta"])
+        history = meta["history"]
+        if history:
+            opt.state[theta] = {
+                "step": torch.tensor(float(len(history))),
+                "exp_avg": tensors["exp_avg"].clone(),
+                "exp_avg_sq": tensors["exp_avg_sq"].clone(),
+            }
+    for step in range(len(history), steps):
+        start = time.perf_counter()
+        beta = beta_at(step, steps, beta_start, beta_end)
+        opt.zero_grad()
+        loss, info = design.objective(theta, beta)
+        loss.backward()
+        opt.step()
+        history.append(
+            {
+                "step": step + 1,
+                "beta": round(beta, 4),
+                "psnr": info["psnr"],
+                "mse": info["mse"],
+                "reflection": info["reflection"],
+                "seconds": round(time.perf_counter() - start, 2),
+            }
+        )
+        moments = opt.state[theta]
+        save_pair(
+            state_path,
+            {
+                "theta": theta.detach(),
+                "exp_avg": moments["exp_avg"],
+                "exp_avg_sq": moments["exp_avg_sq"],
+            },
+            STATE_FORMAT,
+            1,
+            {"settings": json_safe(settings), "history": history},
+        )
+        if progress is not None:
+            progress(history[-1])
+    return {
+        "theta": theta.detach(),
+        "history": history,
+        "beta": beta_at(steps - 1, steps, beta_start, beta_end),
+    }
+
+
+def json_safe(value: Any) -> Any:
+    """``value`` as it reads back from JSON (tuples as lists, numbers as floats or ints)."""
+    import json
+
+    return json.loads(json.dumps(value))
