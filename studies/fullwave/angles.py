@@ -40,6 +40,7 @@ os.environ.setdefault("XLA_FLAGS", "--xla_cpu_multi_thread_eigen=false")
 
 import numpy as np
 
+from splitcam.io import write_text
 from splitcam.physics.fullwave import (
     RouterDesign,
     band_efficiencies,
@@ -94,6 +95,13 @@ def main() -> None:
     parser.add_argument("--stage", choices=["convergence", "angles", "all"], default="all")
     parser.add_argument("--out", type=Path, default=ROOT / "docs/results/fullwave/angles")
     parser.add_argument("--terms", type=int, help="the setting of the angles (default: chosen)")
+    parser.add_argument(
+        "--designs",
+        nargs="+",
+        choices=["zou", "best"],
+        default=["zou", "best"],
+        help="solve these designs (two runs, one design each, can share the folder)",
+    )
     args = parser.parse_args()
     import torch
 
@@ -104,11 +112,16 @@ def main() -> None:
     summary = json.loads(summary_path.read_text()) if summary_path.exists() else {}
     summary.setdefault("convergence", {})
     summary.setdefault("angles", {})
-    routers = designs()
+    routers = {k: v for k, v in designs().items() if k in args.designs}
 
     def save() -> None:
-        summary_path.write_text(json.dumps(summary, indent=1) + "\n", encoding="utf-8")
-        (args.out / "angles.md").write_text(tables(summary), encoding="utf-8")
+        # Several runs (--designs) may share the folder: keep what the others wrote since.
+        if summary_path.exists():
+            theirs = json.loads(summary_path.read_text())
+            for part in ("convergence", "angles"):
+                summary[part] = {**theirs.get(part, {}), **summary[part]}
+        write_text(summary_path, json.dumps(summary, indent=1) + "\n")
+        write_text(args.out / "angles.md", tables(summary))
 
     if args.stage in ("convergence", "all"):
         if "best/997" not in summary["convergence"]:

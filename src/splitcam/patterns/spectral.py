@@ -15,9 +15,9 @@ spectral sensor is an RGB sensor exactly for scenes whose spectra are linear in 
 sRGB values, ``S(x, l) = sum_c rgb_c(x) E_c(l)``. splitcam takes ``E_c`` from the spectral
 upsampling of Mallett & Yuksel (*Spectral Primary Decomposition for Rendering with sRGB
 Reflectance*, EGSR 2019; ``colour.recovery`` ships the three basis reflectances, which sum to 1
-at every wavelength and reproduce sRGB under D65): ``E_c = B_c * D65``, each scaled to one unit
-of photons on the grid, so that one unit of colour ``c`` is what the RGB model calls one unit of
-light of colour ``c`` (a bare pixel collects 1 of each; a sensor's kernels then keep summing to
+at every wavelength and reproduce sRGB under D65): ``E_c = B_c * D65``, each scaled to sum to 1 on
+the grid, so that one unit of colour ``c`` is what the RGB model calls one unit of light of
+colour ``c`` (a bare pixel collects 1 of each; a sensor's kernels then keep summing to
 at most 1 per colour). The RGB kernel of splitter ``s`` and colour ``c`` is then
 
     ``k[s, c] = sum_l kernels[s, l] * E_c(l)``,
@@ -64,7 +64,8 @@ def _basis(wavelengths: tuple[float, ...]) -> np.ndarray:
 def scene_basis(wavelengths: Any) -> np.ndarray:
     """The spectra ``E_c`` of one unit of linear sRGB red, green and blue on ``wavelengths``
     (nm), ``(L, 3)``: Mallett & Yuksel's basis reflectances under D65, each column summing to 1
-    (one unit of photons on the grid). See the module docstring.
+    (D65's spectral power: the weights are energy per
+    wavelength, summing to 1; see the module docstring). See the module docstring.
 
     Raises:
         PatternError: Wavelengths not increasing, or outside 380-780 nm.
