@@ -311,3 +311,47 @@ def test_difference_curves_band_the_mean_and_the_chart_draws_them(tmp_path) -> N
     assert path.stat().st_size > 10_000
     with pytest.raises(ValueError, match="per-image scores"):
         difference_curves({"a": {1.0: {"psnr": 1.0}}, "b": {1.0: {"psnr": 1.0}}}, [("a", "b")])
+
+
+def test_the_crossovers_are_stated_in_lux_for_a_camera(tmp_path) -> None:
+    """With a camera, each pooled crossover and its interval are also written in scene lux:
+    N divided by the camera's photo-electrons per lux."""
+    import json
+
+    import numpy as np
+
+    from splitcam.evaluation.exposure import two_figures, write_study
+    from splitcam.physics.radiometry import Camera
+
+    photons = [1.0, 10.0, 100.0, 1000.0]
+    names = [f"s/i{i}" for i in range(6)]
+    rng = np.random.default_rng(5)
+
+    def result(offset, slope):
+        per = {n: offset + slope * math.log10(n) + rng.normal(0, 0.3, 6) for n in photons}
+        return {
+            n: {
+                "psnr": float(v.mean()),
+                "ssim": 0.5,
+                "ciede2000": float(40 - v.mean()),
+                "per_image": {
+                    "psnr": v.tolist(),
+                    "ssim": [0.5] * 6,
+                    "ciede2000": (40 - v).tolist(),
+                },
+                "images": names,
+            }
+            for n, v in per.items()
+        }
+
+    camera = Camera(pitch_um=0.8, f_number=1.4, exposure_s=1 / 60, illuminant="A")
+    results = {"rgbw": result(10.0, 6.0), "router": result(13.0, 4.0)}
+    text = write_study(results, None, tmp_path, references=("rgbw",), camera=camera).read_text()
+    assert "## The crossovers in lux (pitch 0.8 µm, f/1.4, 1/60 s, A, white scene" in text
+    data = json.loads((tmp_path / "exposure.json").read_text())
+    pooled = next(
+        c for c in data["crossovers"] if c["scene_set"] == "all" and c["metric"] == "psnr"
+    )
+    assert pooled["lux"][0] == pytest.approx(pooled["crossover"] / camera.electrons_per_lux)
+    assert f"{two_figures(pooled['lux'][0])} lux [" in text
+    assert data["camera"]["electrons_per_lux"] == pytest.approx(camera.electrons_per_lux)

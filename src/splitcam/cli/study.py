@@ -96,6 +96,16 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--tol", type=float, default=0.0, help="breakeven: differences within this count as ties"
     )
+    lux = p.add_argument_group(
+        "exposure: the crossovers in lux (splitcam.physics.radiometry: the camera equation, "
+        "a white scene, a lossless pixel)"
+    )
+    lux.add_argument("--pitch", type=float, default=1.0, help="pixel pitch, µm (default 1)")
+    lux.add_argument("--f-number", type=float, default=2.0, help="the lens (default 2)")
+    lux.add_argument("--exposure-time", type=float, default=1 / 30, help="seconds (default 1/30)")
+    lux.add_argument(
+        "--illuminant", default="D65", help="D65 (default), A (tungsten) or LED (white LED)"
+    )
     p.add_argument("--out", help="default results/exposure or results/breakeven")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.set_defaults(handler=run)
@@ -108,9 +118,11 @@ def _command(args: argparse.Namespace) -> str:
 def run(args: argparse.Namespace) -> int:
     from ..data.testsets import load_datasets
     from ..evaluation.exposure import default_exposures
+    from ..physics.radiometry import Camera
 
     if args.points < 1:
         raise ValueError(f"--points must be at least 1, got {args.points}")
+    args.camera = Camera(args.pitch, args.f_number, args.exposure_time, args.illuminant)
     photons = args.photons or default_exposures(args.points)
     datasets = load_datasets(args.datasets, args.max_images, args.crop)
     images = [img for _, imgs in datasets for img in imgs]
@@ -215,6 +227,7 @@ def _run_exposure(args: argparse.Namespace, images: list, names: str, photons: l
         domain=args.domain,
         references=_references(args.reference, list(REFERENCES)),
         networks=networks,
+        camera=args.camera,
     )
     print(path.read_text(encoding="utf-8"))
     print(f"wrote {path}, exposure.json and exposure.png")

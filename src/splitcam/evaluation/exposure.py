@@ -32,6 +32,7 @@ from ..io.domains import LINEAR
 from ..patterns import Pattern, get
 from ..physics.light import check_domain, decode_scene
 from ..physics.noise import Exposure, add_exposure_noise, level_label
+from ..physics.radiometry import Camera
 from ..physics.sensor import SplitterSensor
 from ..recon.base import Reconstructor
 from ..recon.closed_form import closed_form_lmmse
@@ -406,6 +407,45 @@ def _crossover_table(
     return [*lines, *markdown_table(head, rows)]
 
 
+def _lux_section(crossovers: list[dict], camera: Camera, photons: list[float]) -> list[str]:
+    """The pooled PSNR crossovers in scene lux (each record gets ``lux``: the crossover and its
+    interval's ends in lux, None where they lie outside the exposures studied)."""
+
+    def lux(n: float | None) -> float | None:
+        return None if n is None or n == 0.0 or math.isinf(n) else camera.lux(n)
+
+    rows = []
+    for c in crossovers:
+        c["lux"] = [lux(c["crossover"]), lux(c["low"]), lux(c["high"])]
+        if c["scene_set"] != "all" or c["metric"] != "psnr":
+            continue
+        point, low, high = c["lux"]
+        if point is None:
+            continue
+        lo = f"<{two_figures(camera.lux(min(photons)))}" if low is None else two_figures(low)
+        hi = f">{two_figures(camera.lux(max(photons)))}" if high is None else two_figures(high)
+        rows.append(
+            [
+                c["candidate"],
+                c["reference"],
+                c["text"].split(" [")[0],
+                f"{two_figures(point)} lux [{lo}, {hi}]",
+            ]
+        )
+    if not rows:
+        return []
+    return [
+        "",
+        f"## The crossovers in lux ({camera.describe()})",
+        "",
+        f"N = 1 photo-electron is {camera.lux(1.0):.3g} lux on the scene with this camera "
+        "(splitcam.physics.radiometry: the camera equation on axis; photons counted over "
+        "400-700 nm). PSNR crossovers pooled over the images, with their 90 % intervals:",
+        "",
+        *markdown_table(["sensor", "beats", "below N", "below scene illuminance"], rows),
+    ]
+
+
 def network_references(networks: dict[str, str], refs: Sequence[str]) -> dict[str, dict[str, str]]:
     """``{label: {ref: label of the network it is compared with}}`` for the networks of an
     exposure study (``networks``: ``{label: pattern name}``): a network is compared only with
@@ -501,6 +541,7 @@ def write_study(
     domain: str = LINEAR,
     references: Sequence[str] = ("bayer",),
     networks: dict[str, str] | None = None,
+    camera: Camera | None = None,
 ) -> Path:
     """``exposure.md`` (tables, crossovers, raw SNR check), ``exposure.json`` and
     ``exposure.png`` (PSNR and CIEDE2000 against exposure) in ``out``; ``domain``: the light
@@ -510,7 +551,8 @@ def write_study(
     results that are networks' (the others are the LMMSE's, labelled by pattern); they get a
     crossover table of their own, each network against the reference's network
     (:func:`network_references`), the best reconstruction of each sensor against the best of
-    the reference."""
+    the reference. ``camera``: the crossovers pooled over the images are also stated in scene
+    lux for that camera (:class:`~splitcam.physics.radiometry.Camera`), in both files."""
     domain = check_domain(domain)
     from ..viz.charts import exposure_chart
 
@@ -570,6 +612,8 @@ def write_study(
                 subset=subset,
                 record=crossovers,
             )
+    if camera is not None and crossovers:
+        lines += _lux_section(crossovers, camera, photons)
     if snr:
         lines += [
             "",
@@ -598,6 +642,12 @@ def write_study(
             {
                 "results": {p: {f"{n:g}": v for n, v in r.items()} for p, r in results.items()},
                 "crossovers": crossovers,
+                "camera": None
+                if camera is None
+                else {
+                    "settings": camera.describe(),
+                    "electrons_per_lux": camera.electrons_per_lux,
+                },
                 "raw_snr": snr,
                 "domain": domain,
             },
