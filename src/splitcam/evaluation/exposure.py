@@ -407,6 +407,40 @@ def _crossover_table(
     return [*lines, *markdown_table(head, rows)]
 
 
+def _crossover_sections(
+    results: dict, photons: list[float], references: Sequence[str], networks: dict | None
+) -> tuple[list[str], list[dict]]:
+    """The crossover tables of ``exposure.md`` (the LMMSE's, then the networks'; pooled, then
+    each scene set apart where there are several) and their records as data."""
+    networks = networks or {}
+    lines: list[str] = []
+    lmmse = {k: v for k, v in results.items() if k not in networks}
+    refs = [r for r in references if r in lmmse]
+    net_refs = [r for r in references if r in networks.values()]
+    nets = {k: v for k, v in results.items() if k in networks}
+    crossovers: list[dict] = []
+    # Pooled over every image, then each scene set apart where there are several.
+    first = next(iter(results.values()))[photons[0]]
+    sets = sorted({n.split("/")[0] for n in first.get("images", [])})
+    for subset in [None, *sets] if len(sets) > 1 else [None]:
+        if refs:
+            suffix = " (closed-form LMMSE)" if networks else ""
+            lines += _crossover_table(
+                lmmse, photons, refs, title_suffix=suffix, subset=subset, record=crossovers
+            )
+        if net_refs:
+            lines += _crossover_table(
+                nets,
+                photons,
+                net_refs,
+                network_references(networks, net_refs),
+                title_suffix=" (networks, each against the reference's network)",
+                subset=subset,
+                record=crossovers,
+            )
+    return lines, crossovers
+
+
 def _lux_section(crossovers: list[dict], camera: Camera, photons: list[float]) -> list[str]:
     """The pooled PSNR crossovers in scene lux (each record gets ``lux``: the crossover and its
     interval's ends in lux, None where they lie outside the exposures studied)."""
@@ -587,31 +621,8 @@ def write_study(
             ([p, *(f"{r[n]['ciede2000']:.3f}" for n in photons)] for p, r in results.items()),
         ),
     ]
-    networks = networks or {}
-    lmmse = {k: v for k, v in results.items() if k not in networks}
-    refs = [r for r in references if r in lmmse]
-    net_refs = [r for r in references if r in networks.values()]
-    nets = {k: v for k, v in results.items() if k in networks}
-    crossovers: list[dict] = []
-    # Pooled over every image, then each scene set apart where there are several.
-    first = next(iter(results.values()))[photons[0]]
-    sets = sorted({n.split("/")[0] for n in first.get("images", [])})
-    for subset in [None, *sets] if len(sets) > 1 else [None]:
-        if refs:
-            suffix = " (closed-form LMMSE)" if networks else ""
-            lines += _crossover_table(
-                lmmse, photons, refs, title_suffix=suffix, subset=subset, record=crossovers
-            )
-        if net_refs:
-            lines += _crossover_table(
-                nets,
-                photons,
-                net_refs,
-                network_references(networks, net_refs),
-                title_suffix=" (networks, each against the reference's network)",
-                subset=subset,
-                record=crossovers,
-            )
+    crossing, crossovers = _crossover_sections(results, photons, references, networks)
+    lines += crossing
     if camera is not None and crossovers:
         lines += _lux_section(crossovers, camera, photons)
     if snr:
