@@ -272,3 +272,41 @@ def test_device_noise_resumes_exactly(kind) -> None:
     again.load_state_dict(state)
     second, _ = again(raw)
     assert first.device.type == "cuda" and torch.equal(first, second)
+
+
+def test_dark_current_adds_its_poisson_noise_and_no_signal():
+    """Dark electrons: Poisson counts whose mean a dark frame removes. On a flat raw image the
+    mean stays the signal and the variance is a g + b with the dark term in b, by simulation
+    (both the evaluation path and the training batch path); without dark current the key,
+    hence every seed and stored result, is as before."""
+    import torch
+
+    from splitcam.physics.noise import Exposure, photon_noise
+
+    g = 0.6
+    raw = torch.full((1, 1, 300, 300), g, dtype=torch.float64)
+    exposure = Exposure(90.0, read_noise=1.5, dark=40.0)
+    a, b = exposure.variance_coefficients()
+    assert b == pytest.approx((3 / 90 * 1.5) ** 2 + (3 / 90) ** 2 * 40.0)
+    for noisy in (
+        exposure.add(raw, "flat"),
+        photon_noise(raw, [exposure], torch.Generator().manual_seed(3)),
+    ):
+        assert float(noisy.mean()) == pytest.approx(g, abs=3e-3)
+        assert float(noisy.var()) == pytest.approx(a * g + b, rel=0.03)
+    plain = Exposure(90.0, read_noise=1.5)
+    assert plain.key() == "N90|r1.5|fwNone|gNone|b12|s1"
+    assert "dark" not in plain.sensor_settings() and exposure.sensor_settings()["dark"] == 40.0
+    assert exposure.key() != plain.key()
+    with pytest.raises(ValueError, match="dark"):
+        Exposure(90.0, dark=-1.0)
+
+
+def test_dark_current_costs_the_closed_form_lmmse():
+    from splitcam.physics.noise import Exposure
+    from splitcam.recon.closed_form import closed_form_mse, shipped_image_statistics
+
+    stats = shipped_image_statistics("linear")
+    clean = float(closed_form_mse("bayer", Exposure(30.0), statistics=stats))
+    dark = float(closed_form_mse("bayer", Exposure(30.0, dark=20.0), statistics=stats))
+    assert dark > clean * 1.05

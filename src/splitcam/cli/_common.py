@@ -163,23 +163,33 @@ def add_sensor_options(p: argparse.ArgumentParser) -> None:
         "--gain", type=float, help="photon model: ADC electrons per DN (default: no ADC)"
     )
     p.add_argument("--bits", type=int, help="photon model: ADC bits (default 12)")
+    p.add_argument(
+        "--dark",
+        type=float,
+        help="photon model: dark electrons per exposure (dark current x time; its mean is "
+        "subtracted, its noise stays; default 0)",
+    )
 
 
 def sensor_settings(args: argparse.Namespace) -> dict:
     """The keyword arguments of :class:`~splitcam.physics.noise.Exposure` from the options of
     :func:`_add_sensor_options`."""
-    return {
+    settings = {
         "read_noise": 2.0 if args.read_noise is None else args.read_noise,
         "full_well": args.full_well,
         "gain": args.gain,
         "bits": 12 if args.bits is None else args.bits,
     }
+    if getattr(args, "dark", None):
+        settings["dark"] = args.dark  # absent otherwise: the settings recorded before it
+    return settings
 
 
 def sensor_flags_given(args: argparse.Namespace) -> list[str]:
     """The photon-model sensor flags given on the command line."""
     names = {"read_noise": "--read-noise", "full_well": "--full-well", "gain": "--gain"}
     names["bits"] = "--bits"
+    names["dark"] = "--dark"
     return [flag for name, flag in names.items() if getattr(args, name, None) is not None]
 
 

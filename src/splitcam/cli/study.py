@@ -214,6 +214,7 @@ def _run_exposure(args: argparse.Namespace, images: list, names: str, photons: l
     sensor = sensor_settings(args)
     note = (
         f"Images: {names}. Read noise {sensor['read_noise']:g} e-, "
+        + (f"dark {sensor['dark']:g} e- per exposure, " if sensor.get("dark") else "")
         + (f"full well {args.full_well:g} e-, " if args.full_well else "no saturation, ")
         + (f"ADC {sensor['bits']} bits at {args.gain:g} e-/DN. " if args.gain else "no ADC. ")
         + f"Command: {_command(args)}"

@@ -319,7 +319,9 @@ class Exposure(NoiseModel):
     value in the units of model.md §1 is ``R + G + B = 3``, so a raw value ``g`` means
     ``e = g N / 3`` photo-electrons: every pattern sees the same photon flux, and a filter's lost
     light shows as lost signal. Noise, in order: shot noise ``Poisson(e)`` (``shot``), read noise
-    ``N(0, read_noise^2)`` electrons, saturation to ``[0, full_well]`` (``full_well`` not None),
+    ``N(0, read_noise^2)`` electrons (after ``Poisson(dark)`` dark electrons, whose mean a
+    dark frame removes at the end: ``dark`` adds noise, not signal), saturation to
+    ``[0, full_well]`` (``full_well`` not None),
     an ADC ``DN = round(e / gain)`` clipped to ``[0, 2^bits - 1]`` (``gain`` not None); the raw
     image handed on is ``DN * gain * 3 / N`` (or ``e * 3 / N`` without ADC), the same scale for
     every pattern. With ``shot=False``, no full well, no ADC and ``read_noise = N sigma / (3 *
@@ -336,6 +338,7 @@ class Exposure(NoiseModel):
     gain: float | None = None
     bits: int = 12
     shot: bool = True
+    dark: float = 0.0
 
     def __post_init__(self) -> None:
         def positive(name: str, value: Any) -> None:
@@ -358,6 +361,12 @@ class Exposure(NoiseModel):
         if self.gain is not None:
             positive("gain (electrons per DN)", self.gain)
         check_count(self.bits, "bits", 1)
+        if (
+            isinstance(self.dark, bool)
+            or not isinstance(self.dark, Real)
+            or not (math.isfinite(self.dark) and self.dark >= 0)
+        ):
+            raise ValueError(f"expected dark (electrons per exposure) >= 0, got {self.dark!r}")
 
     @property
     def electrons_per_unit(self) -> float:
@@ -366,12 +375,12 @@ class Exposure(NoiseModel):
 
     def variance_coefficients(self) -> tuple[float, float]:
         """``(a, b)`` with the noise variance of a raw pixel of expected value ``g`` being
-        ``a g + b`` in raw units (shot, read and, with an ADC, uniform quantisation noise;
-        saturation ignored): ``a = 3 / N`` (0 without shot noise),
-        ``b = (3 read / N)^2 + (3 gain / N)^2 / 12``."""
+        ``a g + b`` in raw units (shot, dark, read and, with an ADC, uniform quantisation
+        noise; saturation ignored): ``a = 3 / N`` (0 without shot noise),
+        ``b = (3 read / N)^2 + (3 / N)^2 dark + (3 gain / N)^2 / 12``."""
         scale = 3.0 / self.photons
         a = scale if self.shot else 0.0
-        b = (scale * self.read_noise) ** 2
+        b = (scale * self.read_noise) ** 2 + scale**2 * self.dark
         if self.gain is not None:
             b += (scale * self.gain) ** 2 / 12.0
         return a, b
@@ -381,6 +390,8 @@ class Exposure(NoiseModel):
         e = raw.detach().to(torch.float64).clamp_min(0).cpu() * self.electrons_per_unit
         if self.shot:
             e = torch.poisson(e, generator=generator)
+        if self.dark > 0:
+            e = e + torch.poisson(torch.full_like(e, self.dark), generator=generator)
         if self.read_noise > 0:
             e = e + self.read_noise * torch.randn(e.shape, generator=generator, dtype=torch.float64)
         if self.full_well is not None:
@@ -388,13 +399,16 @@ class Exposure(NoiseModel):
         if self.gain is not None:
             dn = torch.round(e / self.gain).clamp(0, 2**self.bits - 1)
             e = dn * self.gain
+        e = e - self.dark  # the dark frame's mean subtracted; its noise stays
         return (e / self.electrons_per_unit).to(device=raw.device, dtype=raw.dtype)
 
     def key(self) -> str:
-        return (
+        key = (
             f"N{self.photons:g}|r{self.read_noise:g}|fw{self.full_well}|g{self.gain}"
             f"|b{self.bits}|s{int(self.shot)}"
         )
+        # Without dark current the key (and so every seed and stored result) is as before.
+        return key + (f"|d{self.dark:g}" if self.dark else "")
 
     def label(self) -> str:
         return f"N{self.photons:g}"
@@ -410,7 +424,10 @@ class Exposure(NoiseModel):
         return {"photons": self.photons}
 
     def sensor_settings(self) -> dict[str, Any]:
-        return {k: v for k, v in dataclasses.asdict(self).items() if k != "photons"}
+        settings = {k: v for k, v in dataclasses.asdict(self).items() if k != "photons"}
+        if not self.dark:
+            del settings["dark"]  # as recorded before dark current was modelled
+        return settings
 
 
 def add_exposure_noise(raw: torch.Tensor, image_name: str, exposure: Exposure) -> torch.Tensor:
@@ -494,6 +511,8 @@ def photon_noise(
     e = raw.detach().to(device=device, dtype=torch.float64).clamp_min(0) * per_unit
     if first.shot:
         e = torch.poisson(e, generator=generator)
+    if first.dark > 0:
+        e = e + torch.poisson(torch.full_like(e, first.dark), generator=generator)
     if first.read_noise > 0:
         noise = torch.randn(e.shape, generator=generator, dtype=torch.float64, device=device)
         e = e + first.read_noise * noise
@@ -501,6 +520,7 @@ def photon_noise(
         e = e.clamp(0, first.full_well)
     if first.gain is not None:
         e = torch.round(e / first.gain).clamp(0, 2**first.bits - 1) * first.gain
+    e = e - first.dark
     return (e / per_unit).to(device=raw.device, dtype=raw.dtype)
 
 
