@@ -1,0 +1,74 @@
+"""The answer at a glance: PSNR of each full-wave router minus each measured filter array, against
+scene illuminance, with the 90 % band over the images and each crossover with its interval.
+
+    python studies/exposure/headline.py [STUDY_FOLDER] [--out docs/results/exposure/headline.png]
+        [--pitch 1 --f-number 2 --exposure-time 0.0333 --illuminant D65]
+
+STUDY_FOLDER holds ``exposure.json`` of ``splitcam study exposure`` run with per-image scores
+(default ``docs/results/exposure/measured/rn2``). Every sensor is reconstructed by the same
+network for any pattern (``universal-photon``): no sensor's network is fine-tuned. Exposures
+are converted to lux by :class:`splitcam.physics.radiometry.Camera`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import copy
+import json
+from pathlib import Path
+
+from splitcam.evaluation.exposure import difference_curves
+from splitcam.physics.radiometry import Camera
+from splitcam.viz.charts import difference_chart
+
+ROOT = Path(__file__).resolve().parents[2]
+NET = "net-universal-photon-"
+ROUTERS = ("router-best-fullwave", "router-zou-fullwave", "router-zou-fullwave-f2")
+ARRAYS = ("rgbw-d5100", "bayer-d5100")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument(
+        "study", nargs="?", type=Path, default=ROOT / "docs/results/exposure/measured/rn2"
+    )
+    parser.add_argument("--out", type=Path, default=ROOT / "docs/results/exposure/headline.png")
+    parser.add_argument("--pitch", type=float, default=1.0)
+    parser.add_argument("--f-number", type=float, default=2.0)
+    parser.add_argument("--exposure-time", type=float, default=1 / 30)
+    parser.add_argument("--illuminant", default="D65")
+    parser.add_argument("--read-noise", type=float, default=2.0, help="the study's, for the title")
+    args = parser.parse_args()
+    camera = Camera(args.pitch, args.f_number, args.exposure_time, args.illuminant)
+    data = json.loads((args.study / "exposure.json").read_text())
+    results = {label: {float(n): v for n, v in r.items()} for label, r in data["results"].items()}
+    pairs = [(NET + r, NET + a) for a in ARRAYS for r in ROUTERS]
+    curves = difference_curves(results, pairs)
+    lux = []
+    for c in curves:
+        c = copy.deepcopy(c)
+        c["candidate"] = c["candidate"].removeprefix(NET)
+        c["reference"] = c["reference"].removeprefix(NET)
+        c["photons"] = [camera.lux(n) for n in c["photons"]]
+        cross = c["crossover"]
+        for key in ("crossover", "low", "high"):
+            v = cross[key]
+            if v is not None and v not in (0.0, float("inf")):
+                cross[key] = camera.lux(v)
+        lux.append(c)
+        print(
+            f"{c['candidate']} against {c['reference']}: crossover {cross['crossover']} lux, "
+            f"90 % interval [{cross['low']}, {cross['high']}]"
+        )
+    difference_chart(
+        lux,
+        args.out,
+        title=f"Full-wave routers against measured filter arrays, network for any sensor "
+        f"(universal-photon), read noise {args.read_noise:g} e-; centre of the field",
+        xlabel=f"scene illuminance (lux): {camera.describe()}",
+    )
+    print(f"wrote {args.out}")
+
+
+if __name__ == "__main__":
+    main()
