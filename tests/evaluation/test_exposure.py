@@ -355,3 +355,28 @@ def test_the_crossovers_are_stated_in_lux_for_a_camera(tmp_path) -> None:
     assert pooled["lux"][0] == pytest.approx(pooled["crossover"] / camera.electrons_per_lux)
     assert f"{two_figures(pooled['lux'][0])} lux [" in text
     assert data["camera"]["electrons_per_lux"] == pytest.approx(camera.electrons_per_lux)
+
+
+def test_a_candidate_that_always_wins_gets_a_share_not_an_interval(tmp_path) -> None:
+    from splitcam.evaluation.exposure import write_study
+
+    photons = [1.0, 10.0, 100.0]
+    names = ["s/a", "s/b", "s/c"]
+
+    def result(v):
+        return {
+            n: {
+                "psnr": v,
+                "ssim": 0.5,
+                "ciede2000": 40 - v,
+                "per_image": {"psnr": [v] * 3, "ssim": [0.5] * 3, "ciede2000": [40 - v] * 3},
+                "images": names,
+            }
+            for n in photons
+        }
+
+    text = write_study(
+        {"rgbw": result(10.0), "A": result(12.0)}, None, tmp_path, references=("rgbw",)
+    ).read_text()
+    row = next(ln for ln in text.split("## Crossover")[1].splitlines() if ln.startswith("| A |"))
+    assert row.count("every exposure studied (in 100% of resamples)") == 2 and "[" not in row

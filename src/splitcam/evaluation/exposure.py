@@ -376,7 +376,12 @@ def _crossover_table(
                     curve = {n: sign * v for n, v in zip(photons, ours.mean(0), strict=True)}
                     ref = {n: sign * v for n, v in zip(photons, theirs.mean(0), strict=True)}
                     interval = crossover_interval(ours, theirs, photons, higher_is_better=sign > 0)
-                    text = f"{describe_crossover(curve, ref)} {interval_text(interval, photons)}"
+                    text = describe_crossover(curve, ref)
+                    point = interval["crossover"]
+                    if point is not None and math.isinf(point):
+                        text += f" (in {interval['everywhere']:.0%} of resamples)"
+                    elif point is not None:
+                        text += f" {interval_text(interval, photons)}"
                     intervals = True
                     if record is not None:
                         record.append(
@@ -399,9 +404,10 @@ def _crossover_table(
     if intervals:
         lines += [
             "Each crossover with its 90 % interval over the images (bootstrap: the 5th and "
-            "95th percentiles of the crossovers of 2000 resamples of the images); `<1`: the "
-            "candidate never wins in a share of resamples, `>10000`: it wins at every "
-            "exposure studied in a share of them.",
+            "95th percentiles of the crossovers of 2000 resamples of the images); an end "
+            "written `<` the lowest exposure: in at least 5 % of resamples the candidate never "
+            "wins, `>` the highest: in at least 5 % it wins at every exposure studied. A "
+            "candidate that wins at every exposure: the share of resamples in which it does.",
             "",
         ]
     return [*lines, *markdown_table(head, rows)]
