@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import json
 
+import numpy as np
+
 from splitcam.cli import main
 
 
@@ -108,3 +110,25 @@ def test_study_exposure_with_networks_continues_and_compares_network_with_networ
     assert "| net-universal-photon-A |" in nets
     assert main([*args, "--out", str(tmp_path)]) == 0
     assert (tmp_path / "evaluation" / "per_image.csv").read_text() == csv
+
+
+def test_study_exposure_gives_crossovers_per_scene_set(tmp_path) -> None:
+    """Two image folders: the crossovers pooled and for each folder apart, each with its
+    interval, in exposure.md and exposure.json."""
+    from PIL import Image
+
+    rng = np.random.default_rng(0)
+    for folder in ("city", "forest"):
+        (tmp_path / folder).mkdir()
+        for i in range(2):
+            pixels = (rng.random((40, 40, 3)) * 255).astype(np.uint8)
+            Image.fromarray(pixels).save(tmp_path / folder / f"{folder}{i}.png")
+    data = f"{tmp_path / 'city'},{tmp_path / 'forest'}"
+    args = ["study", "exposure", "--datasets", data, "--crop", "32", "--photons", "3", "300"]
+    args += ["--patterns", "A,rgbw", "--reference", "rgbw", "--pitch", "0.8", "--quiet"]
+    assert main([*args, "--out", str(tmp_path / "o")]) == 0
+    text = (tmp_path / "o" / "exposure.md").read_text()
+    assert ", city only" in text and ", forest only" in text
+    records = json_load(tmp_path / "o" / "exposure.json")["crossovers"]
+    assert {r["scene_set"] for r in records} == {"all", "city", "forest"}
+    assert {r["images"] for r in records} == {4, 2}

@@ -4,6 +4,7 @@ where a lossy router ties a filter array."""
 from __future__ import annotations
 
 import argparse
+import re
 import sys
 from pathlib import Path
 
@@ -127,6 +128,12 @@ def run(args: argparse.Namespace) -> int:
     datasets = load_datasets(args.datasets, args.max_images, args.crop)
     images = [img for _, imgs in datasets for img in imgs]
     names = ", ".join(f"{d} ({len(i)})" for d, i in datasets)
+    # Each image's scene set (the dataset, without its crop), for crossovers per set.
+    args.scene_sets = {
+        name: re.sub(r"-\d+px$", "", d) for d, imgs in datasets for name, _ in imgs
+    }
+    if len(args.scene_sets) < len(images):  # one name in two sets: pooled only
+        args.scene_sets = None
     if args.study == "breakeven":
         return _run_breakeven(args, images, names, photons)
     return _run_exposure(args, images, names, photons)
@@ -205,6 +212,7 @@ def _run_exposure(args: argparse.Namespace, images: list, names: str, photons: l
         progress=not args.quiet,
         domain=args.domain,
         out=Path(out) / "evaluation",
+        scene_sets=args.scene_sets,
     )
     snr = (
         raw_snr_check(images, patterns=args.patterns, domain=args.domain)

@@ -71,6 +71,7 @@ def exposure_study(
     progress: bool = True,
     domain: str = LINEAR,
     out: str | os.PathLike[str] | None = None,
+    scene_sets: dict[str, str] | None = None,
     **settings: Any,
 ) -> dict[str, dict[float, dict[str, float]]]:
     """``{label: {photons: {"psnr", "ssim", "ciede2000"}}}``: the closed-form LMMSE of each
@@ -84,6 +85,8 @@ def exposure_study(
     the numbers are the protocol's; with ``out``, its files are written there as each image is
     scored, and a run interrupted and started again with the same ``out`` continues where it
     stopped (results of the same method, image, exposure and sensor are reused).
+    ``scene_sets``: ``{image name: scene set}`` (Kodak24, McMaster, ...), so that crossovers
+    are also given per set (:func:`write_study`); the images are scored as one set either way.
 
     Raises:
         ValueError: A bad exposure setting, an unknown domain, a method of another domain, or
@@ -111,7 +114,7 @@ def exposure_study(
     for method in todo:
         mine = [r for r in rows if r.method == method.name]
         results[lmmse.get(method.name, method.name)] = {
-            n: _level_scores([r for r in mine if r.level == level])
+            n: _level_scores([r for r in mine if r.level == level], scene_sets)
             for n, level in zip(photons, map(level_label, exposures), strict=True)
         }
     return results
@@ -120,15 +123,17 @@ def exposure_study(
 METRICS = ("psnr", "ssim", "ciede2000")
 
 
-def _level_scores(rows: list) -> dict[str, Any]:
+def _level_scores(rows: list, scene_sets: dict[str, str] | None = None) -> dict[str, Any]:
     """The means over images of one method at one exposure, and ``per_image``: each metric's
-    values in the order of ``images`` (``dataset/image`` names), for intervals over images."""
-    rows = sorted(rows, key=lambda r: (r.dataset, r.image))
+    values in the order of ``images`` (``set/image`` names: the image's scene set from
+    ``scene_sets``, else its dataset), for intervals over images."""
+    sets = scene_sets or {}
+    rows = sorted(rows, key=lambda r: (sets.get(r.image, r.dataset), r.image))
     out: dict[str, Any] = {
         key: mean_over_images(getattr(r, key) for r in rows).mean for key in METRICS
     }
     out["per_image"] = {key: [float(getattr(r, key)) for r in rows] for key in METRICS}
-    out["images"] = [f"{r.dataset}/{r.image}" for r in rows]
+    out["images"] = [f"{sets.get(r.image, r.dataset)}/{r.image}" for r in rows]
     return out
 
 
