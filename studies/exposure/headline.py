@@ -63,9 +63,11 @@ def main() -> None:
     difference_chart(
         lux,
         args.out,
-        title=f"Full-wave routers against measured filter arrays, network for any sensor "
-        f"(universal-photon), read noise {args.read_noise:g} e-; centre of the field",
-        xlabel=f"scene illuminance (lux): {camera.describe()}",
+        title=f"Full-wave routers against measured filter arrays, one network for every sensor "
+        f"(universal-photon), read noise {args.read_noise:g} e-, centre of the field\n"
+        f"{camera.describe()}; bands and bars: 90 % intervals over the images",
+        xlabel="scene illuminance (lux)",
+        unit="lux",
     )
     print(f"wrote {args.out}")
 

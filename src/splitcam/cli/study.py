@@ -129,9 +129,7 @@ def run(args: argparse.Namespace) -> int:
     images = [img for _, imgs in datasets for img in imgs]
     names = ", ".join(f"{d} ({len(i)})" for d, i in datasets)
     # Each image's scene set (the dataset, without its crop), for crossovers per set.
-    args.scene_sets = {
-        name: re.sub(r"-\d+px$", "", d) for d, imgs in datasets for name, _ in imgs
-    }
+    args.scene_sets = {name: re.sub(r"-\d+px$", "", d) for d, imgs in datasets for name, _ in imgs}
     if len(args.scene_sets) < len(images):  # one name in two sets: pooled only
         args.scene_sets = None
     if args.study == "breakeven":

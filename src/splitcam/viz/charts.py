@@ -171,12 +171,14 @@ def difference_chart(
     *,
     title: str | None = None,
     xlabel: str = "exposure N: photo-electrons of a lossless full-light pixel",
+    unit: str = "",
 ) -> Path:
     """Candidate − reference against exposure (log axis), one panel per reference: the mean
     over images as a line, its bootstrap band shaded, and each crossover (the exposure below
     which the candidate wins) marked with its interval as a bar on the zero line.
 
-    ``curves``: what :func:`splitcam.evaluation.exposure.difference_curves` returns."""
+    ``curves``: what :func:`splitcam.evaluation.exposure.difference_curves` returns (their
+    exposures may be given in another unit, e.g. lux, named by ``unit`` in the legend)."""
     import matplotlib
     from matplotlib.figure import Figure
 
@@ -197,9 +199,8 @@ def difference_chart(
                 if point is None
                 else ("always" if point == float("inf") else f"{float(f'{point:.2g}'):g}")
             )
-            ax.plot(
-                xs, c["mean"], "-o", ms=3, color=col, label=f"{c['candidate']} (wins below {where})"
-            )
+            below = f"wins below {where}{' ' + unit if unit and point else ''}"
+            ax.plot(xs, c["mean"], "-o", ms=3, color=col, label=f"{c['candidate']} ({below})")
             ax.fill_between(xs, c["low"], c["high"], color=col, alpha=0.18, lw=0)
             if point is not None and point != float("inf"):
                 lo = cross["low"] if cross["low"] > 0 else xs[0]
