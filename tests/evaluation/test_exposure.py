@@ -55,6 +55,28 @@ def _synthetic_results() -> dict:
     }
 
 
+def _scored(per: dict, names: list[str]) -> dict:
+    """An exposure study's result from per-image PSNRs ``{N: values}`` (CIEDE2000 taken as
+    40 − PSNR, SSIM 0.5): the means and the per-image scores, as exposure_study returns them."""
+    import numpy as np
+
+    out = {}
+    for n, v in per.items():
+        v = np.asarray(v, dtype=float)
+        out[n] = {
+            "psnr": float(v.mean()),
+            "ssim": 0.5,
+            "ciede2000": float((40 - v).mean()),
+            "per_image": {
+                "psnr": v.tolist(),
+                "ssim": [0.5] * len(v),
+                "ciede2000": (40 - v).tolist(),
+            },
+            "images": names,
+        }
+    return out
+
+
 def test_crossover_against_rgbw_on_synthetic_curves() -> None:
     from splitcam.evaluation.exposure import crossover
 
@@ -227,21 +249,10 @@ def test_a_study_writes_intervals_per_scene_set(tmp_path) -> None:
     rng = np.random.default_rng(0)
 
     def result(offset, slope):
-        per = {n: offset + slope * math.log10(n) + rng.normal(0, 0.3, len(names)) for n in photons}
-        return {
-            n: {
-                "psnr": float(v.mean()),
-                "ssim": 0.5,
-                "ciede2000": float(40 - v.mean()),
-                "per_image": {
-                    "psnr": v.tolist(),
-                    "ssim": [0.5] * len(names),
-                    "ciede2000": (40 - v).tolist(),
-                },
-                "images": names,
-            }
-            for n, v in per.items()
-        }
+        return _scored(
+            {n: offset + slope * math.log10(n) + rng.normal(0, 0.3, len(names)) for n in photons},
+            names,
+        )
 
     results = {"rgbw": result(10.0, 6.0), "router": result(13.0, 4.0)}
     text = write_study(results, None, tmp_path, references=("rgbw",)).read_text()
@@ -271,20 +282,7 @@ def test_difference_curves_band_the_mean_and_the_chart_draws_them(tmp_path) -> N
     rng = np.random.default_rng(1)
 
     def result(values):
-        return {
-            n: {
-                "psnr": float(v.mean()),
-                "ssim": 0.5,
-                "ciede2000": float((40 - v).mean()),
-                "per_image": {
-                    "psnr": v.tolist(),
-                    "ssim": [0.5] * len(v),
-                    "ciede2000": (40 - v).tolist(),
-                },
-                "images": names,
-            }
-            for n, v in zip(photons, values.T, strict=True)
-        }
+        return _scored(dict(zip(photons, values.T, strict=True)), names)
 
     ref = 10 + 6 * np.log10(photons)[None, :] + rng.normal(0, 0.2, (6, 4))
     router = 12 + 5 * np.log10(photons)[None, :] + rng.normal(0, 0.4, (6, 4))
@@ -328,21 +326,9 @@ def test_the_crossovers_are_stated_in_lux_for_a_camera(tmp_path) -> None:
     rng = np.random.default_rng(5)
 
     def result(offset, slope):
-        per = {n: offset + slope * math.log10(n) + rng.normal(0, 0.3, 6) for n in photons}
-        return {
-            n: {
-                "psnr": float(v.mean()),
-                "ssim": 0.5,
-                "ciede2000": float(40 - v.mean()),
-                "per_image": {
-                    "psnr": v.tolist(),
-                    "ssim": [0.5] * 6,
-                    "ciede2000": (40 - v).tolist(),
-                },
-                "images": names,
-            }
-            for n, v in per.items()
-        }
+        return _scored(
+            {n: offset + slope * math.log10(n) + rng.normal(0, 0.3, 6) for n in photons}, names
+        )
 
     camera = Camera(pitch_um=0.8, f_number=1.4, exposure_s=1 / 60, illuminant="A")
     results = {"rgbw": result(10.0, 6.0), "router": result(13.0, 4.0)}
@@ -364,16 +350,7 @@ def test_a_candidate_that_always_wins_gets_a_share_not_an_interval(tmp_path) -> 
     names = ["s/a", "s/b", "s/c"]
 
     def result(v):
-        return {
-            n: {
-                "psnr": v,
-                "ssim": 0.5,
-                "ciede2000": 40 - v,
-                "per_image": {"psnr": [v] * 3, "ssim": [0.5] * 3, "ciede2000": [40 - v] * 3},
-                "images": names,
-            }
-            for n in photons
-        }
+        return _scored({n: [v] * 3 for n in photons}, names)
 
     text = write_study(
         {"rgbw": result(10.0), "A": result(12.0)}, None, tmp_path, references=("rgbw",)

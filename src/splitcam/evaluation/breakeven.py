@@ -23,7 +23,13 @@ from ..io.domains import LINEAR
 from ..patterns import Pattern, get, router
 from ..recon.base import Reconstructor
 from ..recon.closed_form import closed_form_lmmse
-from .exposure import crossings, crossover_interval, default_exposures, exposure_study, two_figures
+from .exposure import (
+    crossings,
+    crossover_interval,
+    default_exposures,
+    exposure_study,
+    interval_ends,
+)
 from .protocol import Images
 from .tables import markdown_table
 
@@ -296,10 +302,7 @@ def write_break_even(
         "η + χ > 1 (infeasible). Rows η, columns χ.",
         "",
     ]
-    lines += markdown_table(
-        ["η \\ χ", *(f"{x:g}" for x in result["chis"])],
-        ([f"{e:g}", *(cell_text(cells[(e, x)]) for x in result["chis"])] for e in result["etas"]),
-    )
+    lines += _map_table(result, lambda e, x: cell_text(cells[(e, x)]))
     if any(c.get("interval") for c in result["cells"]):
         lines += [
             "",
@@ -308,16 +311,7 @@ def write_break_even(
             "at every exposure studied):",
             "",
         ]
-        lines += markdown_table(
-            ["η \\ χ", *(f"{x:g}" for x in result["chis"])],
-            (
-                [
-                    f"{e:g}",
-                    *(_interval_cell(cells[(e, x)], result["photons"]) for x in result["chis"]),
-                ]
-                for e in result["etas"]
-            ),
-        )
+        lines += _map_table(result, lambda e, x: _interval_cell(cells[(e, x)], result["photons"]))
     lines += ["", "Router presets (mean η, χ over R, G, B):", ""]
     lines += [f"- {name}: η = {e:.3f}, χ = {x:.3f}" for name, (e, x) in presets.items()]
     lines += ["", f"![break-even map]({chart.name})", ""]
@@ -326,11 +320,17 @@ def write_break_even(
     return path
 
 
+def _map_table(result: dict[str, Any], text: Callable[[float, float], str]) -> list[str]:
+    """The map as a Markdown table: rows η, columns χ, each cell ``text(eta, chi)``."""
+    return markdown_table(
+        ["η \\ χ", *(f"{x:g}" for x in result["chis"])],
+        ([f"{e:g}", *(text(e, x) for x in result["chis"])] for e in result["etas"]),
+    )
+
+
 def _interval_cell(cell: dict, photons: Sequence[float]) -> str:
+    """A cell's interval as the map's table writes it (``140–520``), or nothing."""
     interval = cell.get("interval")
     if not interval:
         return ""
-    lo, hi = interval
-    low = f"<{two_figures(min(photons))}" if lo == 0.0 else two_figures(lo)
-    high = f">{two_figures(max(photons))}" if np.isinf(hi) else two_figures(hi)
-    return f"{low}–{high}"
+    return "{}–{}".format(*interval_ends({"low": interval[0], "high": interval[1]}, photons))

@@ -46,6 +46,7 @@ __all__ = [
     "crossover_interval",
     "describe_crossover",
     "difference_curves",
+    "interval_ends",
     "interval_text",
     "two_figures",
     "exposure_study",
@@ -258,13 +259,19 @@ def difference_curves(
     return out
 
 
-def interval_text(interval: dict[str, Any], photons: Sequence[float]) -> str:
-    """``[140, 520]``: a :func:`crossover_interval` as the tables write it (two significant
-    figures; ``<1`` or ``>10000`` where an end lies outside the exposures studied)."""
+def interval_ends(interval: dict[str, Any], photons: Sequence[float]) -> tuple[str, str]:
+    """The ends of a :func:`crossover_interval` as tables write them: two significant figures,
+    ``<1`` or ``>10000`` where an end lies outside the exposures studied."""
     lo, hi = interval["low"], interval["high"]
     low = f"<{two_figures(min(photons))}" if lo == 0.0 else two_figures(lo)
     high = f">{two_figures(max(photons))}" if math.isinf(hi) else two_figures(hi)
-    return f"[{low}, {high}]"
+    return low, high
+
+
+def interval_text(interval: dict[str, Any], photons: Sequence[float]) -> str:
+    """``[140, 520]``: a :func:`crossover_interval` as the crossover tables write it
+    (:func:`interval_ends`)."""
+    return "[{}, {}]".format(*interval_ends(interval, photons))
 
 
 def crossover(
