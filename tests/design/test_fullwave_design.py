@@ -142,7 +142,7 @@ def test_the_whole_objective_differentiates_to_its_finite_difference():
         loss, _ = design.objective(theta, beta=2.0)
         loss.backward()
         opt.step()
-    assert float(design.objective(theta, beta=2.0)[0]) < first
+    assert float(design.objective(theta, beta=2.0)[0].detach()) < first
     binary = design.binary(theta, beta=2.0)
     assert set(np.unique(binary)) <= {0.0, 1.0}
 
