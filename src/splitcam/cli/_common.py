@@ -1,4 +1,4 @@
-"""What several commands share: option groups, argument checks, the Markdown table."""
+"""What several commands share: option groups and argument checks."""
 
 from __future__ import annotations
 
@@ -7,16 +7,6 @@ import dataclasses
 import os
 from collections.abc import Sequence
 from pathlib import Path
-
-
-def table(rows: list[dict[str, str]]) -> str:
-    """A Markdown table (also readable as plain text)."""
-    keys = list(rows[0])
-    widths = {k: max(len(k), *(len(r[k]) for r in rows)) for k in keys}
-    lines = ["| " + " | ".join(k.ljust(widths[k]) for k in keys) + " |"]
-    lines.append("|" + "|".join("-" * (widths[k] + 2) for k in keys) + "|")
-    lines += ["| " + " | ".join(r[k].ljust(widths[k]) for k in keys) + " |" for r in rows]
-    return "\n".join(lines)
 
 
 def pattern_or_model(spec: str):

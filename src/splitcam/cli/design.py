@@ -5,7 +5,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from ._common import check_writable, table
+from ..evaluation.tables import aligned_table as table
+from ._common import check_writable
 
 
 def _network_objective(args: argparse.Namespace) -> dict:

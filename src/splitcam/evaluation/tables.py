@@ -278,6 +278,24 @@ def markdown_table(header: Sequence[str], rows: Iterable[Sequence[str]]) -> list
     return [markdown_row(header), markdown_rule(len(header))] + [markdown_row(r) for r in rows]
 
 
+def aligned_table(rows: Sequence[dict[str, str]]) -> str:
+    """A Markdown table whose columns are padded to line up, so that it also reads as plain
+    text in a terminal (the listings of ``splitcam patterns``, ``models``, ...): the keys of
+    the first row are the header.
+
+    >>> print(aligned_table([{"name": "A", "white": "1.000"}]))
+    | name | white |
+    |------|-------|
+    | A    | 1.000 |
+    """
+    keys = list(rows[0])
+    widths = {k: max(len(k), *(len(r[k]) for r in rows)) for k in keys}
+    lines = ["| " + " | ".join(k.ljust(widths[k]) for k in keys) + " |"]
+    lines.append("|" + "|".join("-" * (widths[k] + 2) for k in keys) + "|")
+    lines += ["| " + " | ".join(r[k].ljust(widths[k]) for k in keys) + " |" for r in rows]
+    return "\n".join(lines)
+
+
 def markdown_row(cells: Sequence[str]) -> str:
     """One line of a Markdown table (:func:`markdown_table`), for tables written line by line."""
     return "| " + " | ".join(cells) + " |"
