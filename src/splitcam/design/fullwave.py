@@ -139,8 +139,10 @@ class FullwaveDesign:
 
     def start(self) -> torch.Tensor:
         """Design variables whose densities (``beta`` 0, no filter) are the geometry's grid,
-        moved a little off 0 and 1 so that the sigmoid can move them."""
-        g = np.clip(self.geometry.grid, 0.02, 0.98)
+        pulled to [0.25, 0.75]: a binary start (pillar 1, background 0) would sit where the
+        sigmoid is flat and its gradient vanishes; the projection makes it binary again as
+        ``beta`` grows."""
+        g = np.clip(self.geometry.grid, 0.25, 0.75)
         return torch.from_numpy(np.log(g / (1 - g)))
 
     def densities(self, theta: torch.Tensor, beta: float) -> torch.Tensor:
