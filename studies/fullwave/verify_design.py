@@ -1,0 +1,63 @@
+"""A designed router against the design it started from, both solved at the verification setting:
+band efficiencies and the closed-form LMMSE PSNR at several exposures.
+
+    python studies/fullwave/verify_design.py DESIGNED-spectra.csv START-spectra.csv \
+        [--photons 10 30 100 300 1000] [--read-noise 2]
+
+Each file is the ``NAME-spectra.csv`` that ``splitcam optics rcwa`` writes (the same solver,
+terms and wavelengths for both). The PSNR is :meth:`splitcam.design.fullwave.FullwaveDesign.
+image_error` of the spectra: the expected error of the closed-form LMMSE in linear light under
+the photon model, away from image borders, no images needed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from splitcam.design.fullwave import FullwaveDesign
+from splitcam.physics.fullwave import RouterDesign, band_efficiencies
+
+
+def spectra(path: Path) -> tuple[list[float], np.ndarray]:
+    rows = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
+    lams = rows[:, 0].tolist()
+    t = rows[:, 1:5].T.reshape(2, 2, -1)  # T_row0_col0, T_row0_col1, T_row1_col0, T_row1_col1
+    return lams, np.clip(t, 0.0, None)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("designed", type=Path)
+    parser.add_argument("start", type=Path)
+    parser.add_argument("--photons", type=float, nargs="+", default=[10, 30, 100, 300, 1000])
+    parser.add_argument("--read-noise", type=float, default=2.0)
+    args = parser.parse_args()
+    print(
+        "| router | blue / green / red band efficiency | "
+        + " | ".join(f"LMMSE PSNR at N = {n:g}" for n in args.photons)
+        + " |"
+    )
+    print("|---|---|" + "---|" * len(args.photons))
+    for path in (args.start, args.designed):
+        lams, t = spectra(path)
+        bands = band_efficiencies(t, lams)
+        cells = []
+        for n in args.photons:
+            design = FullwaveDesign(
+                RouterDesign(np.eye(2)), wavelengths=lams, photons=n, read_noise=args.read_noise
+            )
+            mse = float(design.image_error(torch.from_numpy(t)))
+            cells.append(f"{-10 * math.log10(mse):.2f}")
+        print(
+            f"| {path.stem.removesuffix('-spectra')} | {bands['blue']:.3f} / "
+            f"{bands['green']:.3f} / {bands['red']:.3f} | " + " | ".join(cells) + " |"
+        )
+
+
+if __name__ == "__main__":
+    main()
