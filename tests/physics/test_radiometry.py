@@ -54,3 +54,22 @@ def test_illuminants_differ_in_photons_per_lux():
 def test_bad_settings_are_refused_in_one_line(kwargs, message):
     with pytest.raises(ValueError, match=message):
         Camera(**kwargs)
+
+
+def test_silicon_absorbs_less_of_the_red_within_a_shallow_photodiode():
+    """QE = 1 - exp(-4 pi k d / lambda) from Green 2008's k (at 700 nm, k = 0.010528): checked
+    by hand; falling from blue to red, rising with depth; a camera with it collects less."""
+    import math
+
+    from splitcam.physics.radiometry import SiliconQE
+
+    qe = SiliconQE(3.0)
+    assert float(qe(700.0)) == pytest.approx(1 - math.exp(-4 * math.pi * 0.010528 * 3.0 / 0.7))
+    values = qe([450.0, 500.0, 550.0, 600.0, 650.0, 700.0])
+    assert all(a > b for a, b in zip(values, values[1:], strict=False))
+    assert float(SiliconQE(6.0)(650.0)) > float(qe(650.0))
+    with_si = Camera(qe=qe)
+    assert 0.5 < with_si.electrons_per_lux / Camera().electrons_per_lux < 1.0
+    assert with_si.describe().endswith("QE of silicon 3 µm deep")
+    with pytest.raises(ValueError, match="depth must be > 0"):
+        SiliconQE(0.0)

@@ -107,6 +107,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     lux.add_argument(
         "--illuminant", default="D65", help="D65 (default), A (tungsten) or LED (white LED)"
     )
+    lux.add_argument(
+        "--silicon-depth",
+        type=float,
+        help="µm: the pixel's QE is silicon's absorption within this depth (Green 2008); "
+        "default a lossless pixel",
+    )
     p.add_argument("--out", help="default results/exposure or results/breakeven")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.set_defaults(handler=run)
@@ -119,11 +125,12 @@ def _command(args: argparse.Namespace) -> str:
 def run(args: argparse.Namespace) -> int:
     from ..data.testsets import load_datasets
     from ..evaluation.exposure import default_exposures
-    from ..physics.radiometry import Camera
+    from ..physics.radiometry import Camera, SiliconQE
 
     if args.points < 1:
         raise ValueError(f"--points must be at least 1, got {args.points}")
-    args.camera = Camera(args.pitch, args.f_number, args.exposure_time, args.illuminant)
+    qe = SiliconQE(args.silicon_depth) if args.silicon_depth is not None else None
+    args.camera = Camera(args.pitch, args.f_number, args.exposure_time, args.illuminant, qe=qe)
     photons = args.photons or default_exposures(args.points)
     datasets = load_datasets(args.datasets, args.max_images, args.crop)
     images = [img for _, imgs in datasets for img in imgs]
