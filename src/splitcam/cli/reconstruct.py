@@ -66,75 +66,16 @@ def run(args: argparse.Namespace) -> int:
     import torch
 
     from .. import patterns
-    from ..data.imageio import read_image, read_raw, read_raw_meta, write_image
+    from ..data.imageio import read_image, read_raw
     from ..physics.light import decode_scene, encode_estimate
     from ..physics.sensor import SplitterSensor
     from ..physics.system import simulate
     from ..recon.base import method_domain
-    from ..recon.registry import build_method, build_model
 
-    if (args.image is None) == (args.raw is None):
-        raise ValueError("give exactly one of --image (simulate, then reconstruct) or --raw")
-    check_distinct({"--image": args.image, "--raw": args.raw}, {"--out": args.out})
-    out_suffix = Path(args.out).suffix.lower()
-    if args.bits == 16 and out_suffix not in (".png", ".tif", ".tiff", ".npy"):
-        # Refused before minutes of reconstruction, not after.
-        raise ValueError(f"--bits 16 writes .png or .tif files, not {out_suffix or 'no suffix'}")
-    check_writable(args.out)
-    given = [x for x in (args.method, args.checkpoint, args.model) if x]
-    if len(given) != 1:
-        raise ValueError(
-            "give one of --model (a shipped model, e.g. D), --method (lmmse, malvar2004, ...) "
-            "or --checkpoint (a run folder)"
-        )
-    spec = given[0]
-    warn_failed_runs([spec])
-    sigma, pattern, domain = args.sigma, args.pattern, args.domain
-    recorded = None
-    if args.raw:
-        # What simulate recorded in the raw file: the noise level, and the pattern (which must
-        # agree with whatever the command is told or the method was trained for).
-        made = read_raw_meta(args.raw)
-        if made is not None:
-            recorded = patterns.Pattern.from_dict(made.get("pattern"), source=str(args.raw))
-            if sigma is not None and sigma != made.get("sigma"):
-                raise ValueError(
-                    f"--sigma {sigma:g} contradicts the noise level recorded in {args.raw} "
-                    f"(sigma {made.get('sigma'):g}); leave --sigma out"
-                )
-            if pattern is not None and not patterns.get(pattern).equals(recorded):
-                raise ValueError(
-                    f"--pattern {pattern} contradicts the pattern recorded in {args.raw} "
-                    f"({recorded.name}); leave --pattern out"
-                )
-            made_in = made.get("domain", SRGB)  # files that do not record it are of srgb
-            if domain is not None and domain != made_in:
-                raise ValueError(
-                    f"--domain {domain} contradicts the light domain recorded in {args.raw} "
-                    f"({made_in}); leave --domain out"
-                )
-            sigma, pattern = float(made.get("sigma", 0.0)), pattern or recorded
-            domain = made_in
-        elif sigma is None or pattern is None:
-            raise ValueError(
-                f"{args.raw} does not record how it was made (not written by `splitcam "
-                f"simulate`): give its noise level (--sigma) and its pattern (--pattern)"
-            )
+    spec = _check_request(args)
+    sigma, pattern, domain, recorded = _as_recorded(args)
     sigma = 0.0 if sigma is None else sigma
-    method = (
-        build_model(spec, pattern=pattern, tile=args.tile, precision=args.precision, domain=domain)
-        if args.model
-        else build_method(
-            spec,
-            pattern=pattern,
-            lmmse_train=args.lmmse_train,
-            tile=args.tile,
-            precision=args.precision,
-            progress=not args.quiet,
-            domain=domain,
-        )
-    )
-    method = with_flips([method], args.flips)[0]
+    method = with_flips([_method(args, spec, pattern, domain)], args.flips)[0]
     domain = method_domain(method)  # a network's own where none was asked for
     if pattern is not None and not patterns.get(pattern).equals(method.pattern):
         name = pattern.name if isinstance(pattern, patterns.Pattern) else pattern
@@ -150,6 +91,93 @@ def run(args: argparse.Namespace) -> int:
         method.progress = not args.quiet
     with torch.no_grad():
         out = encode_estimate(method.reconstruct(raw, sigma), domain)
+    _write(args, out)
+    where = "" if domain == SRGB else f" ({domain} domain)"
+    print(f"{method.name}{where}: wrote {args.out} ({out.shape[-1]}x{out.shape[-2]})")
+    return 0
+
+
+def _check_request(args: argparse.Namespace) -> str:
+    """The inputs, the output and the method asked for, checked before any work; the method's
+    spec."""
+    if (args.image is None) == (args.raw is None):
+        raise ValueError("give exactly one of --image (simulate, then reconstruct) or --raw")
+    check_distinct({"--image": args.image, "--raw": args.raw}, {"--out": args.out})
+    out_suffix = Path(args.out).suffix.lower()
+    if args.bits == 16 and out_suffix not in (".png", ".tif", ".tiff", ".npy"):
+        # Refused before minutes of reconstruction, not after.
+        raise ValueError(f"--bits 16 writes .png or .tif files, not {out_suffix or 'no suffix'}")
+    check_writable(args.out)
+    given = [x for x in (args.method, args.checkpoint, args.model) if x]
+    if len(given) != 1:
+        raise ValueError(
+            "give one of --model (a shipped model, e.g. D), --method (lmmse, malvar2004, ...) "
+            "or --checkpoint (a run folder)"
+        )
+    warn_failed_runs([given[0]])
+    return given[0]
+
+
+def _as_recorded(args: argparse.Namespace):
+    """``(sigma, pattern, domain, recorded pattern)``: the options, checked against what
+    simulate recorded in a raw file (the noise level, the pattern and the light domain, which
+    must agree with whatever the command is told)."""
+    from .. import patterns
+    from ..data.imageio import read_raw_meta
+
+    sigma, pattern, domain = args.sigma, args.pattern, args.domain
+    if not args.raw:
+        return sigma, pattern, domain, None
+    made = read_raw_meta(args.raw)
+    if made is None:
+        if sigma is None or pattern is None:
+            raise ValueError(
+                f"{args.raw} does not record how it was made (not written by `splitcam "
+                f"simulate`): give its noise level (--sigma) and its pattern (--pattern)"
+            )
+        return sigma, pattern, domain, None
+    recorded = patterns.Pattern.from_dict(made.get("pattern"), source=str(args.raw))
+    if sigma is not None and sigma != made.get("sigma"):
+        raise ValueError(
+            f"--sigma {sigma:g} contradicts the noise level recorded in {args.raw} "
+            f"(sigma {made.get('sigma'):g}); leave --sigma out"
+        )
+    if pattern is not None and not patterns.get(pattern).equals(recorded):
+        raise ValueError(
+            f"--pattern {pattern} contradicts the pattern recorded in {args.raw} "
+            f"({recorded.name}); leave --pattern out"
+        )
+    made_in = made.get("domain", SRGB)  # files that do not record it are of srgb
+    if domain is not None and domain != made_in:
+        raise ValueError(
+            f"--domain {domain} contradicts the light domain recorded in {args.raw} "
+            f"({made_in}); leave --domain out"
+        )
+    return float(made.get("sigma", 0.0)), pattern or recorded, made_in, recorded
+
+
+def _method(args: argparse.Namespace, spec: str, pattern, domain):
+    from ..recon.registry import build_method, build_model
+
+    if args.model:
+        return build_model(
+            spec, pattern=pattern, tile=args.tile, precision=args.precision, domain=domain
+        )
+    return build_method(
+        spec,
+        pattern=pattern,
+        lmmse_train=args.lmmse_train,
+        tile=args.tile,
+        precision=args.precision,
+        progress=not args.quiet,
+        domain=domain,
+    )
+
+
+def _write(args: argparse.Namespace, out) -> None:
+    """The reconstruction as ``--out``: float32 ``.npy`` (unclipped) or an 8/16-bit image."""
+    from ..data.imageio import write_image
+
     if Path(args.out).suffix.lower() == ".npy":  # float32 (H, W, 3), unclipped
         import numpy as np
 
@@ -159,6 +187,3 @@ def run(args: argparse.Namespace) -> int:
             np.save(tmp, out[0].permute(1, 2, 0).float().numpy())
     else:
         write_image(args.out, out[0].clamp(0, 1), bits=args.bits)
-    where = "" if domain == SRGB else f" ({domain} domain)"
-    print(f"{method.name}{where}: wrote {args.out} ({out.shape[-1]}x{out.shape[-2]})")
-    return 0
