@@ -9,6 +9,14 @@ from collections.abc import Sequence
 from pathlib import Path
 
 
+def table(rows: list[dict[str, str]]) -> str:
+    """A listing as an aligned Markdown table (:func:`splitcam.evaluation.tables.aligned_table`,
+    imported here only when a command prints one: parsing a command imports no torch)."""
+    from ..evaluation.tables import aligned_table
+
+    return aligned_table(rows)
+
+
 def pattern_or_model(spec: str):
     """A pattern by name or file, or the pattern of a shipped model of one pattern (``A-opt``:
     its learned kernels)."""

@@ -5,8 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from ..evaluation.tables import aligned_table as table
-from ._common import check_writable
+from ._common import check_writable, table
 
 
 def _network_objective(args: argparse.Namespace) -> dict:

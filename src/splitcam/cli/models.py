@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from ..evaluation.tables import aligned_table as table
+from ._common import table
 
 
 def register(sub: argparse._SubParsersAction) -> None:

@@ -100,7 +100,7 @@ def _search(args: argparse.Namespace, period: tuple[int, int], optics, out: Path
 
 def _print_front(search, space: dict) -> None:
     """The state of the study and its Pareto front."""
-    from ..evaluation.tables import aligned_table as table
+    from ._common import table
     from .design import fmt
 
     trials = search.study.trials

@@ -5,8 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from ..evaluation.tables import aligned_table as table
-from ._common import pattern_or_model
+from ._common import pattern_or_model, table
 
 ACTIONS = ("list", "show", "export")
 
