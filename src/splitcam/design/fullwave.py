@@ -36,7 +36,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from ..patterns.spectral import scene_basis
+from ..patterns.spectral import _nearest_copies, scene_basis
 from ..physics.fullwave import FullwaveError, RouterDesign, torcwa_quadrants
 from ..physics.noise import Exposure
 from ..physics.sensor import pixel_kernels
@@ -87,18 +87,11 @@ def rgb_kernels(transmission: torch.Tensor, wavelengths: Sequence[float]) -> tor
     for q in np.ndindex(2, 2):
         k = t.new_zeros(3, 3, 3)
         for p in np.ndindex(2, 2):
-            copies = _nearest_copies(q, p)
+            copies = _nearest_copies(q, p, (2, 2))  # the pattern class's own rule
             for dy, dx in copies:
                 k[:, dy + 1, dx + 1] = k[:, dy + 1, dx + 1] + rgb[p] / len(copies)
         kernels.append(k)
     return torch.stack(kernels)
-
-
-def _nearest_copies(q: tuple[int, int], p: tuple[int, int]) -> list[tuple[int, int]]:
-    """Offsets from pixel ``q`` to the nearest copies of pixel ``p`` in a 2x2 period."""
-    ys = [d for d in (-1, 0, 1) if (q[0] + d) % 2 == p[0]]
-    xs = [d for d in (-1, 0, 1) if (q[1] + d) % 2 == p[1]]
-    return [(dy, dx) for dy in ys for dx in xs]
 
 
 @dataclass
