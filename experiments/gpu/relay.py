@@ -23,20 +23,11 @@ within ``--minutes`` of wall time. The training photos are decoded once and held
   ``.safetensors`` (provenance: device, minutes, steps and batch, so patches seen), and
   ``DIR/relay.md`` tables the validation PSNR at the start and the end of every run.
 
-**The gate** (``--gate DIR``, on a CPU) scores every candidate against the shipped model of its
-name on held-out photos, whole (481x321 or 321x481: odd sides, ending part-way through periods):
-the first 8 of the 32 photos every run holds out (its validation photos, whole rather than
-cropped) and the last 12, which no training or choice uses. It scores at the model's own
-validation levels, cleanest first (σ 0 and 15 for the Gaussian models; 300 and 3
-photo-electrons for ``universal-photon``), and a network of any pattern on the patterns its
-validation uses. A candidate ships when the mean PSNR rises at the cleanest level and falls by
-no more than 0.05 dB at the noisiest (the rule of docs/results/gpu). ``DIR/gate.md`` holds the
-table; ``--dry-run`` prints what would ship and writes nothing.
-
-A candidate that is not a continuation of the shipped model of its name (another pattern to
-start from, or a network of other patterns) is skipped with its reason in the table; the rest
-are gated. A model that learns its pattern (A-opt) goes on learning it, so its candidate's
-pattern moves: the patterns compared are the ones both started from.
+**The gate** (``--gate DIR``, on a CPU) scores the candidates by the rule every shipped model
+passes (``splitcam.training.gate``, also ``splitcam models gate``): held-out photos, whole, at
+the model's own validation levels; a candidate ships when the cleanest level rises and the
+noisiest falls by no more than 0.05 dB. ``DIR/gate.md`` holds the table; ``--dry-run`` prints
+what would ship and writes nothing.
 
 ``--device cpu --minutes 0.5`` runs the same path end to end (the test suite does so on tiny
 settings). How to run it on a lent GPU: ``experiments/gpu/README.md``.
@@ -47,7 +38,6 @@ from __future__ import annotations
 import argparse
 import json
 import logging
-import shutil
 import sys
 import time
 from pathlib import Path
@@ -57,10 +47,6 @@ SHARES = {"universal": 3, "universal-photon": 2}
 FIRST_OVERHEAD_S = 30.0
 MIN_SLOT_MIN = 0.2
 MARKER = "relay.json"
-GATE_RISE_DB = 0.0
-GATE_FALL_DB = 0.05
-VAL_FIRST = 8
-LAST_UNUSED = 12
 
 
 class RelayError(ValueError):
@@ -238,137 +224,30 @@ def write_table(path: Path, rows: list[dict], args: argparse.Namespace) -> None:
     path.write_text("\n".join(lines) + "\n")
 
 
-# --- the gate, on a CPU --------------------------------------------------------------------
-
-
-def held_out_photos(config: dict, data: Path) -> list[tuple[str, object]]:
-    """The run's validation photos (the first 8 it holds out) and the last 12, whole."""
-    import torch
-
-    from splitcam.data.imageio import read_image
-    from splitcam.data.patches import list_images
-    from splitcam.training import TrainConfig
-    from splitcam.training.validation import held_out
-
-    settings = TrainConfig.from_saved(config).override({"data.train": str(data), "data.val": None})
-    validation = held_out(settings)[: settings.data.val_max_images or VAL_FIRST]
-    chosen = list(dict.fromkeys([*validation, *list_images(data)[-LAST_UNUSED:]]))
-    return [(p.stem, torch.from_numpy(read_image(p)).permute(2, 0, 1).contiguous()) for p in chosen]
-
-
-def gate_levels(config: dict) -> list:
-    """The model's validation levels, cleanest first."""
-    from splitcam.physics.noise import Exposure
-
-    noise = config.get("noise") or {}
-    if noise.get("model") == "photon":
-        settings = {k: noise[k] for k in ("read_noise", "full_well", "gain", "bits") if k in noise}
-        return [Exposure(float(n), **settings) for n in sorted(noise["val_photons"], reverse=True)]
-    return sorted(float(s) for s in config["data"]["val_sigmas"])
-
-
-def check_candidate(name: str, candidate, shipped) -> None:
-    """Refuse a candidate that is not a continuation of the shipped model of its name: one that
-    serves other patterns, or (for a network of one pattern) started from another pattern. A
-    model that learns its pattern (A-opt) moves its pattern as it trains, so the patterns
-    compared are the ones both started from, not the learned ones."""
-    from splitcam import patterns
-    from splitcam.recon.networks import serves_any_pattern
-
-    any_shipped = serves_any_pattern(shipped.network)
-    if serves_any_pattern(candidate.network) != any_shipped:
-        raise RelayError(f"candidate {name}: it and the shipped {name} serve different patterns")
-    if not any_shipped:
-        start = patterns.Pattern.from_dict(candidate.meta["start_pattern"])
-        shipped_start = shipped.meta.get("start_pattern")
-        origin = patterns.Pattern.from_dict(shipped_start) if shipped_start else shipped.pattern
-        if not start.equals(origin):
-            raise RelayError(
-                f"candidate {name} was trained from pattern {start.name}, the shipped {name} "
-                f"from {origin.name}"
-            )
-
-
-def mean_scores(spec, config: dict, photos, levels, threads: int) -> list[float]:
-    """Mean PSNR per level over the photos (and, for a network of any pattern, its validation
-    patterns)."""
-    from splitcam.evaluation.protocol import mean_psnr
-    from splitcam.recon.registry import build_method
-
-    domain = (config.get("data") or {}).get("domain") or "srgb"
-    pats = config["pattern"]["val_patterns"] if config["pattern"]["name"] == "random" else [None]
-    per_pattern = []
-    for pattern in pats:
-        method = build_method(spec, pattern=pattern, precision="fp32", domain=domain)
-        scores = mean_psnr(method, photos, levels, domain=domain)
-        per_pattern.append([scores[level] for level in scores])
-    return [sum(col) / len(col) for col in zip(*per_pattern, strict=True)]
+# --- the gate, on a CPU (splitcam.training.gate) -------------------------------------------
 
 
 def run_gate(args: argparse.Namespace) -> int:
-    import torch
-
-    from splitcam.io.tensorfiles import paired_paths
     from splitcam.io.weights import MODELS_DIR
-    from splitcam.physics.noise import level_label
-    from splitcam.recon.loading import load_model, model_names
+    from splitcam.training.gate import gate, gate_table, ship
 
     folder = Path(args.gate)
     found = sorted((folder / "candidates").glob("*.json"))
     if not (folder / MARKER).exists() or not found:
         raise RelayError(f"{folder} holds no relay candidates (candidates/NAME.json)")
-    ship_to = Path(args.ship_to) if args.ship_to else MODELS_DIR
-    shipped_names = model_names()
-    gated, refused = [], {}
-    for path in found:
-        try:
-            if path.stem not in shipped_names:
-                raise RelayError(f"candidate {path.stem}: no shipped model of that name")
-            check_candidate(path.stem, load_model(path), load_model(path.stem))
-            gated.append(path)
-        except RelayError as err:
-            refused[path.stem] = str(err)
-            print(f"skipped: {err}", flush=True)
-    torch.set_num_threads(args.threads)
-    lines = [
-        "# Gate: the validation photos and the last 12, whole; ship when the cleanest level "
-        f"rises and the noisiest falls by no more than {GATE_FALL_DB} dB",
-        "",
-        "| model | photos | levels | shipped | candidate | change | ships |",
-        "|---|---|---|---|---|---|---|",
-    ]
-    decisions = {}
-    for name, reason in refused.items():
-        decisions[name] = False
-        lines.append(f"| {name} | | | | | not gated: {reason} | no |")
-    for path in gated:
-        name = path.stem
-        config = load_model(path).meta["config"]
-        photos = held_out_photos(config, Path(args.data))
-        levels = gate_levels(config)
-        before = mean_scores(name, config, photos, levels, args.threads)
-        after = mean_scores(str(path), config, photos, levels, args.threads)
-        change = [a - b for a, b in zip(after, before, strict=True)]
-        ships = change[0] > GATE_RISE_DB and change[-1] >= -GATE_FALL_DB
-        decisions[name] = ships
-        fmt = " / ".join
-        lines.append(
-            f"| {name} | {len(photos)} | {fmt(level_label(v) for v in levels)} | "
-            f"{fmt(f'{v:.2f}' for v in before)} | {fmt(f'{v:.2f}' for v in after)} | "
-            f"{fmt(f'{v:+.2f}' for v in change)} | {'yes' if ships else 'no'} |"
-        )
-        print(lines[-1], flush=True)
-    table = "\n".join(lines) + "\n"
+    verdicts = gate(found, Path(args.data), threads=args.threads)
+    for verdict in verdicts:
+        if verdict.refused is not None:
+            print(f"skipped: {verdict.refused}", flush=True)
+    table = gate_table(verdicts)
     if args.dry_run:
         print(table)
-        print("would ship: " + (", ".join(n for n, s in decisions.items() if s) or "nothing"))
+        names = [v.name for v in verdicts if v.ships]
+        print("would ship: " + (", ".join(names) or "nothing"))
         return 0
     (folder / "gate.md").write_text(table)
-    for name, ships in decisions.items():
-        if ships:
-            for src in paired_paths(folder / "candidates" / name):
-                shutil.copyfile(src, ship_to / src.name)
-            print(f"shipped {name} into {ship_to}")
+    for name in ship(verdicts, Path(args.ship_to) if args.ship_to else MODELS_DIR):
+        print(f"shipped {name}")
     print(table)
     return 0
 

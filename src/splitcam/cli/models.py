@@ -1,4 +1,4 @@
-"""`splitcam models`: list the shipped models, or export a run as a model."""
+"""`splitcam models`: list the shipped models, export a run as a model, or gate candidates."""
 
 from __future__ import annotations
 
@@ -11,17 +11,32 @@ from ._common import table
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "models",
-        help="list the shipped trained models, or export a run as a model",
+        help="list the shipped trained models, export a run as a model, or gate candidates",
         description="`splitcam models` lists the trained models shipped with splitcam and their "
         "budget; `splitcam models export RUN --name NAME [--out DIR]` writes a run's network, "
         "pattern and provenance as NAME.safetensors + NAME.json (16-bit weights by default) "
         "into ./models (or --out DIR; --ship: the package's shipped models); an existing model "
-        "is replaced only with --force. Use it with --model DIR/NAME.json.",
+        "is replaced only with --force. Use it with --model DIR/NAME.json. `splitcam models gate "
+        "NAME.json ... --data DIR` scores exported candidates against the shipped models of "
+        "their names on held-out photos of DIR, whole, and says which pass (the cleanest "
+        "level rises, the noisiest falls by no more than 0.05 dB; splitcam.training.gate); "
+        "--ship copies those that pass into the package's shipped models (--out DIR: there).",
     )
-    p.add_argument("action", nargs="?", choices=["list", "export"], default="list")
-    p.add_argument("run", nargs="?", help="run folder or checkpoint (export)")
+    p.add_argument("action", nargs="?", choices=["list", "export", "gate"], default="list")
+    p.add_argument(
+        "paths",
+        nargs="*",
+        metavar="PATH",
+        help="run folder or checkpoint (export); candidates NAME.json (gate)",
+    )
     p.add_argument("--name", help="model name (export)")
-    p.add_argument("--out", help="folder to export into (default: ./models)")
+    p.add_argument("--out", help="folder to export into (default: ./models); gate: ship into it")
+    p.add_argument(
+        "--data",
+        help="gate: the training photos whose held-out ones score (default: $SPLITCAM_DATA/train)",
+    )
+    p.add_argument("--table", help="gate: also write the table to this Markdown file")
+    p.add_argument("--threads", type=int, help="gate: CPU threads")
     p.add_argument(
         "--ship", action="store_true", help="export into the package's shipped models instead"
     )
@@ -41,8 +56,10 @@ def run(args: argparse.Namespace) -> int:
     from ..recon.loading import load_model, model_names
     from ..training.models import export_model, model_summary
 
+    if args.action == "gate":
+        return run_gate(args)
     if args.action == "export":
-        if not args.run or not args.name:
+        if len(args.paths) != 1 or not args.name:
             raise ValueError("models export needs a run folder and --name")
         if args.ship and args.out:
             raise ValueError("give --ship (into the package's shipped models) or --out, not both")
@@ -55,10 +72,10 @@ def run(args: argparse.Namespace) -> int:
             raise ValueError(f"{what} exists; --force replaces it")
         from ..io.checkpoints import which_checkpoint
 
-        if (note := which_checkpoint(args.run)) is not None:
+        if (note := which_checkpoint(args.paths[0])) is not None:
             print(note)
         path = export_model(
-            args.run,
+            args.paths[0],
             out,
             name=args.name,
             storage=args.storage,
@@ -73,4 +90,34 @@ def run(args: argparse.Namespace) -> int:
         print(f"no models shipped in {weights.MODELS_DIR}")
         return 0
     print(table(rows))
+    return 0
+
+
+def run_gate(args: argparse.Namespace) -> int:
+    from ..data.registry import training_folder
+    from ..io import weights
+    from ..training.gate import gate, gate_table, ship
+
+    if not args.paths:
+        raise ValueError("models gate needs candidates: exported models NAME.json")
+    if args.ship and args.out:
+        raise ValueError("give --ship (into the package's shipped models) or --out, not both")
+    for path in map(Path, args.paths):
+        if path.suffix != ".json" or not path.is_file():
+            raise ValueError(f"{path}: not an exported model (NAME.json; splitcam models export)")
+    data = Path(args.data) if args.data else training_folder()
+    if not data.is_dir():
+        raise FileNotFoundError(f"no training photos at {data}: give --data DIR")
+    verdicts = gate([Path(p) for p in args.paths], data, threads=args.threads)
+    table = gate_table(verdicts)
+    print(table)
+    if args.table:
+        Path(args.table).write_text(table)
+    ship_to = weights.MODELS_DIR if args.ship else Path(args.out) if args.out else None
+    if ship_to is None:
+        names = [v.name for v in verdicts if v.ships]
+        print("would ship: " + (", ".join(names) or "nothing") + " (--ship ships them)")
+        return 0
+    for name in ship(verdicts, ship_to):
+        print(f"shipped {name} into {ship_to}")
     return 0

@@ -1,0 +1,196 @@
+"""The gate a candidate network passes before it replaces the shipped model of its name.
+
+One rule for every way a candidate is made (a GPU relay's segment, a colour stage on a CPU, any
+fine-tuning): score the candidate and the shipped model on held-out photos, whole (481x321 or
+321x481 in the training set: odd sides, ending part-way through periods), at the model's own
+validation levels, cleanest first (σ 0 and 15 for the Gaussian models; photo-electrons for the
+photon ones), and on the patterns its validation uses for a network of any pattern. The photos
+are the run's validation photos (the first ``VAL_FIRST`` of those every run holds out, whole
+rather than cropped) and the last ``LAST_UNUSED`` of the folder, which no training or choice
+uses. A candidate ships when the mean PSNR rises at the cleanest level and falls by no more than
+``FALL_DB`` at the noisiest.
+
+A candidate that is not a continuation of the shipped model of its name (another pattern to
+start from, or a network of other patterns) is not gated, and its reason is kept. A model that
+learns its pattern (A-opt) goes on learning it, so the patterns compared are the ones both
+started from.
+
+``splitcam models gate CANDIDATE.json ... --data DIR`` is the command.
+"""
+
+from __future__ import annotations
+
+import shutil
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+RISE_DB = 0.0
+FALL_DB = 0.05
+VAL_FIRST = 8
+LAST_UNUSED = 12
+
+
+class GateError(ValueError):
+    """A candidate the gate cannot compare with the shipped model of its name."""
+
+
+@dataclass
+class Verdict:
+    """One candidate's scores beside the shipped model's, or why it was not gated."""
+
+    name: str
+    path: Path
+    photos: int = 0
+    levels: list = field(default_factory=list)
+    before: list[float] = field(default_factory=list)
+    after: list[float] = field(default_factory=list)
+    refused: str | None = None
+
+    @property
+    def change(self) -> list[float]:
+        return [a - b for a, b in zip(self.after, self.before, strict=True)]
+
+    @property
+    def ships(self) -> bool:
+        if self.refused is not None:
+            return False
+        change = self.change
+        return change[0] > RISE_DB and change[-1] >= -FALL_DB
+
+
+def held_out_photos(config: dict, data: Path) -> list[tuple[str, object]]:
+    """The run's validation photos (the first ``VAL_FIRST`` it holds out) and the last
+    ``LAST_UNUSED`` of the folder, whole."""
+    import torch
+
+    from ..data.imageio import read_image
+    from ..data.patches import list_images
+    from .config import TrainConfig
+    from .validation import held_out
+
+    settings = TrainConfig.from_saved(config).override({"data.train": str(data), "data.val": None})
+    validation = held_out(settings)[: settings.data.val_max_images or VAL_FIRST]
+    chosen = list(dict.fromkeys([*validation, *list_images(data)[-LAST_UNUSED:]]))
+    return [(p.stem, torch.from_numpy(read_image(p)).permute(2, 0, 1).contiguous()) for p in chosen]
+
+
+def gate_levels(config: dict) -> list:
+    """The model's validation levels, cleanest first."""
+    from ..physics.noise import Exposure
+
+    noise = config.get("noise") or {}
+    if noise.get("model") == "photon":
+        settings = {k: noise[k] for k in ("read_noise", "full_well", "gain", "bits") if k in noise}
+        return [Exposure(float(n), **settings) for n in sorted(noise["val_photons"], reverse=True)]
+    return sorted(float(s) for s in config["data"]["val_sigmas"])
+
+
+def check_candidate(name: str, candidate, shipped) -> None:
+    """Refuse a candidate that is not a continuation of the shipped model of its name: one that
+    serves other patterns, or (for a network of one pattern) started from another pattern."""
+    from .. import patterns
+    from ..recon.networks import serves_any_pattern
+
+    any_shipped = serves_any_pattern(shipped.network)
+    if serves_any_pattern(candidate.network) != any_shipped:
+        raise GateError(f"candidate {name}: it and the shipped {name} serve different patterns")
+    if not any_shipped:
+        start = patterns.Pattern.from_dict(candidate.meta["start_pattern"])
+        shipped_start = shipped.meta.get("start_pattern")
+        origin = patterns.Pattern.from_dict(shipped_start) if shipped_start else shipped.pattern
+        if not start.equals(origin):
+            raise GateError(
+                f"candidate {name} was trained from pattern {start.name}, the shipped {name} "
+                f"from {origin.name}"
+            )
+
+
+def mean_scores(spec, config: dict, photos, levels) -> list[float]:
+    """Mean PSNR per level over the photos (and, for a network of any pattern, its validation
+    patterns)."""
+    from ..evaluation.protocol import mean_psnr
+    from ..recon.registry import build_method
+
+    domain = (config.get("data") or {}).get("domain") or "srgb"
+    pats = config["pattern"]["val_patterns"] if config["pattern"]["name"] == "random" else [None]
+    per_pattern = []
+    for pattern in pats:
+        method = build_method(spec, pattern=pattern, precision="fp32", domain=domain)
+        scores = mean_psnr(method, photos, levels, domain=domain)
+        per_pattern.append([scores[level] for level in scores])
+    return [sum(col) / len(col) for col in zip(*per_pattern, strict=True)]
+
+
+def candidate_name(path: Path) -> str:
+    """The shipped model a candidate would replace: the file's name (``D.json`` → ``D``)."""
+    return path.stem
+
+
+def gate(candidates: Sequence[Path], data: Path, threads: int | None = None) -> list[Verdict]:
+    """Score each candidate (an exported model's JSON) against the shipped model of its name on
+    the held-out photos of ``data``."""
+    import torch
+
+    from ..recon.loading import load_model, model_names
+
+    if threads is not None:
+        torch.set_num_threads(threads)
+    shipped_names = model_names()
+    verdicts = []
+    for path in map(Path, candidates):
+        name = candidate_name(path)
+        verdict = Verdict(name, path)
+        verdicts.append(verdict)
+        try:
+            if name not in shipped_names:
+                raise GateError(f"candidate {name}: no shipped model of that name")
+            candidate = load_model(path)
+            check_candidate(name, candidate, load_model(name))
+        except GateError as err:
+            verdict.refused = str(err)
+            continue
+        config = candidate.meta["config"]
+        photos = held_out_photos(config, Path(data))
+        verdict.photos = len(photos)
+        verdict.levels = gate_levels(config)
+        verdict.before = mean_scores(name, config, photos, verdict.levels)
+        verdict.after = mean_scores(str(path), config, photos, verdict.levels)
+    return verdicts
+
+
+def gate_table(verdicts: Sequence[Verdict]) -> str:
+    """The verdicts as a Markdown table (the refused first), with the rule in its heading."""
+    from ..physics.noise import level_label
+
+    lines = [
+        "# Gate: the validation photos and the last 12, whole; ship when the cleanest level "
+        f"rises and the noisiest falls by no more than {FALL_DB} dB",
+        "",
+        "| model | photos | levels | shipped | candidate | change | ships |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    fmt = " / ".join
+    for v in sorted(verdicts, key=lambda v: v.refused is None):
+        if v.refused is not None:
+            lines.append(f"| {v.name} | | | | | not gated: {v.refused} | no |")
+            continue
+        lines.append(
+            f"| {v.name} | {v.photos} | {fmt(level_label(x) for x in v.levels)} | "
+            f"{fmt(f'{x:.2f}' for x in v.before)} | {fmt(f'{x:.2f}' for x in v.after)} | "
+            f"{fmt(f'{x:+.2f}' for x in v.change)} | {'yes' if v.ships else 'no'} |"
+        )
+    return "\n".join(lines) + "\n"
+
+
+def ship(verdicts: Sequence[Verdict], ship_to: Path) -> list[str]:
+    """Copy every candidate that passed (its JSON and tensors) into ``ship_to``; the names."""
+    from ..io.tensorfiles import paired_paths
+
+    shipped = []
+    for v in verdicts:
+        if v.ships:
+            for src in paired_paths(v.path):
+                shutil.copyfile(src, Path(ship_to) / src.name)
+            shipped.append(v.name)
+    return shipped

@@ -1,0 +1,128 @@
+"""The gate (splitcam.training.gate, ``splitcam models gate``): a candidate is scored against the
+shipped model of its name on held-out photos whole, ships exactly when the rule holds on the
+numbers its table prints, a copy of the shipped model does not ship (no rise), a worse one does
+not, a candidate that is no continuation of its namesake is refused with its reason, and bad
+input gets one line."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+from PIL import Image
+from safetensors.torch import load_file, save_file
+
+from splitcam.cli import main
+from splitcam.io.tensorfiles import meta_checksum
+from splitcam.io.weights import MODELS_DIR
+from splitcam.training.gate import FALL_DB, gate, gate_table, ship
+
+
+@pytest.fixture(scope="module")
+def photos(tmp_path_factory) -> Path:
+    """14 smooth photos of odd sizes: the last one is the run's validation photo, and with the
+    last 12 the gate scores 12 whole photos."""
+    folder = tmp_path_factory.mktemp("photos")
+    rng = np.random.default_rng(1)
+    for i in range(14):
+        h, w = (37, 45) if i % 2 else (45, 37)
+        y, x = np.mgrid[0:h, 0:w] / 20.0
+        base = np.stack([np.sin(x * (i + 1)), np.cos(y * 2), np.sin(x + y)], -1)
+        img = 127 + 90 * base + rng.normal(0, 4, (h, w, 3))
+        Image.fromarray(img.clip(0, 255).astype(np.uint8)).save(folder / f"p{i:02d}.png")
+    return folder
+
+
+def _candidate(folder: Path, name: str, source: str = "D", scale: float = 1.0) -> Path:
+    """A copy of the shipped ``source`` model named ``name``, its last layer scaled by
+    ``scale`` (1: the shipped weights bit for bit)."""
+    folder.mkdir(parents=True, exist_ok=True)
+    tensors = load_file(MODELS_DIR / f"{source}.safetensors")
+    last = sorted(k for k in tensors if k.endswith("weight"))[-1]
+    tensors[last] = (tensors[last].float() * scale).to(tensors[last].dtype)
+    out = folder / f"{name}.safetensors"
+    save_file(tensors, out)
+    meta = json.loads((MODELS_DIR / f"{source}.json").read_text())
+    meta.update(name=name, tensors=out.name, sha256=hashlib.sha256(out.read_bytes()).hexdigest())
+    meta["meta_sha256"] = meta_checksum(meta)
+    path = folder / f"{name}.json"
+    path.write_text(json.dumps(meta))
+    return path
+
+
+def _rows(table: str) -> dict[str, list[str]]:
+    rows = {}
+    for line in table.splitlines():
+        if line.startswith("| ") and not line.startswith("| model"):
+            cells = [c.strip() for c in line.strip("|").split("|")]
+            rows[cells[0]] = cells
+    return rows
+
+
+def test_gate_decides_by_its_rule_on_the_numbers_it_prints(photos, tmp_path) -> None:
+    torch.manual_seed(0)
+    same = _candidate(tmp_path / "same", "D")
+    worse = _candidate(tmp_path / "worse", "D", scale=1.5)
+    verdicts = gate([same, worse], photos, threads=1)
+    for verdict in verdicts:
+        assert verdict.refused is None and verdict.photos == 12
+        assert [float(level) for level in verdict.levels] == [0.0, 15.0]
+    identical, degraded = verdicts
+    # The shipped weights bit for bit: the same scores, no rise, not shipped.
+    assert identical.before == identical.after and not identical.ships
+    assert all(c < -FALL_DB for c in degraded.change) and not degraded.ships
+    rows = _rows(gate_table(verdicts))
+    cells = rows["D"]
+    before, after = ([float(v) for v in cells[i].split(" / ")] for i in (3, 4))
+    assert after[0] > before[0] or cells[-1] == "no"
+    ship_to = tmp_path / "models"
+    ship_to.mkdir()
+    assert ship(verdicts, ship_to) == [] and not any(ship_to.iterdir())
+
+
+def test_a_passing_candidate_ships_its_pair(photos, tmp_path) -> None:
+    """A candidate whose verdict passes is copied with its tensors, and nothing else."""
+    path = _candidate(tmp_path / "c", "D")
+    (verdict,) = gate([path], photos, threads=1)
+    verdict.after = [b + 0.1 for b in verdict.before]  # as a better candidate would score
+    assert verdict.ships
+    ship_to = tmp_path / "models"
+    ship_to.mkdir()
+    assert ship([verdict], ship_to) == ["D"]
+    assert sorted(p.name for p in ship_to.iterdir()) == ["D.json", "D.safetensors"]
+    shipped = (ship_to / "D.safetensors").read_bytes()
+    assert shipped == path.with_suffix(".safetensors").read_bytes()
+
+
+def test_refused_candidates_keep_their_reason(photos, tmp_path) -> None:
+    # D's network named E: trained from pattern D, while the shipped E started from E.
+    wrong = _candidate(tmp_path / "w", "E", source="D")
+    unknown = _candidate(tmp_path / "u", "nosuch", source="D")
+    verdicts = gate([wrong, unknown], photos, threads=1)
+    assert "from pattern D" in verdicts[0].refused and not verdicts[0].ships
+    assert "no shipped model" in verdicts[1].refused
+    rows = _rows(gate_table(verdicts))
+    assert "not gated" in rows["E"][5] and rows["E"][-1] == "no"
+
+
+def test_cli_gate_is_dry_unless_told_and_refuses_bad_input(photos, tmp_path, capsys) -> None:
+    path = _candidate(tmp_path / "c", "D")
+    table = tmp_path / "gate.md"
+    assert main(["models", "gate", str(path), "--data", str(photos), "--table", str(table)]) == 0
+    out = capsys.readouterr().out
+    assert "would ship: nothing" in out and _rows(table.read_text())["D"][-1] == "no"
+    shutil.copy(path, tmp_path / "D.txt")
+    for argv, message in [
+        (["models", "gate"], "needs candidates"),
+        (["models", "gate", str(tmp_path / "D.txt")], "not an exported model"),
+        (["models", "gate", str(path), "--data", str(tmp_path / "none")], "no training photos"),
+        (["models", "gate", str(path), "--ship", "--out", str(tmp_path)], "not both"),
+    ]:
+        assert main(argv) != 0
+        err = capsys.readouterr().err.strip()
+        assert message in err and len(err.splitlines()) == 1
