@@ -19,6 +19,7 @@ from __future__ import annotations
 import os
 import warnings
 from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -33,6 +34,7 @@ from .scales import valid_scales
 __all__ = [
     "DeviceImages",
     "ImageCache",
+    "MinedWindows",
     "PatchSampler",
     "dihedral",
     "downscale",
@@ -377,6 +379,48 @@ class DeviceImages:
         return self.values[values.long()]
 
 
+@dataclass(frozen=True)
+class MinedWindows:
+    """Windows chosen in advance (for example where a network errs most in colour:
+    :func:`splitcam.training.mining.mine_colour`) that a :class:`PatchSampler` draws from with
+    probability ``share`` per patch.
+
+    ``index``, ``corner`` and ``code`` are as :meth:`PatchSampler.draw` returns them, for
+    patches of side ``patch_size``; ``score`` is what chose them (kept for the record).
+    """
+
+    index: torch.Tensor
+    corner: torch.Tensor
+    code: torch.Tensor
+    score: torch.Tensor
+    patch_size: int
+    share: float
+
+    def __post_init__(self) -> None:
+        n = len(self.index)
+        if n == 0 or any(len(t) != n for t in (self.corner, self.code, self.score)):
+            raise ValueError("mined windows need as many corners, codes and scores as indices")
+        if not 0.0 <= self.share <= 1.0:
+            raise ValueError(f"share must be a probability in [0, 1], got {self.share}")
+
+    def tensors(self) -> dict[str, torch.Tensor]:
+        """The windows as tensors to save (``from_tensors`` reads them back)."""
+        return {"index": self.index, "corner": self.corner, "code": self.code, "score": self.score}
+
+    @classmethod
+    def from_tensors(
+        cls, tensors: dict[str, torch.Tensor], patch_size: int, share: float
+    ) -> MinedWindows:
+        return cls(
+            tensors["index"].long(),
+            tensors["corner"].long(),
+            tensors["code"].long(),
+            tensors["score"],
+            patch_size,
+            share,
+        )
+
+
 class PatchSampler:
     """Random square patches in random dihedral orientations, drawn from an :class:`ImageCache`.
 
@@ -417,6 +461,9 @@ class PatchSampler:
         colour: Chroma augmentation and dead-leaves scenes mixed into each batch after it is
             cut (:class:`~splitcam.data.colour.ColourMix`), drawn on the same generator; None
             or an inactive mix draws nothing, so the patch sequence is unchanged.
+        mined: Windows chosen in advance: each patch is one of them (uniformly) with
+            probability ``mined.share``, instead of its random window (two extra draws per
+            patch); None draws nothing, so the patch sequence is unchanged.
         device: Hold the images on this device (:class:`DeviceImages`) and build each batch
             there by one gather; None: build batches on the host from the cache's arrays, which
             on a CPU is faster (``benchmarks/bench_data.py``). Either way the random choices are
@@ -440,6 +487,7 @@ class PatchSampler:
         hard: float = 0.0,
         device: torch.device | str | None = None,
         colour: ColourMix | None = None,
+        mined: MinedWindows | None = None,
     ) -> None:
         if not 0.0 <= hard <= 1.0:
             raise ValueError(f"hard must be in [0, 1], got {hard}")
@@ -474,6 +522,24 @@ class PatchSampler:
         self.images = DeviceImages(cache, device) if device is not None else None
         #: Colour shown beyond the photos' (chroma augmentation, dead leaves), or None.
         self.colour = colour if colour is not None and colour.active else None
+        #: Windows drawn from with probability ``mined.share``, or None.
+        self.mined: MinedWindows | None = None
+        self.use_mined(mined)
+
+    def use_mined(self, mined: MinedWindows | None) -> None:
+        """Draw from ``mined`` from the next batch on (see ``mined`` in the class).
+
+        Raises:
+            ValueError: Windows of another patch size, or of images this sampler lacks.
+        """
+        if mined is not None:
+            inside = (mined.index >= 0) & (mined.index < len(self.cache))
+            if mined.patch_size != self.patch_size or not bool(inside.all()):
+                raise ValueError(
+                    f"mined windows are {mined.patch_size}-pixel windows of other images than "
+                    f"this sampler's {self.patch_size}-pixel patches of {len(self.cache)} images"
+                )
+        self.mined = mined if mined is not None and mined.share > 0 else None
 
     @property
     def device(self) -> torch.device:
@@ -515,9 +581,10 @@ class PatchSampler:
             probability ``partial``.
         """
         if self.hard > 0:
-            batch = self._harder(self.assemble(*self.draw(batch_size * HARD_POOL)), batch_size)
+            pool = self._with_mined(*self.draw(batch_size * HARD_POOL))
+            batch = self._harder(self.assemble(*pool), batch_size)
         else:
-            batch = self.assemble(*self.draw(batch_size))
+            batch = self.assemble(*self._with_mined(*self.draw(batch_size)))
         # Whole periods first (no draw): a 64-pixel patch of a 1x3 pattern would otherwise
         # always end one column into a period, and a network trained only on that edge loses
         # 2-3 dB on crops that end on a whole period (docs/results/edges/).
@@ -530,6 +597,21 @@ class PatchSampler:
                 cut[i] += r if hit and side > 1 else 0
         batch = batch[..., : self.patch_size - cut[0], : self.patch_size - cut[1]]
         return self.colour(batch, self.generator) if self.colour is not None else batch
+
+    def _with_mined(
+        self, index: torch.Tensor, corner: torch.Tensor, code: torch.Tensor
+    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """The drawn windows, each replaced by a mined one with probability ``mined.share``."""
+        if self.mined is None:
+            return index, corner, code
+        n = len(index)
+        take = torch.rand(n, generator=self.generator) < self.mined.share
+        pick = torch.randint(len(self.mined.index), (n,), generator=self.generator)[take]
+        index, corner, code = index.clone(), corner.clone(), code.clone()
+        index[take] = self.mined.index[pick]
+        corner[take] = self.mined.corner[pick]
+        code[take] = self.mined.code[pick]
+        return index, corner, code
 
     def _harder(self, candidates: torch.Tensor, batch_size: int) -> torch.Tensor:
         """``batch_size`` of ``candidates`` chosen by detail (see ``hard`` in the class)."""

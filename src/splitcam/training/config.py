@@ -214,6 +214,16 @@ class DataConfig:
         "probability that a patch is replaced by a colour dead-leaves scene (discs with "
         "radii ~ r^-3 and colours uniform in the RGB cube; splitcam.data.colour)",
     )
+    colour_mined: float = _opt(
+        0.0,
+        "probability that a patch is drawn from windows mined where the starting network's "
+        "colour error is largest: of --mine-candidates windows drawn at random, the "
+        "--mine-keep share with the largest chroma error of its estimate at σ 0 (demosaicnet's "
+        "hard-patch mining, scored by colour; mined once at the run's start and kept in the "
+        "run folder; splitcam.training.mining)",
+    )
+    mine_candidates: int = _opt(8192, "windows scored when --colour-mined mines")
+    mine_keep: float = _opt(0.1, "share of the scored windows --colour-mined keeps, in (0, 1]")
     domain: str = _opt(
         DEFAULT_DOMAIN,
         "light domain (model.md §13): srgb (the paper's: the 8-bit values / 255 are the "
@@ -248,6 +258,15 @@ class DataConfig:
                 "data.colour_chroma, data.colour_leaves and data.colour_swap must be "
                 f"probabilities in [0, 1], got {self.colour_chroma}, {self.colour_leaves} and "
                 f"{self.colour_swap}",
+            ),
+            (
+                0 <= self.colour_mined <= 1 and 0 < self.mine_keep <= 1,
+                "data.colour_mined must be a probability in [0, 1] and data.mine_keep a share "
+                f"in (0, 1], got {self.colour_mined} and {self.mine_keep}",
+            ),
+            (
+                self.mine_candidates >= 1,
+                f"data.mine_candidates must be >= 1, got {self.mine_candidates}",
             ),
             (
                 self.colour_chroma_max >= 1,

@@ -36,6 +36,12 @@ def sampler_seed(config: TrainConfig, start_step: int) -> int:
     return config.run.seed + start_step
 
 
+def mining_seed(config: TrainConfig) -> int:
+    """The windows scored when mining by colour error (``data.colour_mined``): a stream of
+    their own, so the training patches are the same with and without mining's draws."""
+    return config.run.seed + 7_919
+
+
 def noise_seed(config: TrainConfig, start_step: int, rank: int) -> int:
     """The simulated sensor noise of one rank."""
     return (config.run.seed + start_step) * _STEP + 1 + 104729 * rank

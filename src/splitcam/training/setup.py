@@ -35,6 +35,7 @@ from .distributed import DistInfo, init_distributed
 from .ema import WeightAverage
 from .guard import DivergenceGuard
 from .init_from import continue_point, start_from
+from .mining import mined_windows
 from .state import Run, TrainState, restore
 from .teachers import Teachers
 from .validation import say_held_out, train_source, val_images, val_levels
@@ -78,6 +79,23 @@ def prepare(
     run.init_from, start_step, lr_scale = _origin(config, system, loaded)
     optimizer = build_optimizer(config, system)
     sampler = _patch_sampler(run, source, start_step, system, progress)
+    if config.data.colour_mined > 0:
+        if run.mix is not None:
+            raise ConfigError(
+                "data.colour_mined scores windows with one pattern's network; a run over many "
+                "patterns (pattern random) has none"
+            )
+        sampler.use_mined(
+            mined_windows(
+                run_dir,
+                system,
+                sampler,
+                config,
+                device=run.device,
+                progress=progress and dist.is_main,
+                save=dist.is_main,
+            )
+        )
     if loaded is None and config.data.colour_statistics:
         _use_colour_statistics(system, sampler.cache, config)
     run.train_images = sampler.cache.files
