@@ -76,14 +76,17 @@ def held_out_photos(config: dict, data: Path) -> list[tuple[str, object]]:
 
 
 def gate_levels(config: dict) -> list:
-    """The model's validation levels, cleanest first."""
-    from ..physics.noise import Exposure
+    """The model's validation levels (:func:`~splitcam.training.validation.val_levels`),
+    cleanest first: by the noise variance at mid-grey, whatever the noise model."""
+    from ..physics.noise import as_noise
+    from .config import TrainConfig
+    from .validation import val_levels
 
-    noise = config.get("noise") or {}
-    if noise.get("model") == "photon":
-        settings = {k: noise[k] for k in ("read_noise", "full_well", "gain", "bits") if k in noise}
-        return [Exposure(float(n), **settings) for n in sorted(noise["val_photons"], reverse=True)]
-    return sorted(float(s) for s in config["data"]["val_sigmas"])
+    def variance(level) -> float:
+        a, b = as_noise(level).variance_coefficients()
+        return a * 0.5 + b
+
+    return sorted(val_levels(TrainConfig.from_saved(config)), key=variance)
 
 
 def check_candidate(name: str, candidate, shipped) -> None:
