@@ -7,21 +7,27 @@ Pattern, noise model and light domain, and budget come from each model's JSON he
 over the 42 whole images at σ 0 and 15, PSNR dB) from the committed evaluation of
 ``splitcam reproduce`` (docs/results/reproduce/evaluation/table.md), beside the paper's Table 1-3
 numbers (:data:`splitcam.evaluation.report.PAPER`); the recipe that trains each again from
-experiments/recipes/.
+experiments/recipes/. A score measured on other weights than the model ships now (its
+fingerprint in the evaluation's ``evaluation.json`` differs) is marked as such, so the page never
+passes an older model's score for the current one. ``tests/docs/test_models_page.py`` checks that
+the page is what this script writes.
 """
 
 from __future__ import annotations
 
+import json
 import re
 from pathlib import Path
 
+from splitcam.evaluation.protocol import method_fingerprint
 from splitcam.evaluation.report import PAPER, PAPER_DATASETS, PAPER_MODELS
 from splitcam.recon.loading import load_model, model_names
 from splitcam.training.models import model_summary
 from splitcam.training.recipe import read_recipe
 
 DOCS = Path(__file__).resolve().parent
-TABLE = DOCS / "results" / "reproduce" / "evaluation" / "table.md"
+EVALUATION = DOCS / "results" / "reproduce" / "evaluation"
+TABLE = EVALUATION / "table.md"
 
 #: Where the models not in the paper's tables are scored.
 ELSEWHERE = {
@@ -57,8 +63,25 @@ def scores() -> tuple[dict[str, tuple[float, float]], dict[str, dict[str, float]
     return {m: (a / n, b / n) for m, (a, b, n) in sums.items() if n == total}, per_set
 
 
-def main() -> None:
+def scored_other_weights(names: list[str]) -> set[str]:
+    """The models among ``names`` whose committed scores were measured on other weights than
+    the ones shipped now."""
+    from splitcam.recon.registry import build_method
+
+    recorded = json.loads((EVALUATION / "evaluation.json").read_text())
+    crop = recorded.get("crop", 0)
+    stale = set()
+    for name in names:
+        now = method_fingerprint(build_method(name, precision="fp32"), crop)
+        if recorded["fingerprints"].get(f"net-{name}") != now:
+            stale.add(name)
+    return stale
+
+
+def render() -> str:
+    """The page's text."""
     ours, per_set = scores()
+    stale = scored_other_weights(sorted(ours))
     paper = {model: PAPER.get(row) for row, model in PAPER_MODELS.items()}
     lines = [
         "# Shipped models",
@@ -73,7 +96,9 @@ def main() -> None:
         "trains a model again end to end, stage by stage (`experiments/recipes/`). The last "
         "column is each set's own mean at σ 0 and Kodak24 minus McMaster: how much a network "
         "loses on saturated colour (demosaicnet, a GPU-trained Bayer network, on the same whole "
-        "images: 41.84 / 39.14, 2.70; [colour](results/colour/README.md)).",
+        "images: 41.84 / 39.14, 2.70; [colour](results/colour/README.md)). A score marked "
+        "*earlier weights* was measured before the model's last stage shipped: run "
+        "`splitcam reproduce` again and this page after it.",
         "",
         "| model | pattern | trained on | steps | batch | training | stages | σ 0 / 15 | paper "
         "| σ 0 Kodak24 / McMaster (drop) |",
@@ -82,8 +107,9 @@ def main() -> None:
     for name in model_names():
         row = model_summary(name, load_model(name).meta)
         stages = len(read_recipe(name).stages)
+        note = " *earlier weights*" if name in stale else ""
         if name in ours:
-            score = "{:.2f} / {:.2f}".format(*ours[name])
+            score = "{:.2f} / {:.2f}".format(*ours[name]) + note
         else:
             score = ELSEWHERE.get(
                 name, "photons, linear light: [exposure](results/exposure/README.md)"
@@ -96,7 +122,7 @@ def main() -> None:
             f"({sets['kodak24'] - sets['mcmaster']:.2f})"
             if {"kodak24", "mcmaster"} <= set(sets)
             else "–"
-        )
+        ) + (note if sets else "")
         lines.append(
             f"| {name} | {row['pattern']} | {row['trained on']} | {row['steps']} | {row['batch']} "
             f"| {row['train time']} | {stages} | {score} | {ref_text} | {drop} |"
@@ -105,7 +131,11 @@ def main() -> None:
         "",
         "Regenerate with `python docs/models.py` after a model ships.",
     ]
-    (DOCS / "models.md").write_text("\n".join(lines) + "\n", encoding="utf-8")
+    return "\n".join(lines) + "\n"
+
+
+def main() -> None:
+    (DOCS / "models.md").write_text(render(), encoding="utf-8")
     print("wrote", DOCS / "models.md")
 
 

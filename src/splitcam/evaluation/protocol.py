@@ -51,6 +51,7 @@ __all__ = [
     "Zoom",
     "check_method_domains",
     "evaluate",
+    "method_fingerprint",
     "mean_psnr",
     "parse_zoom",
     "score",
@@ -215,7 +216,7 @@ def _zoom_at(zooms: list[Zoom], sigma: float | NoiseModel) -> Zoom | None:
     return (exact or [z for z in zooms if z.sigma is None] or [None])[0]
 
 
-def _fingerprint(method: Reconstructor, crop: int, domain: str = SRGB) -> str:
+def method_fingerprint(method: Reconstructor, crop: int, domain: str = SRGB) -> str:
     """What a stored result depends on besides its key: the method's kind, its pattern's kernels
     and the border crop, bfloat16 inference where a network runs in it, and a light domain other
     than srgb. A result is reused on resume only if this is unchanged."""
@@ -287,7 +288,9 @@ def evaluate(
     domain, sigmas, sensor_settings = _check_settings(methods, sigmas, crop, domain)
     zoom = _zoom_plan(zoom_images, datasets)
     _check_image_sizes(datasets, crop)
-    fingerprints = {result_label(m.name, domain): _fingerprint(m, crop, domain) for m in methods}
+    fingerprints = {
+        result_label(m.name, domain): method_fingerprint(m, crop, domain) for m in methods
+    }
     out_dir = Path(out) if out is not None else None
     with _no_empty_folder(out_dir):
         done: dict[tuple, EvalRow] = {}
