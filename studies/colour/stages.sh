@@ -6,10 +6,15 @@
 set -euo pipefail
 : "${SPLITCAM_DATA:?set SPLITCAM_DATA to the data folder (its train/ holds the photos)}"
 export OMP_NUM_THREADS=1
+# --resume where the folder holds a checkpoint: an interrupted stage continues, a finished one
+# does no more steps.
+again() { [ -f "$1/checkpoint.safetensors" ] && echo --resume || true; }
 for name in "$@"; do
+    out="runs/colour/$name-colour"
     splitcam train --config "experiments/colour/$name-colour.toml" --data "$SPLITCAM_DATA/train" \
-        --out "runs/colour/$name-colour"
+        --out "$out" $(again "$out") --quiet
+    out="runs/colour/$name-cooldown"
     splitcam train --config "experiments/colour/$name-cooldown.toml" \
         --init-from "runs/colour/$name-colour" --data "$SPLITCAM_DATA/train" \
-        --out "runs/colour/$name-cooldown"
+        --out "$out" $(again "$out") --quiet
 done

@@ -164,26 +164,32 @@ def gate(candidates: Sequence[Path], data: Path, threads: int | None = None) -> 
 
 def gate_table(verdicts: Sequence[Verdict]) -> str:
     """The verdicts as a Markdown table (the refused first), with the rule in its heading."""
+    from ..evaluation.tables import markdown_table
     from ..physics.noise import level_label
 
-    lines = [
-        "# Gate: the validation photos and the last 12, whole; ship when the cleanest level "
-        f"rises and the noisiest falls by no more than {FALL_DB} dB",
-        "",
-        "| model | photos | levels | shipped | candidate | change | ships |",
-        "|---|---|---|---|---|---|---|",
-    ]
     fmt = " / ".join
+    rows = []
     for v in sorted(verdicts, key=lambda v: v.refused is None):
         if v.refused is not None:
-            lines.append(f"| {v.name} | | | | | not gated: {v.refused} | no |")
+            rows.append([v.name, "", "", "", "", f"not gated: {v.refused}", "no"])
             continue
-        lines.append(
-            f"| {v.name} | {v.photos} | {fmt(level_label(x) for x in v.levels)} | "
-            f"{fmt(f'{x:.2f}' for x in v.before)} | {fmt(f'{x:.2f}' for x in v.after)} | "
-            f"{fmt(f'{x:+.2f}' for x in v.change)} | {'yes' if v.ships else 'no'} |"
+        rows.append(
+            [
+                v.name,
+                str(v.photos),
+                fmt(level_label(x) for x in v.levels),
+                fmt(f"{x:.2f}" for x in v.before),
+                fmt(f"{x:.2f}" for x in v.after),
+                fmt(f"{x:+.2f}" for x in v.change),
+                "yes" if v.ships else "no",
+            ]
         )
-    return "\n".join(lines) + "\n"
+    header = ["model", "photos", "levels", "shipped", "candidate", "change", "ships"]
+    heading = (
+        "# Gate: the validation photos and the last 12, whole; ship when the cleanest level "
+        f"rises and the noisiest falls by no more than {FALL_DB} dB"
+    )
+    return "\n".join([heading, "", *markdown_table(header, rows)]) + "\n"
 
 
 def ship(verdicts: Sequence[Verdict], ship_to: Path) -> list[str]:
