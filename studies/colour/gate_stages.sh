@@ -1,0 +1,25 @@
+#!/usr/bin/env bash
+# Gate the colour stage of each shipped network named (after studies/colour/stages.sh): export
+# its cool-down as a candidate, score it against the shipped model by the gate every model
+# passes (splitcam models gate: held-out photos, whole, at the model's validation levels), and
+# describe both on the colourful held-out photos and the skimage photos (they choose nothing).
+# Ships nothing: `splitcam models gate runs/colour/candidates/NAME.json --ship` does.
+#   SPLITCAM_DATA=DIR bash studies/colour/gate_stages.sh D A ...
+set -euo pipefail
+: "${SPLITCAM_DATA:?set SPLITCAM_DATA to the data folder (its train/ holds the photos)}"
+export OMP_NUM_THREADS=1
+mkdir -p runs/colour/candidates runs/colour/gates
+[ -d runs/colour/heldout/colourful ] || python studies/colour/heldout.py --data "$SPLITCAM_DATA/train"
+for name in "$@"; do
+    candidate="runs/colour/candidates/$name.json"
+    [ -f "$candidate" ] || splitcam models export "runs/colour/$name-cooldown/checkpoint.safetensors" \
+        --name "$name" --out runs/colour/candidates
+    splitcam models gate "$candidate" --data "$SPLITCAM_DATA/train" --threads 1 \
+        --table "runs/colour/gates/$name.md"
+    out="runs/colour/describe-$name"
+    run="runs/colour/$name-cooldown/checkpoint.safetensors"
+    splitcam evaluate --model "$name" --checkpoint "$run" --datasets runs/colour/heldout/colourful \
+        --sigmas 0 15 --precision fp32 --out "$out-colourful" --quiet
+    splitcam evaluate --model "$name" --checkpoint "$run" --datasets default --max-size 0 \
+        --sigmas 0 15 --precision fp32 --out "$out-skimage" --quiet
+done
