@@ -10,7 +10,6 @@ import pytest
 import torch
 from conftest import blocky_images, small_config, tiny_config
 
-from splitcam import patterns
 from splitcam.io import checkpoints as ckpt_io
 from splitcam.recon.loading import load_model
 from splitcam.training import ConfigError, load_system, train
@@ -153,67 +152,3 @@ def test_init_from_an_ambiguous_name_is_refused(tmp_path, monkeypatch):
     config = tiny_config(data, tmp_path / "run", **{"run.init_from": "D", "network.features": 64})
     with pytest.raises(ConfigError, match="ambiguous"):
         train(config, progress=False)
-
-
-@pytest.mark.slow
-def test_init_from_auto_tries_each_start_and_continues_from_the_best(
-    image_folder, tmp_path, capsys
-):
-    """--init-from auto trains universal and every shipped network of the pattern's period for
-    an equal share of 30 % of the time limit, says what each reached, and the run continues
-    from the probe that validated best for the rest of the limit."""
-    from splitcam.cli import main
-    from splitcam.recon.loading import load_model, model_names
-    from splitcam.training.auto_init import candidates
-    from splitcam.training.rundir import metrics_rows
-
-    names = candidates(patterns.get("bayer"), "srgb")
-    expected = ["universal"] + [
-        n
-        for n in model_names()
-        if load_model(n).meta["network"]["arch"] == "physics"
-        and tuple(load_model(n).meta["network"]["period"]) == (2, 2)
-        and (load_model(n).meta["config"]["data"].get("domain") or "srgb") == "srgb"
-    ]
-    assert names == expected and "bayer" in names and "D" in names and "E" not in names
-    run = tmp_path / "run"
-    args = [
-        "train",
-        "--pattern",
-        "bayer",
-        "--init-from",
-        "auto",
-        "--data",
-        str(image_folder),
-        "--out",
-        str(run),
-        "--time-limit",
-        "0.3",
-        "--patch-size",
-        "16",
-        "--batch-size",
-        "2",
-        "--val-crop",
-        "32",
-        "--val-images",
-        "2",
-        "--threads",
-        "2",
-        "--quiet",
-    ]
-    assert main(args) == 0
-    out = capsys.readouterr().out
-    ends = {}
-    for name in names:
-        vals = [r["val_psnr"] for r in metrics_rows(run / "init-search" / name) if "val_psnr" in r]
-        ends[name] = vals[-1]
-        assert f"  {name}: validation" in out
-    best = max(ends, key=ends.get)
-    assert f"continuing from {best} " in out
-    # The probes end at their limits by design: only the run itself may advise a resume.
-    assert out.count("to train further") <= 1
-    meta = ckpt_io.read_meta(run / "checkpoint.safetensors")
-    assert meta["init_from"]["name"] == str(run / "init-search" / best)
-    assert meta["config"]["run"]["time_limit"] == pytest.approx(0.3 * 0.7)
-    chain = meta["init_from"]["provenance"]["segments"]
-    assert chain[-1]["init_from"] == best
