@@ -197,16 +197,6 @@ def test_fine_tuning_from_a_universal_model(tiny_universal, tmp_path, capsys):
         if not torch.equal(v, source.network.state_dict()[k])
     ]
     assert changed  # trained on from the model's weights
-    # No --steps, --time-limit or --lr: the default fine-tuning budget and rate, announced.
-    from splitcam.cli.train import FINE_TUNE_LR, FINE_TUNE_MINUTES, fine_tuning
-
-    capsys.readouterr()
-    implied = fine_tuning(str(model), {})
-    assert implied["run.time_limit"] == FINE_TUNE_MINUTES and implied["optim.lr"] == FINE_TUNE_LR
-    assert f"for {FINE_TUNE_MINUTES:g} minutes" in capsys.readouterr().out
-    given = fine_tuning(str(model), {"run.time_limit": 1.0, "optim.lr": 1e-3})
-    assert "run.time_limit" not in given and "optim.lr" not in given
-    assert fine_tuning("D", {}) == {}  # a network of one pattern implies nothing
 
 
 def test_a_config_file_keeps_its_budget_and_rate_when_it_starts_from_a_universal_model(
@@ -244,26 +234,6 @@ def test_a_run_that_diverges_says_so_and_fails(tmp_path, capsys):
     assert "splitcam train: failed:" in capsys.readouterr().err
     good = train(tiny_config(data, tmp_path / "good", **{"optim.steps": 6}), progress=False)
     assert good.failure is None
-
-
-def test_a_users_pattern_fine_tunes_the_network_for_any_pattern_by_default(capsys):
-    """A pattern file (or router) has no network of its own: it starts from universal, with the
-    fine-tuning defaults (patches chosen by detail among them), unless the run says otherwise."""
-    from splitcam.cli.train import FINE_TUNE_HARD, own_pattern_start, start_settings
-
-    assert own_pattern_start({"pattern.name": "mine.toml"}) == {"run.init_from": "universal"}
-    assert "no network of its own" in capsys.readouterr().out
-    assert own_pattern_start({"pattern.name": "router(eta=0.5)"}) == {"run.init_from": "universal"}
-    for given in (
-        {"pattern.name": "D"},  # a library pattern trains by its recipe
-        {"pattern.name": "random"},
-        {"pattern.name": "mine.toml", "network.arch": "physics"},
-        {"pattern.name": "mine.toml", "run.init_from": "A"},
-        {"pattern.name": "mine.toml", "pattern.learn": True},
-    ):
-        assert own_pattern_start(given) == {}, given
-    assert start_settings("universal", {})["data.hard_patches"] == FINE_TUNE_HARD
-    assert "data.hard_patches" not in start_settings("universal", {"data.hard_patches": 0.0})
 
 
 def test_train_with_a_pattern_file_starts_from_universal(image_folder, tmp_path):
@@ -317,17 +287,9 @@ def test_a_photon_fine_tune_keeps_the_exposures_its_network_was_trained_on(
     shipped network was trained on (its header: 1 to 10^4), not the default 10 to 10^4, which
     forgot the exposures below 10 (docs/results/exposure/measured/fine-tuned/); `--photons`
     given, or a network trained on Gaussian noise, keep the run's own."""
-    from splitcam.cli.train import photon_range
     from splitcam.recon.loading import resolve_model
-    from splitcam.training.config import TrainConfig
 
     header = json.loads(resolve_model("universal-photon").read_text())["config"]["noise"]
-    assert header["photons"] != TrainConfig().noise.photons  # what the rule is for
-    photon = {"noise.model": "photon"}
-    assert photon_range("universal-photon", photon) == {"noise.photons": header["photons"]}
-    assert photon_range("universal-photon", {**photon, "noise.photons": [5.0, 50.0]}) == {}
-    assert photon_range("universal-photon", {}) == {}  # a Gaussian run
-    assert photon_range("universal", photon) == {}  # trained on Gaussian noise
     run = tmp_path / "ft"
     args = ["train", "--pattern", "D", "--init-from", "universal-photon", "--noise", "photon"]
     tiny = ["--val-split", "2", "--val-images", "1", "--patch-size", "16", "--batch-size", "2"]
