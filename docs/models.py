@@ -1,12 +1,16 @@
 """Write docs/models.md, the model zoo: one row per shipped model.
 
-    python docs/models.py
+    python docs/models.py                   # the page
+    python docs/models.py --heldout DIR     # first score the models on DIR's held-out photos
 
 Pattern, noise model and light domain, and budget come from each model's JSON header
 (:func:`splitcam.training.models.model_summary`); the scores on Kodak24 + McMaster (the mean
 over the 42 whole images at σ 0 and 15, PSNR dB) from the committed evaluation of
 ``splitcam reproduce`` (docs/results/reproduce/evaluation/table.md), beside the paper's Table 1-3
-numbers (:data:`splitcam.evaluation.report.PAPER`); the recipe that trains each again from
+numbers (:data:`splitcam.evaluation.report.PAPER`); each model's mean on the held-out training
+photos the gate scores (the run's validation photos and the last 12 of the folder, whole, at the
+model's cleanest and noisiest validation level; :func:`splitcam.training.gate.held_out_score`),
+kept in docs/results/heldout/scores.json; the recipe that trains each again from
 experiments/recipes/. A score measured on other weights than the model ships now (its
 fingerprint in the evaluation's ``evaluation.json`` differs) is marked as such, so the page never
 passes an older model's score for the current one. ``tests/docs/test_models_page.py`` checks that
@@ -15,6 +19,7 @@ the page is what this script writes.
 
 from __future__ import annotations
 
+import argparse
 import json
 import re
 from pathlib import Path
@@ -27,6 +32,7 @@ from splitcam.training.recipe import read_recipe
 
 DOCS = Path(__file__).resolve().parent
 EVALUATION = DOCS / "results" / "reproduce" / "evaluation"
+HELDOUT = DOCS / "results" / "heldout" / "scores.json"
 TABLE = EVALUATION / "table.md"
 
 #: Where the models not in the paper's tables are scored.
@@ -78,10 +84,38 @@ def scored_other_weights(names: list[str]) -> set[str]:
     return stale
 
 
+def score_heldout(data: Path) -> None:
+    """Score every shipped model whose weights have no score yet in :data:`HELDOUT` (kept after
+    each model, so an interrupted run continues)."""
+    from splitcam.training.gate import held_out_score
+
+    scores = json.loads(HELDOUT.read_text()) if HELDOUT.exists() else {}
+    for name in model_names():
+        if scores.get(name, {}).get("sha256") == load_model(name).meta.get("sha256"):
+            continue
+        scores[name] = held_out_score(name, data)
+        HELDOUT.parent.mkdir(parents=True, exist_ok=True)
+        HELDOUT.write_text(json.dumps(scores, indent=1, sort_keys=True) + "\n")
+        print(name, scores[name]["levels"], [round(v, 2) for v in scores[name]["psnr"]])
+
+
+def heldout_cell(name: str, scores: dict) -> str:
+    """A model's held-out mean at its cleanest and noisiest level, marked where it was measured
+    on other weights."""
+    entry = scores.get(name)
+    if entry is None:
+        return "–"
+    cells = " / ".join(f"{v:.2f}" for v in entry["psnr"])
+    levels = " / ".join(entry["levels"])
+    stale = entry.get("sha256") != load_model(name).meta.get("sha256")
+    return f"{cells} ({levels})" + (" *earlier weights*" if stale else "")
+
+
 def render() -> str:
     """The page's text."""
     ours, per_set = scores()
     stale = scored_other_weights(sorted(ours))
+    heldout = json.loads(HELDOUT.read_text()) if HELDOUT.exists() else {}
     paper = {model: PAPER.get(row) for row, model in PAPER_MODELS.items()}
     lines = [
         "# Shipped models",
@@ -96,13 +130,16 @@ def render() -> str:
         "trains a model again end to end, stage by stage (`experiments/recipes/`). The last "
         "column is each set's own mean at σ 0 and Kodak24 minus McMaster: how much a network "
         "loses on saturated colour (demosaicnet, a GPU-trained Bayer network, on the same whole "
-        "images: 41.84 / 39.14, 2.70; [colour](results/colour/README.md)). A score marked "
-        "*earlier weights* was measured before the model's last stage shipped: run "
-        "`splitcam reproduce` again and this page after it.",
+        "images: 41.84 / 39.14, 2.70; [colour](results/colour/README.md)). Held-out photos: the "
+        "mean PSNR on the 20 training photos the gate scores, which no run trains on (whole, "
+        "odd sides; `splitcam models gate`), at the model's cleanest / noisiest validation "
+        "level (σ, or N photo-electrons in linear light; `python docs/models.py --heldout DIR` "
+        "scores them). A score marked *earlier weights* was measured before the model's last "
+        "stage shipped: run `splitcam reproduce` (or `--heldout`) again and this page after it.",
         "",
         "| model | pattern | trained on | steps | batch | training | stages | σ 0 / 15 | paper "
-        "| σ 0 Kodak24 / McMaster (drop) |",
-        "|---|---|---|---|---|---|---|---|---|---|",
+        "| σ 0 Kodak24 / McMaster (drop) | held-out photos |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for name in model_names():
         row = model_summary(name, load_model(name).meta)
@@ -125,7 +162,8 @@ def render() -> str:
         ) + (note if sets else "")
         lines.append(
             f"| {name} | {row['pattern']} | {row['trained on']} | {row['steps']} | {row['batch']} "
-            f"| {row['train time']} | {stages} | {score} | {ref_text} | {drop} |"
+            f"| {row['train time']} | {stages} | {score} | {ref_text} | {drop} "
+            f"| {heldout_cell(name, heldout)} |"
         )
     lines += [
         "",
@@ -135,6 +173,11 @@ def render() -> str:
 
 
 def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--heldout", metavar="DIR", help="score on DIR's held-out photos first")
+    args = parser.parse_args()
+    if args.heldout:
+        score_heldout(Path(args.heldout))
     (DOCS / "models.md").write_text(render(), encoding="utf-8")
     print("wrote", DOCS / "models.md")
 

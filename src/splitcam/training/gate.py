@@ -125,6 +125,25 @@ def mean_scores(spec, config: dict, photos, levels) -> list[float]:
     return [sum(col) / len(col) for col in zip(*per_pattern, strict=True)]
 
 
+def held_out_score(spec: str | Path, data: Path) -> dict:
+    """A model's (a shipped name or a model file) mean PSNR on the gate's held-out photos of
+    ``data`` at its validation levels: ``{"photos", "levels" (labels), "psnr", "sha256"}``, the
+    last the checksum of the weights scored."""
+    from ..physics.noise import level_label
+    from ..recon.loading import load_model
+
+    meta = load_model(spec).meta
+    config = meta["config"]
+    photos = held_out_photos(config, Path(data))
+    levels = gate_levels(config)
+    return {
+        "photos": len(photos),
+        "levels": [level_label(level) for level in levels],
+        "psnr": mean_scores(str(spec), config, photos, levels),
+        "sha256": meta.get("sha256"),
+    }
+
+
 def candidate_name(path: Path) -> str:
     """The shipped model a candidate would replace: the file's name (``D.json`` → ``D``)."""
     return path.stem
