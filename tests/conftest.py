@@ -149,6 +149,23 @@ def blocky_images(folder: Path, count: int, seed: int = 0) -> Path:
     return folder
 
 
+def odd_photos(folder: Path, count: int, size: tuple[int, int], seed: int = 0) -> Path:
+    """``count`` smooth photos of odd sides, ``size`` and its transpose in turn (held out whole,
+    they end part-way through periods), each a different mix of sines plus a little noise."""
+    import numpy as np
+    from PIL import Image
+
+    folder.mkdir(parents=True, exist_ok=True)
+    rng = np.random.default_rng(seed)
+    for i in range(count):
+        h, w = size if i % 2 else size[::-1]
+        y, x = np.mgrid[0:h, 0:w] / (h / 2)
+        base = np.stack([np.sin(x * (i + 1)), np.cos(y * 2), np.sin(x + y)], -1)
+        img = 127 + 90 * base + rng.normal(0, 4, (h, w, 3))
+        Image.fromarray(img.clip(0, 255).astype(np.uint8)).save(folder / f"p{i:02d}.png")
+    return folder
+
+
 def tiny_config(folder: Path, out: Path, **changes):
     """A :class:`TrainConfig` of :data:`TINY_SETTINGS` on ``folder`` into ``out``."""
     from splitcam.training import TrainConfig

@@ -11,9 +11,8 @@ import json
 import shutil
 from pathlib import Path
 
-import numpy as np
 import pytest
-from PIL import Image
+from conftest import odd_photos
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -28,15 +27,7 @@ def _relay():
 @pytest.fixture(scope="module")
 def photos(tmp_path_factory) -> Path:
     """14 smooth photos of odd sizes (so the held-out ones end part-way through periods)."""
-    folder = tmp_path_factory.mktemp("photos")
-    rng = np.random.default_rng(0)
-    for i in range(14):
-        h, w = (67, 81) if i % 2 else (81, 67)
-        y, x = np.mgrid[0:h, 0:w] / 40.0
-        base = np.stack([np.sin(x * (i + 1)), np.cos(y * 2), np.sin(x + y)], -1)
-        img = 127 + 100 * base + rng.normal(0, 5, (h, w, 3))
-        Image.fromarray(img.clip(0, 255).astype(np.uint8)).save(folder / f"p{i:02d}.png")
-    return folder
+    return odd_photos(tmp_path_factory.mktemp("photos"), 14, (67, 81), seed=0)
 
 
 @pytest.fixture(scope="module")

@@ -11,10 +11,9 @@ import json
 import shutil
 from pathlib import Path
 
-import numpy as np
 import pytest
 import torch
-from PIL import Image
+from conftest import odd_photos
 from safetensors.torch import load_file, save_file
 
 from splitcam.cli import main
@@ -27,15 +26,7 @@ from splitcam.training.gate import FALL_DB, gate, gate_table, ship
 def photos(tmp_path_factory) -> Path:
     """14 smooth photos of odd sizes: the last one is the run's validation photo, and with the
     last 12 the gate scores 12 whole photos."""
-    folder = tmp_path_factory.mktemp("photos")
-    rng = np.random.default_rng(1)
-    for i in range(14):
-        h, w = (37, 45) if i % 2 else (45, 37)
-        y, x = np.mgrid[0:h, 0:w] / 20.0
-        base = np.stack([np.sin(x * (i + 1)), np.cos(y * 2), np.sin(x + y)], -1)
-        img = 127 + 90 * base + rng.normal(0, 4, (h, w, 3))
-        Image.fromarray(img.clip(0, 255).astype(np.uint8)).save(folder / f"p{i:02d}.png")
-    return folder
+    return odd_photos(tmp_path_factory.mktemp("photos"), 14, (37, 45), seed=1)
 
 
 def _candidate(folder: Path, name: str, source: str = "D", scale: float = 1.0) -> Path:

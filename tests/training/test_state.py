@@ -6,6 +6,7 @@ the weights it scored beside the checkpoint."""
 
 from __future__ import annotations
 
+import pytest
 import torch
 from conftest import tiny_config
 
@@ -25,12 +26,19 @@ def _moved(state) -> None:
     state.train_seconds = 12.5
 
 
-def test_a_checkpoint_restores_what_the_run_changed(image_folder, tmp_path) -> None:
+@pytest.fixture
+def moved(image_folder, tmp_path):
+    """A prepared physics run after one made-up step: its config, folder, run and state."""
     config = tiny_config(image_folder, tmp_path / "r", **{"network.arch": "physics"})
     run_dir = tmp_path / "r"
     run_dir.mkdir()
     run, state = prepare(config, run_dir, None, False)
     _moved(state)
+    return config, run_dir, run, state
+
+
+def test_a_checkpoint_restores_what_the_run_changed(moved) -> None:
+    config, run_dir, run, state = moved
     save_checkpoint(state, run)
     expected_weights = {k: v.clone() for k, v in state.system.state_dict().items()}
     expected_moments = [
@@ -55,12 +63,8 @@ def test_a_checkpoint_restores_what_the_run_changed(image_folder, tmp_path) -> N
     assert [g["peak_lr"] for g in restored.optimizer.param_groups][0] == 5e-4
 
 
-def test_save_best_keeps_the_scored_weights(image_folder, tmp_path) -> None:
-    config = tiny_config(image_folder, tmp_path / "r", **{"network.arch": "physics"})
-    run_dir = tmp_path / "r"
-    run_dir.mkdir()
-    run, state = prepare(config, run_dir, None, False)
-    _moved(state)
+def test_save_best_keeps_the_scored_weights(moved) -> None:
+    _, run_dir, run, state = moved
     save_best(state, run, 31.5)
     assert state.best_val == 31.5
     best = ckpt_io.load(run_dir / ckpt_io.BEST_NAME)
