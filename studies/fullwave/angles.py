@@ -68,7 +68,7 @@ def designs() -> dict[str, RouterDesign]:
     }
 
 
-def solve(design, terms, directions, cache) -> dict:
+def solve(design, terms, directions, cache, quadrants=None) -> dict:
     out = quadrant_spectra(
         design,
         list(WAVELENGTHS),
@@ -77,9 +77,10 @@ def solve(design, terms, directions, cache) -> dict:
         directions=directions,
         cache=cache,
     )
-    bands = band_efficiencies(out["transmission"], WAVELENGTHS)
+    bands = band_efficiencies(out["transmission"], WAVELENGTHS, quadrants)
     return {
         "terms": out["terms"],
+        "quadrants": bands["quadrants"],
         "blue": bands["blue"],
         "green": bands["green"],
         "red": bands["red"],
@@ -152,8 +153,13 @@ def main() -> None:
                 key = f"{name}/{terms}/f{f_number or 'none'}/cra{chief}"
                 if key in summary["angles"]:
                     continue
+                # Efficiencies into the pixels the design sorts to at normal incidence (its
+                # solve is in the log already): oblique light may sort worse, or not at all.
+                normal = solve(design, terms, [(0.0, 0.0, 1.0)], cache)
                 start = time.perf_counter()
-                summary["angles"][key] = solve(design, terms, directions, cache)
+                summary["angles"][key] = solve(
+                    design, terms, directions, cache, normal["quadrants"]
+                )
                 print(
                     f"{key}: {fmt(summary['angles'][key])} ({time.perf_counter() - start:.0f} s)",
                     flush=True,

@@ -352,6 +352,26 @@ def test_colliding_roles_are_said_with_the_numbers(tmp_path, capsys):
         band_efficiencies(np.full((2, 2, 3), 0.25), [450.0, 550.0, 650.0])
 
 
+def test_band_efficiencies_into_given_pixels_where_oblique_light_sorts_badly():
+    """Oblique light can send blue and red to one pixel (the Zou router at a 25-degree chief
+    ray): with the pixels the design sorts to at normal incidence given, its efficiencies are
+    the shares that still reach them, computed here by hand."""
+    lams = [450.0, 550.0, 650.0]
+    t = np.zeros((2, 2, 3))
+    t[0, 1] = [0.5, 0.1, 0.6]  # blue and red both land mostly in pixel 1
+    t[0, 0] = [0.1, 0.2, 0.1]  # the red pixel at normal incidence
+    t[1, 0] = [0.1, 0.3, 0.1]
+    t[1, 1] = [0.2, 0.3, 0.1]  # the blue pixel at normal incidence
+    with pytest.raises(ValueError, match="both peak"):
+        band_efficiencies(t, lams)
+    eff = band_efficiencies(t, lams, {"blue": 3, "red": 0})
+    assert eff["blue"] == pytest.approx(0.2) and eff["red"] == pytest.approx(0.1)
+    assert eff["green"] == pytest.approx(0.1 + 0.3)  # pixels 1 and 2 at 550 nm
+    assert eff["quadrants"] == {"blue": 3, "red": 0}
+    with pytest.raises(ValueError, match="two different pixels"):
+        band_efficiencies(t, lams, {"blue": 2, "red": 2})
+
+
 def test_a_wavelength_where_an_order_grazes_is_solved():
     """At 400 and 500 nm a 2 µm period in vacuum has a diffraction order exactly at grazing (a
     Rayleigh anomaly); the solve divided by its zero normal wavevector and returned NaN."""

@@ -586,14 +586,26 @@ def _flux(fields) -> Any:
     return (0.5 * (ex * hy.conj() - ey * hx.conj()).real).T
 
 
-def band_efficiencies(transmission: Any, wavelengths: Any) -> dict[str, Any]:
+def band_efficiencies(
+    transmission: Any, wavelengths: Any, quadrants: dict[str, int] | None = None
+) -> dict[str, Any]:
     """Band efficiencies of a 2x2 router, as the leaderboard scores them: the mean transmission
     of 400-500, 500-600 and 600-700 nm into its own pixels (blue where the shortest wavelength
     peaks, red where the longest peaks, green the other two), from ``(2, 2, L)`` transmissions;
-    ``quadrants`` names the blue and red ones (row-major index)."""
+    ``quadrants`` names the blue and red ones (row-major index).
+
+    ``quadrants`` given (``{"blue": i, "red": j}``, the pixels the design sorts to, as its
+    normal-incidence solve found them): the efficiencies into those pixels, whatever this
+    light does; at oblique incidence a router can send blue and red to one pixel, and then
+    its efficiencies are low, not undefined."""
     t = np.asarray(transmission).reshape(4, -1)
     lam = np.asarray(wavelengths)
-    blue, red = int(t[:, 0].argmax()), int(t[:, -1].argmax())
+    if quadrants is not None:
+        blue, red = int(quadrants["blue"]), int(quadrants["red"])
+        if blue == red or not {blue, red} <= set(range(4)):
+            raise FullwaveError(f"quadrants must name two different pixels 0-3, got {quadrants}")
+    else:
+        blue, red = int(t[:, 0].argmax()), int(t[:, -1].argmax())
     if blue == red:
         raise FullwaveError(
             f"blue ({lam[0]:g} nm: {t[blue, 0]:.3f}) and red ({lam[-1]:g} nm: "
