@@ -99,15 +99,15 @@ def score_heldout(data: Path) -> None:
         print(name, scores[name]["levels"], [round(v, 2) for v in scores[name]["psnr"]])
 
 
-def heldout_cell(name: str, scores: dict) -> str:
+def heldout_cell(name: str, meta: dict, scores: dict) -> str:
     """A model's held-out mean at its cleanest and noisiest level, marked where it was measured
-    on other weights."""
+    on other weights than its header ``meta`` names."""
     entry = scores.get(name)
     if entry is None:
         return "–"
     cells = " / ".join(f"{v:.2f}" for v in entry["psnr"])
     levels = " / ".join(entry["levels"])
-    stale = entry.get("sha256") != load_model(name).meta.get("sha256")
+    stale = entry.get("sha256") != meta.get("sha256")
     return f"{cells} ({levels})" + (" *earlier weights*" if stale else "")
 
 
@@ -142,7 +142,8 @@ def render() -> str:
         "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for name in model_names():
-        row = model_summary(name, load_model(name).meta)
+        meta = load_model(name).meta
+        row = model_summary(name, meta)
         stages = len(read_recipe(name).stages)
         note = " *earlier weights*" if name in stale else ""
         if name in ours:
@@ -163,7 +164,7 @@ def render() -> str:
         lines.append(
             f"| {name} | {row['pattern']} | {row['trained on']} | {row['steps']} | {row['batch']} "
             f"| {row['train time']} | {stages} | {score} | {ref_text} | {drop} "
-            f"| {heldout_cell(name, heldout)} |"
+            f"| {heldout_cell(name, meta, heldout)} |"
         )
     lines += [
         "",

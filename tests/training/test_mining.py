@@ -127,3 +127,23 @@ def test_a_run_mines_once_keeps_its_windows_and_resumes_exactly(image_folder, tm
     )
     assert losses(tmp_path / "plain") != losses(tmp_path / "full")
     assert not (tmp_path / "plain" / MINED_NAME).exists()
+
+
+@pytest.mark.parametrize(
+    ("changes", "message"),
+    [
+        (
+            {"pattern.name": "random", "network.arch": "universal", "data.colour_mined": 0.5},
+            "one pattern's network",
+        ),
+        ({"data.colour_mined": 1.5}, "colour_mined must be a probability"),
+        ({"data.colour_mined": 0.5, "data.mine_keep": 0.0}, "mine_keep a share"),
+        ({"data.mine_candidates": 0}, "mine_candidates must be >= 1"),
+    ],
+)
+def test_settings_mining_cannot_serve_are_refused(image_folder, tmp_path, changes, message):
+    from splitcam.training import ConfigError
+
+    with pytest.raises(ConfigError, match=message):
+        tiny_config(image_folder, tmp_path / "r", **changes).validate()
+    assert not (tmp_path / "r").exists()

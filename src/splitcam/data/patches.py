@@ -542,6 +542,13 @@ class PatchSampler:
         self.mined = mined if mined is not None and mined.share > 0 else None
 
     @property
+    def whole_periods(self) -> tuple[int, int]:
+        """The patch's rows and columns cut to whole periods (what every batch is cut to before
+        ``partial`` cuts further)."""
+        rows, cols = (self.patch_size - self.patch_size % side for side in self.period)
+        return rows, cols
+
+    @property
     def device(self) -> torch.device:
         """Where :meth:`sample` returns its batches."""
         return self.images.device if self.images is not None else torch.device("cpu")
@@ -588,7 +595,7 @@ class PatchSampler:
         # Whole periods first (no draw): a 64-pixel patch of a 1x3 pattern would otherwise
         # always end one column into a period, and a network trained only on that edge loses
         # 2-3 dB on crops that end on a whole period (docs/results/edges/).
-        cut = [self.patch_size % side for side in self.period]
+        cut = [self.patch_size - side for side in self.whole_periods]
         if self.partial > 0:
             for i, side in enumerate(self.period):
                 # Both draws happen for every batch, so the sequence does not depend on the period.

@@ -16,6 +16,7 @@ from ..physics.noise import level_heading, level_key, parse_level_label
 from ..viz.charts import exposure_chart, sigma_chart
 from ..viz.patterns import draw_pattern
 from .tables import (
+    DROP_SETS,
     ENTRY_FIELDS,
     domain_line,
     markdown_row,
@@ -517,7 +518,7 @@ def _sets_section(t: _Tables, baselines: dict[str, str] | None) -> list[str]:
     methods |= {f"{row}, LMMSE": m for row, m in (baselines or {}).items() if m in t.summary}
     if "bayer+malvar2004" in t.summary:
         methods["bayer, Malvar 2004"] = "bayer+malvar2004"
-    sets = ("kodak24", "mcmaster")
+    sets = DROP_SETS
     methods = {r: m for r, m in methods.items() if all(k in t.summary[m] for k in sets)}
     if not methods:
         return []

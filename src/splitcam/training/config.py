@@ -580,6 +580,11 @@ class TrainConfig:
                 "optim.teacher_weight must be >= 0, and 0 with --learn-pattern (a learned "
                 f"pattern has no shipped network), got {self.optim.teacher_weight}",
             ),
+            (
+                self.data.colour_mined == 0 or self.pattern.name.lower() != "random",
+                "data.colour_mined scores windows with one pattern's network; a run over many "
+                "patterns (pattern random) has none",
+            ),
         ]
         for ok, message in checks:
             if not ok:

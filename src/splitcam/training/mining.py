@@ -72,7 +72,7 @@ def mine_colour(
     scout = PatchSampler(
         sampler.cache, patch_size=sampler.patch_size, seed=seed, period=sampler.period
     )
-    rows, cols = (sampler.patch_size - sampler.patch_size % side for side in sampler.period)
+    rows, cols = sampler.whole_periods
     was_training = system.training
     system.eval()
     drawn, scores = [], []

@@ -80,11 +80,6 @@ def prepare(
     optimizer = build_optimizer(config, system)
     sampler = _patch_sampler(run, source, start_step, system, progress)
     if config.data.colour_mined > 0:
-        if run.mix is not None:
-            raise ConfigError(
-                "data.colour_mined scores windows with one pattern's network; a run over many "
-                "patterns (pattern random) has none"
-            )
         sampler.use_mined(
             mined_windows(
                 run_dir,
