@@ -20,6 +20,7 @@ from typing import Any
 
 from common import SHARED_DATA, machine
 
+from splitcam import patterns
 from splitcam.data.patches import ImageCache, load_validation
 from splitcam.evaluation.metrics import mean_over_images
 from splitcam.evaluation.screening import evaluate_method, screen_patterns
@@ -86,7 +87,7 @@ def main() -> None:
     decode = time.perf_counter() - t0
     keys = ("psnr", "ssim", "ciede2000", f"psnr_crop{CROP}")
     screen = screen_patterns(
-        PATTERNS,
+        [patterns.get(name) for name in PATTERNS],
         cache,
         tests,
         args.sigmas,

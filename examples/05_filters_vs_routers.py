@@ -17,6 +17,7 @@ import argparse
 import math
 from pathlib import Path
 
+from splitcam import patterns
 from splitcam.data.testsets import centre_crop, default_images
 from splitcam.evaluation.exposure import crossover, default_exposures, exposure_study
 from splitcam.viz.charts import exposure_chart
@@ -36,7 +37,12 @@ def main() -> None:
     images = [(n, centre_crop(im, size)) for n, im in default_images()[:count]]
     photons = [3.0, 100.0, 3000.0] if args.tiny else default_exposures(9)
     results = exposure_study(
-        images, patterns=PATTERNS, photons=photons, read_noise=2.0, domain="linear", progress=False
+        images,
+        patterns=[patterns.get(p) for p in PATTERNS],
+        photons=photons,
+        read_noise=2.0,
+        domain="linear",
+        progress=False,
     )
 
     print("photo-electrons  " + "  ".join(f"{p:>10}" for p in PATTERNS) + "   (PSNR, dB)")

@@ -133,3 +133,145 @@ def test_no_function_body_is_longer_than_100_lines():
             if body and body[-1].end_lineno - body[0].lineno + 1 > 100:
                 long.append(f"{path.relative_to(PACKAGE)}:{node.name}")
     assert not long, f"functions over 100 lines: {long}"
+
+
+#: Where a pattern's name or file may become a Pattern below the CLI: the constructors users
+#: call, the method registry, training's reading of its configuration, and results read back
+#: from disk. Everything else takes a Pattern (``patterns.check_pattern`` says how to make one).
+PATTERN_READERS = {
+    "physics/sensor.py": {"SplitterSensor.__init__"},
+    "recon/closed_form.py": {"ClosedFormFilters.__init__"},
+    "recon/lmmse.py": {"LMMSE.fit"},
+    "recon/peers.py": {"Demosaicnet.__init__"},
+    "recon/registry.py": {"_given"},
+    "training/setup.py": {"config_patterns"},
+    "evaluation/report.py": {"_load"},
+}
+
+#: Besides the readers, what may take a pattern's name: the registry's entry points and their
+#: helpers (names are labels in tables there), and constructors that hand it to a reader.
+NAME_TAKERS = {
+    "recon/registry.py": {
+        "build_model",
+        "build_method",
+        "build_methods",
+        "_given",
+        "_pattern_label",
+        "_pattern_key",
+    },
+    "integrations/deepinv.py": {"SplitterPhysics.__init__"},
+}
+
+
+def _pattern_reads(path: Path) -> list[str]:
+    """``Class.function`` of every call of ``splitcam.patterns.get`` in a module (under any
+    name it is imported as, or as ``patterns.get``)."""
+    tree = ast.parse(path.read_text(encoding="utf-8"))
+    aliases = {
+        a.asname or a.name
+        for node in ast.walk(tree)
+        if isinstance(node, ast.ImportFrom) and (node.module or "").endswith("patterns")
+        for a in node.names
+        if a.name == "get"
+    }
+    found = []
+
+    def visit(node: ast.AST, scope: list[str]) -> None:
+        for child in ast.iter_child_nodes(node):
+            inner = scope
+            if isinstance(child, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)):
+                inner = [*scope, child.name]
+            if isinstance(child, ast.Call):
+                f = child.func
+                by_module = (
+                    isinstance(f, ast.Attribute)
+                    and f.attr == "get"
+                    and isinstance(f.value, ast.Name)
+                    and f.value.id == "patterns"
+                )
+                if by_module or (isinstance(f, ast.Name) and f.id in aliases):
+                    found.append(".".join(scope) or "<module>")
+            visit(child, inner)
+
+    visit(tree, [])
+    return found
+
+
+def test_pattern_names_are_read_once_in_known_places():
+    """Below the CLI, ``patterns.get`` is called only where :data:`PATTERN_READERS` allows."""
+    wrong, calls = [], 0
+    for path in _code_files():
+        rel = str(path.relative_to(PACKAGE))
+        if rel.startswith("cli/") or rel == "patterns/__init__.py":
+            continue
+        for where in _pattern_reads(path):
+            calls += 1
+            if where not in PATTERN_READERS.get(rel, set()):
+                wrong.append(f"{rel}:{where}")
+    assert not wrong, f"patterns.get outside the allowed readers: {wrong}"
+    assert calls <= 10, f"{calls} calls of patterns.get below the CLI"
+
+
+def test_the_pattern_reader_check_sees_every_spelling(tmp_path):
+    """The check itself can fail: each way of calling ``patterns.get`` is found, in its scope."""
+    module = tmp_path / "m.py"
+    module.write_text(
+        "from splitcam import patterns\nfrom splitcam.patterns import get as read\n\n"
+        "class S:\n    def __init__(self, p):\n        self.p = patterns.get(p)\n\n"
+        "def f(p):\n    return read(p)\n\nx = read('D')\n"
+    )
+    assert _pattern_reads(module) == ["S.__init__", "f", "<module>"]
+
+
+def _union(annotation: ast.expr | None) -> set[str]:
+    """The members of an ``A | B`` annotation, also inside one subscript (``Sequence[...]``)."""
+    if annotation is None:
+        return set()
+    if isinstance(annotation, ast.BinOp) and isinstance(annotation.op, ast.BitOr):
+        return _union(annotation.left) | _union(annotation.right)
+    if isinstance(annotation, ast.Subscript) and ast.unparse(annotation.value) in (
+        "Sequence",
+        "list",
+        "tuple",
+    ):
+        return _union(annotation.slice)
+    return {ast.unparse(annotation).removeprefix("patterns.")}
+
+
+def test_only_constructors_and_the_registry_take_pattern_names():
+    """A parameter typed ``Pattern | str`` belongs to a reader of :data:`PATTERN_READERS`, the
+    registry or a constructor that hands it to one (:data:`NAME_TAKERS`); every other function
+    takes a Pattern."""
+    wrong = []
+    for path in _code_files():
+        rel = str(path.relative_to(PACKAGE))
+        if rel.startswith("cli/") or rel == "patterns/__init__.py":
+            continue
+        allowed = PATTERN_READERS.get(rel, set()) | NAME_TAKERS.get(rel, set())
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        for cls in [n for n in ast.walk(tree) if isinstance(n, ast.ClassDef)] + [tree]:
+            for node in getattr(cls, "body", []):
+                if not isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                    continue
+                where = f"{cls.name}.{node.name}" if isinstance(cls, ast.ClassDef) else node.name
+                if where in allowed or (node.name == "__init__" and _reads_through_super(cls)):
+                    continue
+                args = node.args.posonlyargs + node.args.args + node.args.kwonlyargs
+                for arg in args:
+                    if {"Pattern", "str"} <= _union(arg.annotation):
+                        wrong.append(f"{rel}:{where}({arg.arg})")
+    assert not wrong, f"functions taking a pattern's name, not a Pattern: {wrong}"
+
+
+def test_the_signature_check_sees_a_name_taker():
+    tree = ast.parse("def f(a: Sequence[str | patterns.Pattern], b: dict[str, Pattern]): ...")
+    a, b = tree.body[0].args.args
+    assert {"Pattern", "str"} <= _union(a.annotation)
+    assert not {"Pattern", "str"} <= _union(b.annotation)
+
+
+def _reads_through_super(cls: ast.AST) -> bool:
+    """A sensor class whose constructor hands its argument to SplitterSensor's."""
+    return isinstance(cls, ast.ClassDef) and any(
+        ast.unparse(b).endswith("SplitterSensor") for b in cls.bases
+    )

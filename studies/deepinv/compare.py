@@ -6,7 +6,7 @@ SplitterPhysics`; it needs no trained weights. It starts from ``A^T y`` (deepinv
 the step ``0.99 / ||A||^2`` (``||A||^2`` from the physics' ``compute_sqnorm``) and runs a fixed
 number of iterations, each with a fixed number of iterations of deepinv's TV proximal solver.
 
-The LMMSE comes twice: in closed form from the shipped image statistics (SPEC section 10) and
+The LMMSE comes twice: in closed form from the shipped image statistics (docs/model.md §10) and
 as the shipped fit that ``build_method("lmmse", pattern=...)`` loads.
 
 Images: the training folder's images sorted by name (the last 32 are held out of the networks'
@@ -33,6 +33,7 @@ from pathlib import Path
 import torch
 
 import splitcam
+from splitcam import patterns
 from splitcam.data.images import read_image
 from splitcam.data.patches import list_images
 from splitcam.data.registry import training_folder
@@ -205,11 +206,11 @@ def page(args, run: dict) -> str:
 solver that needs no trained weights, reconstructs pattern {args.pattern} beside splitcam's
 LMMSE and the shipped network (`build_method("{args.network}")`), all through splitcam's
 evaluation protocol (same scenes, same seeded Gaussian noise, PSNR/SSIM on 8-bit images). The
-LMMSE comes twice: in closed form from the shipped image statistics (SPEC section 10,
-`closed_form_lmmse("{args.pattern}")`; statistics of the 400 training images that precede the
-held-out 32) and as the shipped fit that `build_method("lmmse", pattern="{args.pattern}")`
-loads (fitted on patches of all 432 training images, so these test images took part in its
-fit).
+LMMSE comes twice: in closed form from the shipped image statistics (docs/model.md §10,
+`closed_form_lmmse(patterns.get("{args.pattern}"))`; statistics of the 400 training images
+that precede the held-out 32) and as the shipped fit that
+`build_method("lmmse", pattern="{args.pattern}")` loads (fitted on patches of all 432 training
+images, so these test images took part in its fit).
 
 ## Result
 
@@ -301,7 +302,7 @@ def main(argv: list[str] | None = None) -> None:
     else:
         del names["tv_long"]
     methods += [
-        closed_form_lmmse(args.pattern),
+        closed_form_lmmse(patterns.get(args.pattern)),
         build_method("lmmse", pattern=args.pattern),
         build_method(args.network),
     ]

@@ -8,6 +8,7 @@ steps 0, 50, 100, 200, 300, 400 and 599, and the closed-form PSNR at sigma 0 and
 
 import sys
 
+from splitcam import patterns
 from splitcam.design import design_pattern
 
 STEPS = 600
@@ -17,7 +18,9 @@ STARTS = [("D", "support", 0), ("A", "support", 0), ("D", "exact", 0), ("A", "ra
 for objective in sys.argv[1].split(","):
     for lr in [float(x) for x in sys.argv[2].split(",")]:
         for start, init, seed in STARTS:
-            r = design_pattern(start, init=init, seed=seed, steps=STEPS, lr=lr, objective=objective)
+            r = design_pattern(
+                patterns.get(start), init=init, seed=seed, steps=STEPS, lr=lr, objective=objective
+            )
             at = " ".join(f"{r.history[i]:.3f}" for i in (0, 50, 100, 200, 300, 400, STEPS - 1))
             after = r.psnr_after
             print(

@@ -10,6 +10,7 @@ from pathlib import Path
 
 import torch
 
+from splitcam import patterns
 from splitcam.data.imageio import read_image
 from splitcam.data.patches import list_images
 from splitcam.data.registry import training_folder
@@ -28,7 +29,7 @@ def main() -> None:
         t0 = time.perf_counter()
         methods = []
         for pattern in ("D", "bayer"):
-            method = closed_form_lmmse(pattern, domain=domain)
+            method = closed_form_lmmse(patterns.get(pattern), domain=domain)
             method.name = f"lmmse-{pattern}"
             methods.append(method)
         rows = evaluate(methods, [("train-last6", images)], [0.0], progress=False, domain=domain)

@@ -122,7 +122,9 @@ def main() -> int:
     )
     flat = [img for _, imgs in images for img in imgs]
     study = exposure_study(
-        flat, patterns=["A", "bayer", *map(str, files)], photons=default_exposures(7)
+        flat,
+        patterns=[patterns.get(p) for p in ["A", "bayer", *map(str, files)]],
+        photons=default_exposures(7),
     )
     write_study(
         study,

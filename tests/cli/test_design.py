@@ -32,7 +32,7 @@ def test_cli_writes_a_pattern_file_that_round_trips_and_a_figure(tmp_path, capsy
     assert loaded.name == "D-designed" and loaded.provenance == "designed"
     assert loaded.metadata["init"] == "random" and loaded.metadata["sigmas"] == [0.0, 10.0]
     # The file holds exactly what the library designs with the same settings.
-    result = design_pattern("D", init="random", seed=2, sigmas=[0, 10], steps=20)
+    result = design_pattern(patterns.get("D"), init="random", seed=2, sigmas=[0, 10], steps=20)
     assert loaded.equals(result.pattern)  # bit-exact
     # The printed table is the closed-form PSNR before/after per sigma.
     rows = {

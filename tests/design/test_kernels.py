@@ -37,7 +37,7 @@ def test_design_lowers_the_closed_form_error_and_keeps_the_pattern_valid(
     start, init, seed, objective
 ) -> None:
     result = design_pattern(
-        start, init=init, seed=seed, sigmas=SIGMAS, steps=25, objective=objective
+        patterns.get(start), init=init, seed=seed, sigmas=SIGMAS, steps=25, objective=objective
     )
     begin = patterns.get(start)
     _assert_valid(result.pattern, begin)
@@ -65,19 +65,19 @@ def test_design_lowers_the_closed_form_error_and_keeps_the_pattern_valid(
 
 
 def test_exact_start_is_the_start_pattern_and_seeds_decide_random_starts() -> None:
-    exact = design_pattern("D", init="exact", sigmas=SIGMAS, steps=1)
+    exact = design_pattern(patterns.get("D"), init="exact", sigmas=SIGMAS, steps=1)
     # Step 0 evaluates the start itself (up to the 1e-6 floor of the exact logits).
     assert exact.history[0] == pytest.approx(_mean_db(exact.mse_before), abs=1e-3)
-    one = design_pattern("A", init="random", seed=5, sigmas=SIGMAS, steps=3)
-    again = design_pattern("A", init="random", seed=5, sigmas=SIGMAS, steps=3)
-    other = design_pattern("A", init="random", seed=6, sigmas=SIGMAS, steps=3)
+    one = design_pattern(patterns.get("A"), init="random", seed=5, sigmas=SIGMAS, steps=3)
+    again = design_pattern(patterns.get("A"), init="random", seed=5, sigmas=SIGMAS, steps=3)
+    other = design_pattern(patterns.get("A"), init="random", seed=6, sigmas=SIGMAS, steps=3)
     assert one.pattern.equals(again.pattern)
     assert not one.pattern.equals(other.pattern, atol=1e-3)
 
 
 @pytest.mark.parametrize("start", ["C", "E"])
 def test_other_layouts_keep_their_layout_and_kernel_size(start) -> None:
-    result = design_pattern(start, sigmas=range(0, 21, 10), steps=2)
+    result = design_pattern(patterns.get(start), sigmas=range(0, 21, 10), steps=2)
     _assert_valid(result.pattern, patterns.get(start))
     assert result.sigmas == [0.0, 10.0, 20.0]
     assert result.pattern.metadata["start"] == start
@@ -85,21 +85,21 @@ def test_other_layouts_keep_their_layout_and_kernel_size(start) -> None:
 
 def test_design_refuses_bad_input_and_restores_threads() -> None:
     with pytest.raises(ValueError, match="absorbs light"):
-        design_pattern("bayer", steps=1)
+        design_pattern(patterns.get("bayer"), steps=1)
     for sigmas in ([-1.0], [], [float("nan")], ["x"]):
         with pytest.raises(ValueError, match="sigmas"):
-            design_pattern("D", sigmas=sigmas, steps=1)
+            design_pattern(patterns.get("D"), sigmas=sigmas, steps=1)
     for steps in (0, -3, 1.5, True):
         with pytest.raises(ValueError, match="steps"):
-            design_pattern("D", steps=steps)
+            design_pattern(patterns.get("D"), steps=steps)
     with pytest.raises(ValueError, match="lr"):
-        design_pattern("D", lr=0.0, steps=1)
+        design_pattern(patterns.get("D"), lr=0.0, steps=1)
     with pytest.raises(ValueError, match="init"):
-        design_pattern("D", init="zeros", steps=1)
+        design_pattern(patterns.get("D"), init="zeros", steps=1)
     with pytest.raises(ValueError, match="objective"):
-        design_pattern("D", objective="ssim", steps=1)
+        design_pattern(patterns.get("D"), objective="ssim", steps=1)
     before = torch.get_num_threads()
-    design_pattern("D", steps=1, threads=1)
+    design_pattern(patterns.get("D"), steps=1, threads=1)
     assert torch.get_num_threads() == before
 
 
@@ -116,7 +116,7 @@ def test_design_against_a_frozen_network(tiny_universal):
     sampler = PatchSampler(ImageCache(files, min_size=16, progress=False), patch_size=16)
     before = [p.detach().clone() for p in system.network.parameters()]
     result = design_pattern(
-        "D",
+        patterns.get("D"),
         objective="network",
         network=system.network,
         patches=sampler,
@@ -133,4 +133,4 @@ def test_design_against_a_frozen_network(tiny_universal):
     after_db = network_psnr(result.pattern, system.network, held, [0, 10])
     assert sum(after_db.values()) > sum(before_db.values())
     with pytest.raises(ValueError, match="needs a network"):
-        design_pattern("D", objective="network", steps=1)
+        design_pattern(patterns.get("D"), objective="network", steps=1)

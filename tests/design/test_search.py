@@ -28,7 +28,9 @@ def _collection(fig, label: str):
 
 def test_a_tiny_search_finishes_resumes_and_its_best_trial_reproduces(tmp_path) -> None:
     space = {"steps": 20, "init": ("choice", "support", "random")}
-    search = search_patterns("D", trials=3, folder=tmp_path, space=space, report_every=10)
+    search = search_patterns(
+        patterns.get("D"), trials=3, folder=tmp_path, space=space, report_every=10
+    )
     trials = search.study.trials
     assert [t.state for t in trials] == [COMPLETE] * 3  # the warm-up (100 steps) spares them
     # the designer's defaults come first (steps held at 20), then the sampler's draws
@@ -39,12 +41,14 @@ def test_a_tiny_search_finishes_resumes_and_its_best_trial_reproduces(tmp_path) 
     assert all(search.pattern_file(t.number).is_file() for t in trials)
 
     # resumes from its journal: a second call adds trials to the same study
-    again = search_patterns("D", trials=1, folder=tmp_path, space=space, report_every=10)
+    again = search_patterns(
+        patterns.get("D"), trials=1, folder=tmp_path, space=space, report_every=10
+    )
     assert len(again.study.trials) == 4
     assert "baseline" not in again.study.trials[3].user_attrs
     assert len(open_search(tmp_path).finished()) == 4
     with pytest.raises(ValueError, match="other settings .*sigmas"):
-        search_patterns("D", trials=1, folder=tmp_path, sigmas=[5.0], space=space)
+        search_patterns(patterns.get("D"), trials=1, folder=tmp_path, sigmas=[5.0], space=space)
 
     # the best trial reproduces: designed again from its parameters, the same score and pattern
     best = again.trial()
@@ -59,17 +63,19 @@ def test_one_stage_is_design_pattern_with_the_trials_settings(tmp_path) -> None:
     from splitcam.design import design_pattern
 
     space = {"steps": 12, "init": "random", "seed": 3, "objective": "psnr"}
-    search = search_patterns("A", trials=1, folder=tmp_path, space=space, report_every=0)
+    search = search_patterns(
+        patterns.get("A"), trials=1, folder=tmp_path, space=space, report_every=0
+    )
     (trial,) = search.finished()
     assert trial.intermediate_values == {12: trial.values[0]}
-    plain = design_pattern("A", **{k: v for k, v in trial.params.items()})
+    plain = design_pattern(patterns.get("A"), **{k: v for k, v in trial.params.items()})
     designed = patterns.load(search.pattern_file(trial.number))
     assert designed.equals(plain.pattern, atol=1e-12)
 
     # a design that ran all its steps is kept, however far below the median
     bad = {"lr": 1e-4, "init": "random", "seed": 0}
     kept = search_patterns(
-        "D",
+        patterns.get("D"),
         trials=2,
         folder=tmp_path / "kept",
         space={"steps": 10, "lr": ("log", 1e-4, 0.5)},
@@ -88,7 +94,7 @@ def test_pruning_stops_a_trial_below_the_median(tmp_path) -> None:
     good = {"lr": 0.1, "init": "support"}
     bad = {"lr": 1e-4, "init": "random", "seed": 0}  # barely moves from a random start
     search = search_patterns(
-        "D",
+        patterns.get("D"),
         trials=3,
         folder=tmp_path,
         space={"steps": 20, "lr": ("log", 1e-4, 0.5), "objective": "mse"},
@@ -184,16 +190,20 @@ def test_a_missing_optuna_says_how_to_install_it(tmp_path, monkeypatch, capsys) 
     assert main(argv) == 1
     assert "needs optuna: pip install 'splitcam[search]'" in capsys.readouterr().err
     with pytest.raises(ModuleNotFoundError, match=r"splitcam\[search\]"):
-        search_patterns("D", trials=1, folder=tmp_path)
+        search_patterns(patterns.get("D"), trials=1, folder=tmp_path)
 
 
 def test_bad_search_settings_are_refused(tmp_path) -> None:
     with pytest.raises(ValueError, match="unknown setting"):
-        search_patterns("D", trials=1, folder=tmp_path, space={"temperature": 1.0})
+        search_patterns(patterns.get("D"), trials=1, folder=tmp_path, space={"temperature": 1.0})
     with pytest.raises(ValueError, match="closed-form objectives"):
-        search_patterns("D", trials=1, folder=tmp_path, space={"objective": "network"})
+        search_patterns(
+            patterns.get("D"), trials=1, folder=tmp_path, space={"objective": "network"}
+        )
     with pytest.raises(ValueError, match="low, high"):
-        search_patterns("D", trials=1, folder=tmp_path, space={"lr": ("log", 0.5, 0.1)})
+        search_patterns(
+            patterns.get("D"), trials=1, folder=tmp_path, space={"lr": ("log", 0.5, 0.1)}
+        )
     with pytest.raises(ValueError, match="2x2"):
         search_metasurfaces(
             (1, 3), SMALL, trials=1, folder=tmp_path, space={"objective": "routing"}

@@ -8,6 +8,8 @@ import numpy as np
 import pytest
 import torch
 
+from splitcam import patterns
+
 PHOTONS = [3.0, 300.0]
 
 
@@ -77,7 +79,7 @@ def test_a_router_better_everywhere_reports_always_and_infeasible_cells(tiny) ->
         etas=[0.3],
         chis=[0.0],
         photons=PHOTONS,
-        reference="A",
+        reference=patterns.get("A"),
         metric="ciede2000",
     )["cells"][0]
     assert worse["verdict"] == "never"
@@ -173,9 +175,9 @@ def test_the_map_against_another_reference_equals_computing_it_again(tiny) -> No
     from splitcam.evaluation.breakeven import against, break_even
 
     grid = {"etas": [0.5, 0.9], "chis": [0.0, 0.2], "photons": PHOTONS, "tol": 0.01}
-    first = break_even(tiny, reference="rgbw", **grid)
-    direct = break_even(tiny, reference="bayer-d5100", **grid)
-    rebased = against(first, "bayer-d5100", tiny)
+    first = break_even(tiny, reference=patterns.get("rgbw"), **grid)
+    direct = break_even(tiny, reference=patterns.get("bayer-d5100"), **grid)
+    rebased = against(first, patterns.get("bayer-d5100"), tiny)
     assert rebased["reference"] == "bayer-d5100"
     assert rebased["reference_curve"] == pytest.approx(direct["reference_curve"], abs=1e-9)
     for mine, theirs in zip(rebased["cells"], direct["cells"], strict=True):
@@ -199,7 +201,7 @@ def test_the_map_against_another_reference_equals_computing_it_again(tiny) -> No
     for c in below:
         assert c["interval"] == pytest.approx([c["break_even"]] * 2)
     # back against the first reference: the first map again
-    again = against(rebased, "rgbw", tiny)
+    again = against(rebased, patterns.get("rgbw"), tiny)
     assert [c["verdict"] for c in again["cells"]] == [c["verdict"] for c in first["cells"]]
 
 

@@ -7,6 +7,8 @@ import math
 import pytest
 import torch
 
+from splitcam import patterns
+
 
 def test_crossover_interpolates_in_log_exposure() -> None:
     from splitcam.evaluation.exposure import crossover
@@ -28,7 +30,7 @@ def test_raw_snr_follows_the_signal_gain() -> None:
     from splitcam.evaluation.exposure import raw_snr_check
 
     grey = [("grey", torch.full((3, 64, 64), 0.5))]
-    snr = raw_snr_check(grey, patterns=["A", "D", "bayer"])
+    snr = raw_snr_check(grey, patterns=[patterns.get(n) for n in ("A", "D", "bayer")])
     for name in ("A", "D"):
         assert snr[name]["k"] == pytest.approx(3.0, rel=0.03)  # borders lose a little
         assert abs(snr[name]["shot_gain_db"] - snr[name]["shot_theory_db"]) < 0.6
@@ -158,14 +160,15 @@ def test_exposure_study_continues_an_interrupted_run(tmp_path) -> None:
 
     images = [("flat", torch.full((3, 20, 22), 0.4)), ("ramp", torch.rand(3, 20, 22))]
     first = Counted()
-    a = exposure_study(images, patterns=["A"], photons=[10.0], methods=[first], out=tmp_path,
+    a_only = [patterns.get("A")]
+    a = exposure_study(images, patterns=a_only, photons=[10.0], methods=[first], out=tmp_path,
                        progress=False)  # fmt: skip
     again = Counted()
-    b = exposure_study(images, patterns=["A"], photons=[10.0], methods=[again], out=tmp_path,
+    b = exposure_study(images, patterns=a_only, photons=[10.0], methods=[again], out=tmp_path,
                        progress=False)  # fmt: skip
     assert first.calls == 2 and again.calls == 0 and a == b
     more = Counted()
-    c = exposure_study(images, patterns=["A"], photons=[10.0, 100.0], methods=[more],
+    c = exposure_study(images, patterns=a_only, photons=[10.0, 100.0], methods=[more],
                        out=tmp_path, progress=False)  # fmt: skip
     assert more.calls == 2 and c["net-count-A"][10.0] == a["net-count-A"][10.0]
     assert c["A"][100.0]["psnr"] > c["A"][10.0]["psnr"]  # the LMMSE: more light, better

@@ -319,10 +319,12 @@ def test_evaluate_at_exposures_scores_what_the_exposure_study_scores(tmp_path) -
 
     images = _photos()
     levels = [5.0, Exposure(30.0, read_noise=2.0), Exposure(3000.0, read_noise=2.0)]
-    rows = evaluate([closed_form_lmmse("D")], [("set", images)], levels, tmp_path, progress=False)
+    rows = evaluate(
+        [closed_form_lmmse(patterns.get("D"))], [("set", images)], levels, tmp_path, progress=False
+    )
     assert {r.level for r in rows} == {"5", "N30", "N3000"}
     study = exposure_study(
-        images, patterns=["D"], photons=[30.0, 3000.0], progress=False, domain="srgb"
+        images, patterns=[patterns.get("D")], photons=[30.0, 3000.0], progress=False, domain="srgb"
     )
     for n in (30.0, 3000.0):
         mine = [r.psnr for r in rows if r.photons == n]

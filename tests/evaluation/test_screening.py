@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import torch
 
+from splitcam import patterns
 from splitcam.data.patches import ImageCache
 from splitcam.evaluation.screening import evaluate_method, screen_patterns
 from splitcam.recon.lmmse import LMMSE
@@ -20,7 +21,13 @@ def test_screen_patterns_on_a_few_training_images(shared_data):
     cache = ImageCache(shared_data / "train", min_size=32, max_images=3, progress=False)
     tests = [(f"synthetic{i}", img.float()) for i, img in enumerate(_smooth_images(2, 24, 30, 12))]
     result = screen_patterns(
-        ["D", "bayer"], cache, tests, sigmas=(0, 10), radius=2, patches=16, patch_size=32
+        [patterns.get("D"), patterns.get("bayer")],
+        cache,
+        tests,
+        sigmas=(0, 10),
+        radius=2,
+        patches=16,
+        patch_size=32,
     )
     assert len(result.rows) == 4 and len(result.per_image) == 8
     for sigma, order in result.ranking.items():

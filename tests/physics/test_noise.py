@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 import torch
 
+from splitcam import patterns
 from splitcam.physics.noise import (
     Exposure,
     Gaussian,
@@ -150,8 +151,8 @@ def test_without_shot_noise_and_adc_it_is_the_gaussian_model() -> None:
     noise = exposure.apply(clean, torch.Generator().manual_seed(5)) - clean
     assert float(noise.std()) == pytest.approx(sigma / 255, rel=0.01)
     assert abs(float(noise.mean())) < 3 * sigma / 255 / 400
-    weights, bias = closed_form_filters("D", exposure)
-    w_g, b_g = closed_form_filters("D", sigma)
+    weights, bias = closed_form_filters(patterns.get("D"), exposure)
+    w_g, b_g = closed_form_filters(patterns.get("D"), sigma)
     torch.testing.assert_close(weights, w_g, rtol=1e-10, atol=1e-12)
     torch.testing.assert_close(bias, b_g, rtol=1e-10, atol=1e-12)
 
@@ -307,6 +308,8 @@ def test_dark_current_costs_the_closed_form_lmmse():
     from splitcam.recon.closed_form import closed_form_mse, shipped_image_statistics
 
     stats = shipped_image_statistics("linear")
-    clean = float(closed_form_mse("bayer", Exposure(30.0), statistics=stats))
-    dark = float(closed_form_mse("bayer", Exposure(30.0, dark=20.0), statistics=stats))
+    clean = float(closed_form_mse(patterns.get("bayer"), Exposure(30.0), statistics=stats))
+    dark = float(
+        closed_form_mse(patterns.get("bayer"), Exposure(30.0, dark=20.0), statistics=stats)
+    )
     assert dark > clean * 1.05

@@ -219,7 +219,7 @@ def test_switching_sensor_changes_pattern_without_saving_it() -> None:
     sensor = SwitchingSensor("D")
     rgb = _universal_scene()
     for name in ("A", "E", "bayer"):
-        sensor.set_pattern(name)
+        sensor.set_pattern(patterns.get(name))
         torch.testing.assert_close(sensor(rgb), SplitterSensor(name)(rgb))
         assert sensor.period == patterns.get(name).period
     assert sensor.state_dict() == {}

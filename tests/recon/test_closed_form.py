@@ -134,13 +134,13 @@ def test_closed_form_matches_simulated_fit(name: str) -> None:
     files = list_images(TRAIN)
     cache = ImageCache(files[:40], min_size=48, progress=False)
     stats = _train_statistics(tuple(files[:40]))
-    fit = fit_lmmse(name, cache, patches=1024, seed=0)
+    fit = fit_lmmse(patterns.get(name), cache, patches=1024, seed=0)
     held_out = torch.from_numpy(read_image(files[-1])).permute(2, 0, 1)[None, :, :160, :160]
     raw = SplitterSensor(name).double()(held_out.double())
     target = held_out[0, :, 8:-8, 8:-8].double()
     for sigma in (0.0, 15.0):
         mse_fit = fit.expected_mse(sigma)
-        mse_cf = float(closed_form_mse(name, sigma, statistics=stats))
+        mse_cf = float(closed_form_mse(patterns.get(name), sigma, statistics=stats))
         assert mse_cf == pytest.approx(mse_fit, rel=0.05)
         errs = []
         for filters in (fit, ClosedFormFilters(name, stats)):
@@ -177,13 +177,13 @@ def test_filters_are_differentiable_in_the_kernels() -> None:
 
 def test_several_sigmas_at_once_equal_one_by_one() -> None:
     sig = torch.tensor([0.0, 7.5, 20.0], dtype=torch.float64)
-    w, b = closed_form_filters("A", sig)
-    mse = closed_form_mse("A", sig)
+    w, b = closed_form_filters(patterns.get("A"), sig)
+    mse = closed_form_mse(patterns.get("A"), sig)
     for i, s in enumerate(sig.tolist()):
-        w1, b1 = closed_form_filters("A", s)
+        w1, b1 = closed_form_filters(patterns.get("A"), s)
         torch.testing.assert_close(w[i], w1)
         torch.testing.assert_close(b[i], b1)
-        torch.testing.assert_close(mse[i], closed_form_mse("A", s))
+        torch.testing.assert_close(mse[i], closed_form_mse(patterns.get("A"), s))
     assert bool((mse[1:] > mse[:-1]).all())  # more noise, more error
 
 
@@ -194,7 +194,7 @@ def test_shipped_statistics_and_reconstructor() -> None:
     cov = stats.covariance()
     lo = stats.max_offset
     assert all(cov[c, c, lo, lo] > cov[c, c, lo, lo + 8] > 0 for c in range(3))
-    lmmse = closed_form_lmmse("D")
+    lmmse = closed_form_lmmse(patterns.get("D"))
     assert lmmse.pattern.name == "D"
     rgb = _smooth_images(1, 48, 3).float()
     raw = SplitterSensor("D")(rgb)
@@ -206,9 +206,9 @@ def test_shipped_statistics_and_reconstructor() -> None:
 def test_radius_beyond_statistics_and_bad_input_are_refused(tmp_path: Path) -> None:
     stats = estimate_image_statistics(_smooth_images(1, 24, 4), max_offset=4)
     with pytest.raises(ValueError, match="needs image statistics up to offset"):
-        closed_form_filters("D", 0.0, statistics=stats, radius=4)
+        closed_form_filters(patterns.get("D"), 0.0, statistics=stats, radius=4)
     with pytest.raises(ValueError, match="sigma"):
-        closed_form_filters("D", float("nan"), statistics=stats, radius=1)
+        closed_form_filters(patterns.get("D"), float("nan"), statistics=stats, radius=1)
     with pytest.raises(ValueError, match="larger than"):
         estimate_image_statistics(_smooth_images(1, 6, 0), max_offset=4)
     path = stats.save(tmp_path / "stats")
@@ -243,7 +243,7 @@ def test_closed_form_filters_under_signal_dependent_noise() -> None:
     window pixel's expected signal; more light lowers the expected error; several exposures at
     once equal one by one."""
     stats = shipped_image_statistics()
-    kernels = pattern_pixel_kernels("A")
+    kernels = pattern_pixel_kernels(patterns.get("A"))
     exposure = Exposure(50.0, read_noise=3.0)
     weights, bias = closed_form_filters(kernels, exposure, statistics=stats, radius=2)
     cxx, cyx, mean_x, _ = (t.numpy() for t in _moments(kernels, stats, 2))
@@ -281,7 +281,7 @@ def test_batched_estimate_equals_per_image_estimates_and_their_gradients() -> No
     )
     grads, values = [], []
     for batched in (True, False):
-        k = pattern_pixel_kernels("D").clone().requires_grad_(True)
+        k = pattern_pixel_kernels(patterns.get("D")).clone().requires_grad_(True)
         if batched:
             out = lmmse_estimate(raw, k, sig, stats)
         else:

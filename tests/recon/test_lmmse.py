@@ -89,13 +89,15 @@ def test_lmmse_filters_equal_least_squares(name):
 
 def test_statistics_of_two_fits_add_up():
     images = _smooth_images(4, 14, 14, seed=13)
-    whole = fit_lmmse("E", images, radius=1)
-    pooled = fit_lmmse("E", images[:1], radius=1) + fit_lmmse("E", images[1:], radius=1)
+    whole = fit_lmmse(patterns.get("E"), images, radius=1)
+    pooled = fit_lmmse(patterns.get("E"), images[:1], radius=1) + fit_lmmse(
+        patterns.get("E"), images[1:], radius=1
+    )
     assert torch.equal(pooled.counts, whole.counts)
     for a, b in zip(pooled.filters(4.0), whole.filters(4.0), strict=True):
         torch.testing.assert_close(a, b, rtol=1e-9, atol=1e-12)
     with pytest.raises(ValueError, match="same pattern and radius"):
-        whole + fit_lmmse("E", images, radius=2)
+        whole + fit_lmmse(patterns.get("E"), images, radius=2)
 
 
 def test_lmmse_filters_match_a_fit_on_explicitly_noised_samples():
@@ -147,7 +149,7 @@ def test_lmmse_recovers_constant_colours_of_pattern_d_exactly():
     # scenes must reproduce every flat scene (away from the image border).
     gen = torch.Generator().manual_seed(8)
     colours = torch.rand(8, 3, 1, 1, generator=gen, dtype=torch.float64)
-    method = LMMSE(fit_lmmse("D", colours.expand(8, 3, 12, 12), radius=2))
+    method = LMMSE(fit_lmmse(patterns.get("D"), colours.expand(8, 3, 12, 12), radius=2))
     scene = torch.tensor([0.2, 0.7, 0.4], dtype=torch.float64).view(1, 3, 1, 1).expand(1, 3, 20, 20)
     out = method.reconstruct(SplitterSensor("D")(scene), 0.0)
     inner = slice(3, -3)
@@ -156,10 +158,10 @@ def test_lmmse_recovers_constant_colours_of_pattern_d_exactly():
 
 def test_lmmse_input_validation():
     with pytest.raises(ValueError, match="expected patches of at least"):
-        fit_lmmse("A", torch.rand(1, 3, 8, 8), radius=4)
+        fit_lmmse(patterns.get("A"), torch.rand(1, 3, 8, 8), radius=4)
     with pytest.raises(ValueError, match="expected radius"):
-        fit_lmmse("A", torch.rand(1, 3, 16, 16), radius=-1)
-    method = LMMSE(fit_lmmse("E", _smooth_images(1, 12, 12, seed=9), radius=1))
+        fit_lmmse(patterns.get("A"), torch.rand(1, 3, 16, 16), radius=-1)
+    method = LMMSE(fit_lmmse(patterns.get("E"), _smooth_images(1, 12, 12, seed=9), radius=1))
     with pytest.raises(ValueError, match=r"expected \(N, 1, H, W\)"):
         method.reconstruct(torch.rand(1, 3, 8, 8), 0.0)
     with pytest.raises(ValueError, match="expected a finite sigma >= 0"):
@@ -167,7 +169,7 @@ def test_lmmse_input_validation():
 
 
 def test_save_load_round_trip_and_damaged_files(tmp_path):
-    method = LMMSE(fit_lmmse("B", _smooth_images(2, 16, 16, seed=10), radius=2))
+    method = LMMSE(fit_lmmse(patterns.get("B"), _smooth_images(2, 16, 16, seed=10), radius=2))
     meta_path = method.save(tmp_path / "lmmse_b")
     tensors_path = tmp_path / "lmmse_b.safetensors"
     assert meta_path == tmp_path / "lmmse_b.json" and tensors_path.exists()
@@ -214,7 +216,7 @@ def _fitted(pattern: str = "D"):
     images = torch.nn.functional.interpolate(
         torch.rand(4, 3, 8, 8, generator=gen), size=(40, 40), mode="bilinear"
     )
-    return fit_lmmse(pattern, images, radius=2)
+    return fit_lmmse(patterns.get(pattern), images, radius=2)
 
 
 def test_fitted_lmmse_under_signal_dependent_noise_is_the_explicit_solve() -> None:

@@ -255,8 +255,8 @@ def test_untrained_network_outputs_the_lmmse_estimate(name: str) -> None:
     raw = SplitterSensor(name)(rgb) + 0.02 * torch.randn(2, 1, 40, 40)
     sensor = SplitterSensor(name)
     net = PhysicsReconNet(sensor.period, features=8, blocks=1)
-    out = net(raw, 5.0, pattern_pixel_kernels(name))
-    expected = closed_form_lmmse(name).reconstruct(raw, 5.0)
+    out = net(raw, 5.0, pattern_pixel_kernels(patterns.get(name)))
+    expected = closed_form_lmmse(patterns.get(name)).reconstruct(raw, 5.0)
     torch.testing.assert_close(out, expected, rtol=1e-5, atol=1e-5)
     # Through the reconstruction interface likewise.
     method = NetworkReconstructor(net, sensor.to_pattern(name), "net", tile=48, precision="fp32")
@@ -269,7 +269,7 @@ def test_tiles_equal_the_whole_image_after_training_changes_the_weights() -> Non
     for p in net.parameters():
         p.data.normal_(0, 0.1)
     raw = SplitterSensor("D")(_scene(1, 60))
-    kernels = pattern_pixel_kernels("D")
+    kernels = pattern_pixel_kernels(patterns.get("D"))
     with torch.no_grad():
         whole = net(raw, 10.0, kernels)
     method = NetworkReconstructor(
@@ -296,7 +296,7 @@ def test_per_image_sigmas_equal_one_call_per_image() -> None:
     for p in net.parameters():
         p.data.normal_(0, 0.1)
     raw = SplitterSensor("D")(_scene(2, 24))
-    k = pattern_pixel_kernels("D")
+    k = pattern_pixel_kernels(patterns.get("D"))
     sig = torch.tensor([3.0, 17.0])
     with torch.no_grad():
         both = net(raw, sig, k)
@@ -312,7 +312,7 @@ def test_config_round_trip_and_clear_errors() -> None:
     with pytest.raises(ValueError, match="noise level"):
         net(torch.zeros(1, 1, 9, 9))
     with pytest.raises(ValueError, match="period"):
-        net(torch.zeros(1, 1, 9, 9), 0.0, pattern_pixel_kernels("D"))
+        net(torch.zeros(1, 1, 9, 9), 0.0, pattern_pixel_kernels(patterns.get("D")))
     with pytest.raises(ValueError, match="unknown network config"):
         build_network({"arch": "packed", "period": [2, 2], "radius": 3})
 
@@ -362,7 +362,7 @@ def test_with_a_physics_trunk_it_computes_the_physics_network() -> None:
     universal = UniversalReconNet(features=8, blocks=1).eval()
     universal.load_physics_trunk(physics.state_dict())
     raw = SplitterSensor("A")(_universal_scene(h=36, w=40))
-    k = pattern_pixel_kernels("A")
+    k = pattern_pixel_kernels(patterns.get("A"))
     torch.testing.assert_close(universal(raw, 7.0, k), physics(raw, 7.0, k), rtol=1e-5, atol=1e-5)
     with pytest.raises(ValueError, match="2x2-period physics"):
         UniversalReconNet(features=8, blocks=1).load_physics_trunk(

@@ -50,7 +50,7 @@ def test_pattern_file_named_like_a_builtin_is_not_the_builtin(tmp_path, capsys):
     from splitcam.recon.closed_form import closed_form_filters
 
     w_edited, _ = closed_form_filters(patterns.get(mine), 0.0)
-    w_builtin, _ = closed_form_filters("D", 0.0)
+    w_builtin, _ = closed_form_filters(patterns.get("D"), 0.0)
     torch.testing.assert_close(closed.statistics.filters(0.0)[0], w_edited)
     assert not torch.allclose(w_edited, w_builtin, atol=1e-3)
     capsys.readouterr()
@@ -95,9 +95,12 @@ def test_lmmse_and_demosaicking_take_the_domain_asked_for(tmp_path) -> None:
     assert method_domain(build_method("lmmse", pattern="D")) == "srgb"
     assert method_domain(build_method("malvar2004", domain="linear")) == "linear"
     assert method_domain(build_method("malvar2004")) == "srgb"
-    assert method_domain(closed_form_lmmse("A", shipped_image_statistics("linear"))) == "linear"
+    assert (
+        method_domain(closed_form_lmmse(patterns.get("A"), shipped_image_statistics("linear")))
+        == "linear"
+    )
     with pytest.raises(ValueError, match="statistics of the srgb domain"):
-        closed_form_lmmse("A", shipped_image_statistics(), domain="linear")
+        closed_form_lmmse(patterns.get("A"), shipped_image_statistics(), domain="linear")
     with pytest.raises(ValueError, match="lmmse-train"):
         build_method("lmmse", pattern="D", domain="linear", lmmse_train=tmp_path)
     # The stats file of a domain knows it; a file without the field is of srgb.

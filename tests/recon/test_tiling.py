@@ -5,6 +5,7 @@ from __future__ import annotations
 import pytest
 import torch
 
+from splitcam import patterns
 from splitcam.physics.periodic import phase_conv, phase_map
 from splitcam.physics.sensor import SplitterSensor
 from splitcam.recon.closed_form import closed_form_lmmse
@@ -79,7 +80,7 @@ def test_bad_period_and_radius_are_refused() -> None:
 def test_lmmse_in_tiles_equals_its_filters_applied_by_hand(monkeypatch) -> None:
     from splitcam.recon import lmmse as lmmse_module
 
-    lmmse = closed_form_lmmse("D")
+    lmmse = closed_form_lmmse(patterns.get("D"))
     rgb = torch.rand(1, 3, 70, 90, dtype=torch.float64)
     raw = SplitterSensor("D").double()(rgb)
     weights, bias = lmmse.statistics.filters(5.0)
@@ -191,7 +192,7 @@ def test_channels_last_leaves_the_network_as_it_was() -> None:
     net = build_network({"arch": "physics", "period": [2, 2], "features": 8, "blocks": 1}).eval()
     storage = {n: p.data_ptr() for n, p in net.named_parameters()}
     raw = torch.rand(1, 1, 20, 22, generator=torch.Generator().manual_seed(1))
-    physics = {"sigma": 5.0, "kernels": pattern_pixel_kernels("D")}
+    physics = {"sigma": 5.0, "kernels": pattern_pixel_kernels(patterns.get("D"))}
     plain = reconstruct(net, raw, tile=None, **physics)
     fast = reconstruct(net, raw, tile=None, channels_last=True, **physics)
     torch.testing.assert_close(fast, plain, rtol=0, atol=1e-6)

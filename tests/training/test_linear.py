@@ -12,6 +12,7 @@ import pytest
 import torch
 from conftest import blocky_images, tiny_config
 
+from splitcam import patterns
 from splitcam.cli import main
 from splitcam.evaluation.protocol import mean_psnr
 from splitcam.io import checkpoints as ckpt_io
@@ -130,7 +131,9 @@ def test_a_linear_run_trains_validates_and_exports_in_linear(linear_run, images,
     held_out = val_images(config)
     # At step 0 the physics network is the closed-form LMMSE of the linear statistics, scored
     # in the linear domain.
-    lmmse = mean_psnr(closed_form_lmmse("D", domain="linear"), held_out, [0.0], domain="linear")
+    lmmse = mean_psnr(
+        closed_form_lmmse(patterns.get("D"), domain="linear"), held_out, [0.0], domain="linear"
+    )
     assert rows[0]["val_psnr_0"] == pytest.approx(lmmse[0.0], abs=1e-3)
     # The last row is what the evaluation protocol scores for the trained run, in linear.
     method = build_method(linear_run / "checkpoint.safetensors", domain="linear")  # the latest
@@ -203,7 +206,10 @@ def test_photon_noise_in_linear_light_from_the_command_line(images, tmp_path, ca
     assert [r["step"] for r in rows] == [0, 4]
     levels = [Exposure(30.0), Exposure(1000.0)]
     lmmse = mean_psnr(
-        closed_form_lmmse("D", domain="linear"), val_images(config), levels, domain="linear"
+        closed_form_lmmse(patterns.get("D"), domain="linear"),
+        val_images(config),
+        levels,
+        domain="linear",
     )
     assert rows[0]["val_psnr_N30"] == pytest.approx(lmmse[levels[0]], abs=1e-3)
     assert rows[0]["val_psnr_N1000"] == pytest.approx(lmmse[levels[1]], abs=1e-3)

@@ -65,7 +65,9 @@ def test_joint_run_with_design_steps_starts_from_the_designed_kernels(
 
     learn = {"pattern.learn": True, "pattern.design_steps": 30, "optim.steps": 3}
     config = tiny_config(image_folder, tmp_path / "j", **learn)
-    expected = design_pattern("D", init="support", steps=30, seed=config.run.seed + 17)
+    expected = design_pattern(
+        patterns.get("D"), init="support", steps=30, seed=config.run.seed + 17
+    )
     start = build_system(config).sensor.pixel_kernels().detach()
     support = (
         build_system(

@@ -41,7 +41,9 @@ def test_a_few_steps_lower_the_loss(image_folder, tmp_path, arch):
     assert val[0]["step"] == 0 and val[-1]["step"] == 40
     assert val[-1]["val_psnr"] > val[0]["val_psnr"] + 0.5
     if arch == "physics":  # it starts at the LMMSE estimate: its correction is zero
-        lmmse = mean_psnr(closed_form_lmmse("D"), val_images(config), config.data.val_sigmas)
+        lmmse = mean_psnr(
+            closed_form_lmmse(patterns.get("D")), val_images(config), config.data.val_sigmas
+        )
         assert val[0]["val_psnr"] == pytest.approx(np.mean(list(lmmse.values())), abs=1e-3)
     assert json.loads((tmp_path / "r/config.json").read_text())["optim"]["steps"] == 40
 
@@ -322,7 +324,7 @@ def test_training_under_the_photon_model(tmp_path) -> None:
     assert first["step"] == 0 and "val_psnr_N1000" in first
     assert first["val_psnr_N1000"] > first["val_psnr_N30"]
     levels = [Exposure(30.0), Exposure(1000.0)]
-    lmmse = mean_psnr(closed_form_lmmse("D"), val_images(config), levels)
+    lmmse = mean_psnr(closed_form_lmmse(patterns.get("D")), val_images(config), levels)
     assert first["val_psnr_N30"] == pytest.approx(lmmse[levels[0]], abs=1e-3)
     assert ckpt_io.load(tmp_path / "run").meta["config"]["noise"]["model"] == "photon"
     # The exposure study takes the trained network beside the LMMSE of its pattern.
@@ -331,7 +333,7 @@ def test_training_under_the_photon_model(tmp_path) -> None:
 
     study = exposure_study(
         val_images(config),
-        patterns=["D"],
+        patterns=[patterns.get("D")],
         photons=[30.0, 1000.0],
         methods=[build_method(str(tmp_path / "run"))],
         progress=False,

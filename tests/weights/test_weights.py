@@ -8,6 +8,7 @@ import json
 import pytest
 import torch
 
+from splitcam import patterns
 from splitcam.evaluation.protocol import mean_psnr
 from splitcam.io import weights as io_weights
 from splitcam.recon.loading import load_model, model_names, model_serves_any_pattern
@@ -114,7 +115,7 @@ def test_the_shipped_universal_model_beats_the_lmmse_of_every_library_pattern(sh
         method = build_method("universal", pattern=name, precision="fp32")
         assert method.name == f"net-universal-{name}"
         net = mean_psnr(method, crops, [0.0, 15.0])
-        lmmse = mean_psnr(closed_form_lmmse(name), crops, [0.0, 15.0])
+        lmmse = mean_psnr(closed_form_lmmse(patterns.get(name)), crops, [0.0, 15.0])
         lead = min(net[0.0] - lmmse[0.0], net[15.0] - lmmse[15.0])
         assert lead > UNIVERSAL_LEAD, (name, net, lmmse)
 
@@ -196,7 +197,7 @@ def test_every_shipped_photon_network_loads_by_name_and_beats_the_linear_lmmse(n
         assert method.domain == "linear"
         net = mean_psnr(method, crops, levels, domain="linear")
         lmmse = mean_psnr(
-            closed_form_lmmse(sensor, domain="linear"), crops, levels, domain="linear"
+            closed_form_lmmse(patterns.get(sensor), domain="linear"), crops, levels, domain="linear"
         )
         for lv in levels:
             assert net[lv] > lmmse[lv] + PHOTON_LEAD, (name, sensor, lv, net[lv], lmmse[lv])

@@ -153,7 +153,7 @@ def search_error(command: str, exc: ModuleNotFoundError) -> int:
     return 1
 
 
-def _search(args: argparse.Namespace, out: Path) -> int:
+def _search(args: argparse.Namespace, out: Path, start) -> int:
     """``design --search N``: the search, its table, the best pattern and the figures."""
     from ..design.defaults import DEFAULT_LR, DEFAULT_STEPS
     from ..design.search import search_patterns
@@ -174,7 +174,7 @@ def _search(args: argparse.Namespace, out: Path) -> int:
         raise ValueError(f"--search needs a number of trials >= 1, got {args.search}")
     try:
         search = search_patterns(
-            args.pattern,
+            start,
             trials=args.search,
             folder=args.study,
             sigmas=args.sigmas,
@@ -257,11 +257,12 @@ def run(args: argparse.Namespace) -> int:
     if out.suffix.lower() not in (".toml", ".json"):
         raise ValueError(f"--out must end in .toml or .json, got {out.name!r}")
     check_writable(out)
+    start = patterns.get(args.pattern)
     if args.search is not None:
-        return _search(args, out)
+        return _search(args, out, start)
     in_loop = _network_objective(args) if args.objective == "network" else {}
     result = design_pattern(
-        args.pattern,
+        start,
         init=args.init,
         sigmas=args.sigmas,
         steps=args.steps,

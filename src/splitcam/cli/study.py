@@ -173,15 +173,15 @@ def _run_breakeven(args: argparse.Namespace, images: list, names: str, photons: 
             )
         method = lambda pattern: build_model(spec, pattern=pattern, domain=args.domain)  # noqa: E731
     references = _references(args.reference, ["rgbw"])
-    for name in references:
-        get_pattern(name)  # an unknown reference fails before the map is computed
+    # Read once: an unknown reference fails before the map is computed.
+    reference_patterns = [get_pattern(name) for name in references]
     result = break_even(
         images,
         method=method,
         etas=args.eta or DEFAULT_ETAS,
         chis=args.chi or DEFAULT_CHIS,
         photons=photons,
-        reference=references[0],
+        reference=reference_patterns[0],
         metric=args.metric,
         domain=args.domain,
         tol=args.tol,
@@ -190,9 +190,9 @@ def _run_breakeven(args: argparse.Namespace, images: list, names: str, photons: 
     )
     note = f"Images: {names}. Command: {_command(args)}"
     out = Path(args.out or "results/breakeven")
-    for i, name in enumerate(references):
+    for i, (name, reference) in enumerate(zip(references, reference_patterns, strict=True)):
         if i:
-            result = against(result, name, images, method=method, **sensor)
+            result = against(result, reference, images, method=method, **sensor)
         folder = out if len(references) == 1 else out / name
         path = write_break_even(result, folder, note=note)
         print(path.read_text(encoding="utf-8"))
@@ -202,15 +202,17 @@ def _run_breakeven(args: argparse.Namespace, images: list, names: str, photons: 
 
 def _run_exposure(args: argparse.Namespace, images: list, names: str, photons: list) -> int:
     from ..evaluation.exposure import exposure_study, raw_snr_check, write_study
+    from ..patterns import get as get_pattern
     from ..recon.registry import build_method
 
     options = {"domain": args.domain}
     methods = model_methods(args.model, args.patterns, main_job=False, options=options)
     methods += [build_method(c, domain=args.domain) for c in args.checkpoint]
     out = args.out or "results/exposure"
+    loaded = [get_pattern(p) for p in args.patterns]
     results = exposure_study(
         images,
-        patterns=args.patterns,
+        patterns=loaded,
         photons=photons,
         methods=methods,
         **sensor_settings(args),
@@ -220,7 +222,7 @@ def _run_exposure(args: argparse.Namespace, images: list, names: str, photons: l
         scene_sets=args.scene_sets,
     )
     snr = (
-        raw_snr_check(images, patterns=args.patterns, domain=args.domain)
+        raw_snr_check(images, patterns=loaded, domain=args.domain)
         if "bayer" in args.patterns
         else None
     )

@@ -23,7 +23,7 @@ from typing import Any
 import torch
 
 from ..checks import check_count
-from ..patterns import Pattern, get
+from ..patterns import Pattern, check_pattern
 from ..physics.sensor import LearnableSplitterSensor
 from ..recon.closed_form import ImageStatistics, closed_form_mse, shipped_image_statistics
 from ..recon.lmmse import DEFAULT_RADIUS
@@ -111,7 +111,7 @@ class DesignResult:
 
 
 def closed_form_psnr(
-    kernels: Pattern | str | torch.Tensor,
+    kernels: Pattern | torch.Tensor,
     sigmas: Iterable[float],
     *,
     statistics: ImageStatistics | None = None,
@@ -123,7 +123,7 @@ def closed_form_psnr(
 
 
 def network_psnr(
-    pattern: Pattern | str,
+    pattern: Pattern,
     network: torch.nn.Module,
     rgb: torch.Tensor,
     sigmas: Iterable[float],
@@ -134,7 +134,7 @@ def network_psnr(
     on a fixed set of patches (no rounding to 8 bits; for comparing patterns)."""
     from ..physics.sensor import SplitterSensor
 
-    sensor = SplitterSensor(get(pattern))
+    sensor = SplitterSensor(check_pattern(pattern))
     generator = torch.Generator().manual_seed(seed)
     with torch.no_grad():
         return {
@@ -144,7 +144,7 @@ def network_psnr(
 
 
 def design_pattern(
-    start: Pattern | str,
+    start: Pattern,
     *,
     init: str = "support",
     sigmas: Iterable[float] | torch.Tensor = DEFAULT_SIGMAS,
@@ -175,8 +175,8 @@ def design_pattern(
     it ends lower at step 300 from every start (``docs/results/design.md``).
 
     Args:
-        start: Starting pattern (name, file or :class:`Pattern`); its layout and kernel size are
-            kept. Colour filters (kernels summing below 1, e.g. ``bayer``) are refused.
+        start: Starting pattern; its layout and kernel size are kept. Colour filters (kernels
+            summing below 1, e.g. ``bayer``) are refused.
         init: ``support``, ``exact`` or ``random`` (see
             :class:`~splitcam.physics.sensor.LearnableSplitterSensor`).
         sigmas: Noise levels (8-bit units) of the objective, each >= 0: a sequence, a range or
@@ -204,7 +204,8 @@ def design_pattern(
         ValueError: Bad ``init``, ``sigmas``, ``steps``, ``lr``, ``radius`` or ``objective``;
             a start that cannot be learned (:class:`~splitcam.patterns.PatternError`).
 
-    >>> result = design_pattern("D", steps=5, sigmas=[0.0, 10.0], radius=2)
+    >>> from splitcam import patterns
+    >>> result = design_pattern(patterns.get("D"), steps=5, sigmas=[0.0, 10.0], radius=2)
     >>> result.pattern.name, result.pattern.period, result.pattern.kernel_size
     ('D-designed', (2, 2), (1, 3))
     >>> len(result.history)  # the objective (dB) before each of the 5 steps
@@ -214,7 +215,7 @@ def design_pattern(
     >>> all(result.mse_after[s] < result.mse_before[s] for s in (0.0, 10.0))
     True
     """
-    start = get(start)
+    start = check_pattern(start, "start")
     sigma_list = check_sigmas(sigmas)
     _check_design(
         steps, lr, radius, objective, threads, network is not None and patches is not None

@@ -41,10 +41,13 @@ import math
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from ..checks import check_count
 from .defaults import DEFAULT_LR, DEFAULT_STEPS
+
+if TYPE_CHECKING:
+    from ..patterns import Pattern
 
 logger = logging.getLogger(__name__)
 
@@ -530,7 +533,7 @@ def _check_trials(trials: int, report_every: int, metric: str) -> None:
 
 
 def search_patterns(
-    start: Any = "D",
+    start: Pattern,
     *,
     trials: int,
     folder: str | Path = "search",
@@ -550,7 +553,7 @@ def search_patterns(
     closed-form LMMSE PSNR of the designed pattern, with pruning.
 
     Args:
-        start: Start pattern (name, file or :class:`~splitcam.patterns.Pattern`), fixed.
+        start: Start pattern, fixed.
         trials: Trials to run in this call (added to those in the study).
         folder: The study's folder (journal and trial patterns); created if missing.
         sigmas: Noise levels (8-bit units) of the objective and the score (default: the
@@ -581,7 +584,7 @@ def search_patterns(
         ImportError: Optuna is not installed.
         ValueError: Bad settings, or a study in ``folder`` made with other settings.
     """
-    from ..patterns import get
+    from ..patterns import check_pattern
     from ..recon.lmmse import DEFAULT_RADIUS
     from .ascent import check_sigmas
     from .defaults import DEFAULT_SIGMAS
@@ -589,7 +592,7 @@ def search_patterns(
     _check_trials(trials, report_every, metric)
     if isinstance(warmup, bool) or not isinstance(warmup, int) or warmup < 0:
         raise ValueError(f"expected warmup as an integer >= 0, got {warmup!r}")
-    pattern = get(start)
+    pattern = check_pattern(start, "start")
     settings = {
         "start": pattern.to_dict(),
         "name": pattern.name,

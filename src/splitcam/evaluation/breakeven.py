@@ -20,7 +20,7 @@ import numpy as np
 
 from ..io import write_text
 from ..io.domains import LINEAR
-from ..patterns import Pattern, get, router
+from ..patterns import Pattern, builtin, check_pattern, router
 from ..recon.base import Reconstructor
 from ..recon.closed_form import closed_form_lmmse
 from .exposure import (
@@ -86,7 +86,7 @@ def break_even(
     etas: Sequence[float] = DEFAULT_ETAS,
     chis: Sequence[float] = DEFAULT_CHIS,
     photons: Sequence[float] | None = None,
-    reference: str | Pattern = "rgbw",
+    reference: Pattern | None = None,
     metric: str = "psnr",
     candidate: Callable[[float, float], Pattern] | None = None,
     method: Callable[[Pattern], Reconstructor] | None = None,
@@ -104,7 +104,7 @@ def break_even(
         etas: The grid's band efficiencies, the same for R, G and B.
         chis: The grid's crosstalk fractions, the same for R, G and B.
         photons: Exposures ``N`` (default: 9 log-spaced from 1 to 10^4).
-        reference: The pattern to tie (name or :class:`~splitcam.patterns.Pattern`).
+        reference: The pattern to tie (default: the built-in ``rgbw``).
         metric: ``psnr`` or ``ssim`` (higher is better) or ``ciede2000`` (lower is better; the
             difference is then taken reference − router so that positive still means the
             router is better).
@@ -140,7 +140,7 @@ def break_even(
     def curve_of(rec: Reconstructor) -> dict[float, dict[str, float]]:
         return exposure_study(images, patterns=[], methods=[rec], **study, **settings)[rec.name]
 
-    ref = get(reference)
+    ref = builtin("rgbw") if reference is None else check_pattern(reference, "reference")
     ref_method = reconstruct(ref)
     ref_curve = curve_of(ref_method)
     # the map's reconstruction, named as the reference's without the pattern: net-universal-photon
@@ -188,7 +188,7 @@ def break_even(
 
 def against(
     result: dict[str, Any],
-    reference: str | Pattern,
+    reference: Pattern,
     images: Images,
     *,
     method: Callable[[Pattern], Reconstructor] | None = None,
@@ -202,7 +202,7 @@ def against(
     Raises:
         ValueError: As :func:`break_even`.
     """
-    ref = get(reference)
+    ref = check_pattern(reference, "reference")
     domain = result["domain"]
     reconstruct = method or _closed_form(domain)
     photons = result["photons"]
@@ -266,7 +266,7 @@ def preset_points(names: Sequence[str] = ("router-zou", "router-best")) -> dict[
     over R, G and B of the ``eta`` and ``chi`` in its metadata (white light)."""
     out = {}
     for name in names:
-        meta = get(name).metadata
+        meta = builtin(name).metadata
         out[name] = (float(np.mean(meta["eta"])), float(np.mean(meta["chi"])))
     return out
 

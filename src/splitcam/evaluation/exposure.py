@@ -29,7 +29,7 @@ import torch
 
 from ..io import write_text
 from ..io.domains import LINEAR
-from ..patterns import Pattern, get
+from ..patterns import Pattern, builtin, check_pattern
 from ..physics.light import check_domain, decode_scene
 from ..physics.noise import Exposure, add_exposure_noise, level_label
 from ..physics.radiometry import Camera
@@ -62,10 +62,17 @@ def default_exposures(count: int = 9) -> list[float]:
     return [float(v) for v in np.logspace(0, 4, count)]
 
 
+def _patterns(patterns: Sequence[Pattern] | None) -> list[Pattern]:
+    """The patterns given (each checked), or the built-in :data:`DEFAULT_PATTERNS`."""
+    if patterns is None:
+        return [builtin(name) for name in DEFAULT_PATTERNS]
+    return [check_pattern(p) for p in patterns]
+
+
 def exposure_study(
     images: Images,
     *,
-    patterns: Sequence[str | Pattern] = DEFAULT_PATTERNS,
+    patterns: Sequence[Pattern] | None = None,
     photons: Sequence[float] | None = None,
     read_noise: float = 2.0,
     methods: Sequence[Reconstructor] = (),
@@ -96,7 +103,7 @@ def exposure_study(
     domain = check_method_domains(methods, domain)
     photons = list(photons or default_exposures())
     exposures = [Exposure(n, read_noise=read_noise, **settings) for n in photons]  # checked first
-    loaded = [get(p) for p in patterns]  # a pattern file is labelled by its pattern's name
+    loaded = _patterns(patterns)  # a pattern file is labelled by its pattern's name
     lmmse = {f"lmmse-{p.name}": p.name for p in loaded}
     todo: list[Reconstructor] = [
         closed_form_lmmse(p, domain=domain, name=label)
@@ -529,7 +536,7 @@ def network_references(networks: dict[str, str], refs: Sequence[str]) -> dict[st
 def raw_snr_check(
     images: Images,
     *,
-    patterns: Sequence[str] = DEFAULT_PATTERNS,
+    patterns: Sequence[Pattern] | None = None,
     shot_limited: float = 1e4,
     read_limited: float = 10.0,
     read_noise: float = 20.0,
@@ -554,8 +561,9 @@ def raw_snr_check(
     }
     signal: dict[str, float] = {}
     snr: dict[str, dict[str, float]] = {}
-    for name in patterns:
-        sensor = SplitterSensor(get(name))
+    for pattern in _patterns(patterns):
+        name = pattern.name
+        sensor = SplitterSensor(pattern)
         clean_power, total = 0.0, 0.0
         noise_power = {r: 0.0 for r in regimes}
         count = 0
@@ -572,7 +580,7 @@ def raw_snr_check(
         snr[name] = {r: 10 * math.log10(clean_power / noise_power[r]) for r in regimes}
     ref = "bayer"
     out = {}
-    for name in patterns:
+    for name in signal:
         k = signal[name] / signal[ref]
         out[name] = {
             "k": k,

@@ -13,7 +13,7 @@ from typing import Any
 import torch
 
 from ..data.patches import ImageCache, load_validation
-from ..patterns import Pattern, get
+from ..patterns import Pattern, check_pattern
 from ..physics.sensor import SplitterSensor
 from ..recon.base import Reconstructor, check_sigma
 from ..recon.lmmse import (
@@ -118,7 +118,7 @@ class ScreenResult:
 
 
 def screen_patterns(
-    pattern_names: Sequence[str | Pattern],
+    patterns: Sequence[Pattern],
     train_dir: str | os.PathLike[str] | ImageCache,
     test_images: TestImages,
     sigmas: Sequence[float] = (0.0, 10.0),
@@ -137,8 +137,7 @@ def screen_patterns(
     the draws. Minutes for the whole library, against days of network training.
 
     Args:
-        pattern_names: Built-in names, pattern file paths or :class:`Pattern` objects; names
-            must be distinct.
+        patterns: The patterns, of distinct names.
         train_dir: Folder of training images (or an already decoded :class:`ImageCache`).
         test_images: ``(name, image)`` pairs or a folder (see :func:`evaluate_method`).
         sigmas: Noise levels in 8-bit units.
@@ -154,7 +153,7 @@ def screen_patterns(
         A :class:`ScreenResult`.
     """
     start = time.perf_counter()
-    resolved = [get(p) for p in pattern_names]
+    resolved = [check_pattern(p) for p in patterns]
     names = [p.name for p in resolved]
     if len(set(names)) != len(names):
         raise ValueError(f"expected distinct pattern names, got {names}")

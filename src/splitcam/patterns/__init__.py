@@ -9,16 +9,20 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .core import COLOURS, Pattern, PatternError, kernel_offsets
+from .core import COLOURS, Pattern, PatternError, check_pattern, kernel_offsets
 from .files import load, save
 from .library import BUILTIN_FACTORIES, parse_router, router
 from .measures import PatternMeasures, measure, pixel_response
 
 __all__ = [
     "COLOURS",
+    "NAMES",
+    "PARSERS",
     "Pattern",
     "PatternError",
     "PatternMeasures",
+    "builtin",
+    "check_pattern",
     "get",
     "kernel_offsets",
     "load",
@@ -30,13 +34,47 @@ __all__ = [
 ]
 
 
+#: The built-in patterns by lower-case name (:func:`names` gives their own spelling).
+NAMES = {name.lower(): factory for name, factory in BUILTIN_FACTORIES.items()}
+
+
+def _file(text: str) -> Pattern | None:
+    path = Path(text)
+    return load(path) if path.suffix.lower() in (".json", ".toml") or path.exists() else None
+
+
+#: How :func:`get` reads text that is not a built-in name, tried in order: each parser returns
+#: a :class:`Pattern`, or None for text not of its kind (and raises for text of its kind that
+#: it cannot read). The keys are the syntax, shown when nothing reads the text.
+PARSERS = {
+    "router(eta=R,G,B;chi=R,G,B)": parse_router,
+    "the path of a .json/.toml pattern file": _file,
+}
+
+
 def names() -> list[str]:
     """Names of the built-in patterns, in library order."""
     return list(BUILTIN_FACTORIES)
 
 
+def builtin(name: str) -> Pattern:
+    """The built-in pattern ``name`` (case-insensitive), for code that names a fixed one.
+
+    Raises:
+        PatternError: Not a built-in name.
+    """
+    factory = NAMES.get(name.strip().lower())
+    if factory is None:
+        raise PatternError(f"unknown pattern {name!r}; valid names: {', '.join(names())}")
+    return factory()
+
+
 def get(name: str | Path | Pattern) -> Pattern:
-    """A built-in pattern by name (case-insensitive), or a pattern loaded from a file path.
+    """A built-in pattern by name (case-insensitive), or a pattern read by one of the
+    :data:`PARSERS` (a router by its parameters, a pattern file); a :class:`Pattern` as it is.
+
+    The one place a pattern's name or file becomes a :class:`Pattern`: the library's functions
+    take patterns (:func:`check_pattern`), so a name is read once, where a user hands it over.
 
     >>> from splitcam import patterns
     >>> d = patterns.get("d")
@@ -48,21 +86,18 @@ def get(name: str | Path | Pattern) -> Pattern:
     'router(eta=0.5,0.5,0.5;chi=0,0,0)'
 
     Raises:
-        PatternError: Unknown name; the message lists the valid names.
+        PatternError: Unknown name; the message lists the valid names and the other syntaxes.
     """
     if isinstance(name, Pattern):
         return name
     key = str(name)
-    for builtin, factory in BUILTIN_FACTORIES.items():
-        if builtin.lower() == key.strip().lower():
-            return factory()
-    modelled = parse_router(key)
-    if modelled is not None:
-        return modelled
-    path = Path(key)
-    if path.suffix.lower() in (".json", ".toml") or path.exists():
-        return load(path)
+    factory = NAMES.get(key.strip().lower())
+    if factory is not None:
+        return factory()
+    for parser in PARSERS.values():
+        found = parser(key)
+        if found is not None:
+            return found
     raise PatternError(
-        f"unknown pattern {key!r}; valid names: {', '.join(names())} "
-        f"(or the path of a .json/.toml pattern file, or router(eta=R,G,B;chi=R,G,B))"
+        f"unknown pattern {key!r}; valid names: {', '.join(names())} (or {' or '.join(PARSERS)})"
     )

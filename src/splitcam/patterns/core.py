@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from numbers import Integral, Real
+from pathlib import PurePath
 from typing import Any
 
 import numpy as np
@@ -259,3 +260,26 @@ def kernel_offsets(kh: int, kw: int) -> tuple[np.ndarray, np.ndarray]:
     """Row and column offsets ``(a - kh//2, b - kw//2)`` of every tap, each of shape (kh, kw)."""
     dy, dx = np.meshgrid(np.arange(kh) - kh // 2, np.arange(kw) - kw // 2, indexing="ij")
     return dy, dx
+
+
+def check_pattern(value: Any, what: str = "pattern") -> Pattern:
+    """``value`` if it is a :class:`Pattern`; else a TypeError that says how to make one.
+
+    Library functions take patterns, not names: a name or a file is read once, where a user
+    hands it over (:func:`splitcam.patterns.get`, the constructors users call, the CLI).
+
+    >>> check_pattern("D", "start")  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    TypeError: expected a Pattern for start, got the str 'D': splitcam.patterns.get('D') reads...
+    """
+    if isinstance(value, Pattern):
+        return value
+    hint = (
+        f": splitcam.patterns.get({str(value)!r}) reads a pattern's name or file"
+        if isinstance(value, (str, PurePath))
+        else ""
+    )
+    raise TypeError(
+        f"expected a Pattern for {what}, got the {type(value).__name__} {value!r}{hint}"
+    )

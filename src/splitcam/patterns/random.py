@@ -32,9 +32,6 @@ from .core import Pattern
 
 __all__ = ["FAMILIES", "MIN_COLOUR_SHARE", "PatternMix", "random_pattern"]
 
-#: The families :func:`random_pattern` draws from.
-FAMILIES = ("filter", "router", "scatter")
-
 #: Smallest mean fraction (over the period's positions) of each colour a draw must collect.
 MIN_COLOUR_SHARE = 0.1
 
@@ -66,7 +63,10 @@ def _layout(rng: np.random.Generator, period: tuple[int, int]) -> tuple[np.ndarr
     return np.searchsorted(used, layout), len(used)
 
 
-def _filter(rng: np.random.Generator, period: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
+def _filter(
+    rng: np.random.Generator, period: tuple[int, int], kh: int, kw: int
+) -> tuple[np.ndarray, np.ndarray]:
+    del kh, kw  # filters have 1x1 kernels
     ph, pw = period
     sets = _owners(rng, period).reshape(-1, 3)
     band = rng.uniform(0.5, 1.0, size=sets.shape)
@@ -115,12 +115,17 @@ def _scatter(
     return layout, (raw * eta).reshape(s, 3, kh, kw)
 
 
+#: The families :func:`random_pattern` draws from: name → draw ``(rng, period, kh, kw) →
+#: (layout, kernels)``.
+FAMILIES = {"filter": _filter, "router": _router, "scatter": _scatter}
+
+
 def random_pattern(
     rng: np.random.Generator,
     *,
     max_period: int = 4,
     max_kernel: int = 5,
-    families: tuple[str, ...] = FAMILIES,
+    families: tuple[str, ...] = tuple(FAMILIES),
     name: str = "random",
 ) -> Pattern:
     """One random valid pattern (see the module docstring for the families).
@@ -146,12 +151,7 @@ def random_pattern(
         family = families[int(rng.integers(len(families)))]
         period = (int(rng.integers(1, max_period + 1)), int(rng.integers(1, max_period + 1)))
         kh, kw = (int(v) for v in rng.choice(sides, size=2))
-        if family == "filter":
-            layout, kernels = _filter(rng, period)
-        elif family == "router":
-            layout, kernels = _router(rng, period, kh, kw)
-        else:
-            layout, kernels = _scatter(rng, period, kh, kw)
+        layout, kernels = FAMILIES[family](rng, period, kh, kw)
         # Each kernel at most 1 despite rounding; every colour reaches the sensor.
         kernels = kernels / np.maximum(kernels.sum((2, 3), keepdims=True), 1.0)
         share = kernels[layout].sum((-1, -2)).reshape(-1, 3).mean(0)

@@ -28,7 +28,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from ..checks import check_image
-from ..patterns import Pattern, PatternError, get
+from ..patterns import Pattern, PatternError, check_pattern, get
 from .periodic import period_shuffle, period_unshuffle, phase_conv
 
 __all__ = [
@@ -206,13 +206,13 @@ def pixel_kernels(weights: torch.Tensor, layout: Layout) -> torch.Tensor:
     return weights.reshape(-1)[index]
 
 
-def pattern_pixel_kernels(pattern: Pattern | str) -> torch.Tensor:
-    """:func:`pixel_kernels` of a pattern (name, file or :class:`Pattern`), in float64.
+def pattern_pixel_kernels(pattern: Pattern) -> torch.Tensor:
+    """:func:`pixel_kernels` of a :class:`Pattern`, in float64.
 
     Shape:
         - output: ``(Ph, Pw, 3, kh, kw)``.
     """
-    pattern = get(pattern)
+    pattern = check_pattern(pattern)
     weights = torch.from_numpy(np.array(pattern.kernels, dtype=np.float64))
     return pixel_kernels(weights, pattern.layout)
 
@@ -271,7 +271,7 @@ class SplitterSensor(nn.Module):
 
     def __init__(self, pattern: Pattern | str) -> None:
         super().__init__()
-        pattern = get(pattern) if isinstance(pattern, str) else pattern
+        pattern = get(pattern)  # a constructor users call: names and files read here
         self._meta = pattern
         self.register_buffer("layout", _tensor(pattern.layout, torch.long))
         # The layout as a tuple, read once: converting the buffer on every call would copy it
@@ -464,9 +464,9 @@ class SwitchingSensor(SplitterSensor):
         super().__init__(pattern)
         self.set_pattern(self._meta)
 
-    def set_pattern(self, pattern: Pattern | str) -> None:
+    def set_pattern(self, pattern: Pattern) -> None:
         """Use ``pattern`` from now on (buffers stay on the sensor's device)."""
-        pattern = get(pattern) if isinstance(pattern, str) else pattern
+        pattern = check_pattern(pattern)
         device = self.kernels.device
         self._meta = pattern
         self._layout = _layout_key(pattern.layout)

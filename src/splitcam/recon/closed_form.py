@@ -41,7 +41,7 @@ from ..data.patches import ImageCache
 from ..io.domains import LINEAR, SRGB
 from ..io.tensorfiles import load_pair, save_pair
 from ..io.weights import IMAGE_STATISTICS, IMAGE_STATISTICS_LINEAR
-from ..patterns import Pattern, get
+from ..patterns import Pattern, check_pattern, get
 from ..physics.light import check_domain, srgb_to_linear
 from ..physics.noise import NoiseModel, as_noise, check_level
 from ..physics.sensor import pattern_pixel_kernels
@@ -355,7 +355,7 @@ def _solve(
     return weights, bias, mse
 
 
-def _as_kernels(pattern_or_kernels: Pattern | str | torch.Tensor) -> torch.Tensor:
+def _as_kernels(pattern_or_kernels: Pattern | torch.Tensor) -> torch.Tensor:
     if isinstance(pattern_or_kernels, torch.Tensor):
         k = pattern_or_kernels
         if k.ndim != 5 or k.shape[2] != 3:
@@ -383,7 +383,7 @@ def _as_sigmas(sigma: Any) -> tuple[torch.Tensor, bool]:
 
 
 def closed_form_filters(
-    kernels: Pattern | str | torch.Tensor,
+    kernels: Pattern | torch.Tensor,
     sigma: float | torch.Tensor,
     *,
     statistics: ImageStatistics | None = None,
@@ -392,7 +392,7 @@ def closed_form_filters(
     """LMMSE filters and biases of any kernels at noise level(s) ``sigma``, differentiable.
 
     Args:
-        kernels: A pattern (name, file or :class:`Pattern`), or pixel kernels
+        kernels: A :class:`Pattern`, or pixel kernels
             ``(Ph, Pw, 3, kh, kw)`` (:func:`splitcam.physics.sensor.pixel_kernels`; gradients
             flow back to them).
         sigma: Noise standard deviation in 8-bit units, a number or a 1-D tensor of several; or
@@ -416,7 +416,7 @@ def closed_form_filters(
 
 
 def closed_form_mse(
-    kernels: Pattern | str | torch.Tensor,
+    kernels: Pattern | torch.Tensor,
     sigma: float | torch.Tensor,
     *,
     statistics: ImageStatistics | None = None,
@@ -451,7 +451,7 @@ class ClosedFormFilters:
         statistics: ImageStatistics | None = None,
         radius: int = DEFAULT_RADIUS,
     ) -> None:
-        self.pattern = get(pattern)
+        self.pattern = get(pattern)  # a constructor users call: names and files read here
         self.statistics = statistics if statistics is not None else shipped_image_statistics()
         self.radius = radius
         self._kernels = _as_kernels(self.pattern)
@@ -474,7 +474,7 @@ class ClosedFormFilters:
 
 
 def closed_form_lmmse(
-    pattern: Pattern | str,
+    pattern: Pattern,
     statistics: ImageStatistics | None = None,
     *,
     radius: int = DEFAULT_RADIUS,
@@ -484,7 +484,7 @@ def closed_form_lmmse(
     """An :class:`LMMSE` reconstructor of any pattern, from image statistics.
 
     Args:
-        pattern: The pattern (name, file or :class:`Pattern`).
+        pattern: The pattern.
         statistics: Image statistics (default: the shipped ones of ``domain``).
         radius: Filter radius.
         name: Label in tables.
@@ -501,7 +501,7 @@ def closed_form_lmmse(
             f"image statistics of the {statistics.domain} domain cannot make an LMMSE of the "
             f"{check_domain(domain)} domain"
         )
-    filters = ClosedFormFilters(pattern, statistics, radius)
+    filters = ClosedFormFilters(check_pattern(pattern), statistics, radius)
     # Image statistics of another domain tell its results apart from the sRGB LMMSE's.
     other = statistics.domain != SRGB
     return LMMSE(

@@ -15,7 +15,7 @@ import torch
 
 from ..checks import check_raw
 from ..io.domains import SRGB
-from ..patterns import get
+from ..patterns import builtin
 from ..physics.light import check_domain
 from ..physics.noise import check_level
 from .extend import extend_mosaic
@@ -86,7 +86,7 @@ class ClassicalDemosaic:
             )
         self.name = name or key
         self.domain = check_domain(domain)
-        self.pattern = get("bayer")
+        self.pattern = builtin("bayer")
         self.radius = self.RADIUS[key]
         self.tile = tile
         self._function = _demosaic_functions()[key]

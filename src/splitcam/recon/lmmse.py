@@ -25,7 +25,7 @@ from ..data.patches import ImageCache, PatchSampler
 from ..io.domains import SRGB
 from ..io.tensorfiles import load_pair, save_pair
 from ..io.weights import LMMSE_DIR
-from ..patterns import Pattern, PatternError, get
+from ..patterns import Pattern, PatternError, check_pattern, get
 from ..physics.light import check_domain
 from ..physics.noise import NoiseModel, as_noise, check_level
 from ..physics.periodic import phase_conv, phase_map
@@ -298,7 +298,7 @@ def _accumulate(
 
 
 def fit_lmmse(
-    pattern: Pattern | str,
+    pattern: Pattern,
     source: torch.Tensor | PatchSampler | ImageCache | str | os.PathLike[str],
     *,
     radius: int = DEFAULT_RADIUS,
@@ -315,7 +315,7 @@ def fit_lmmse(
     images do.
 
     Args:
-        pattern: The pattern (name, file path or :class:`Pattern`).
+        pattern: The pattern.
         source: Where the training patches come from:
             a tensor ``(N, 3, H, W)`` of images used whole (``patches``, ``patch_size`` and
             ``seed`` ignored); a :class:`PatchSampler` (``patches`` patches are drawn from it,
@@ -339,7 +339,7 @@ def fit_lmmse(
     Shape:
         - source (tensor): ``(N, 3, H, W)``, values in [0, 1].
     """
-    pattern = get(pattern)
+    pattern = check_pattern(pattern)
     if isinstance(radius, bool) or not isinstance(radius, int) or radius < 0:
         raise ValueError(f"expected radius as an integer >= 0, got {radius!r}")
     if not isinstance(source, (torch.Tensor, PatchSampler)):
@@ -473,8 +473,10 @@ class LMMSE:
         name: str = "lmmse",
         **kwargs: Any,
     ) -> LMMSE:
-        """``LMMSE(fit_lmmse(pattern, source, **kwargs), name)``."""
-        return cls(fit_lmmse(pattern, source, **kwargs), name)
+        """``LMMSE(fit_lmmse(pattern, source, **kwargs), name)``; ``pattern`` may be a name or
+        a pattern file."""
+        # a constructor users call: names and files read here
+        return cls(fit_lmmse(get(pattern), source, **kwargs), name)
 
     @classmethod
     def load(cls, path: str | os.PathLike[str]) -> LMMSE:
@@ -527,7 +529,7 @@ class LMMSE:
 SHIPPED_DIR = LMMSE_DIR
 
 
-def shipped_lmmse(pattern: Pattern | str, name: str = "lmmse") -> LMMSE:
+def shipped_lmmse(pattern: Pattern, name: str = "lmmse") -> LMMSE:
     """The shipped LMMSE fit of a built-in pattern (fitted on CBSD432), labelled ``name``.
 
     A pattern file whose kernels differ from the built-in pattern of the same name gets no
@@ -536,7 +538,7 @@ def shipped_lmmse(pattern: Pattern | str, name: str = "lmmse") -> LMMSE:
     Raises:
         FileNotFoundError: No shipped fit for this pattern; the message says how to fit one.
     """
-    pattern = get(pattern)
+    pattern = check_pattern(pattern)
     path = SHIPPED_DIR / f"{pattern.name}.json"
     if path.is_file():
         statistics = LMMSEStatistics.load(path)

@@ -42,7 +42,7 @@ from torch import nn
 
 from ..checks import check_raw
 from ..io.domains import SRGB
-from ..patterns import Pattern, get
+from ..patterns import Pattern, builtin, get
 from ..physics.light import check_domain
 from ..physics.noise import check_level
 from .extend import extend_mosaic
@@ -166,9 +166,9 @@ class Demosaicnet:
         domain: str = SRGB,
         name: str | None = None,
     ) -> None:
-        resolved = get(pattern)
+        resolved = get(pattern)  # a constructor users call: names and files read here
         key = resolved.name.lower()
-        if key not in DEMOSAICNET_PATTERNS or not resolved.equals(get(key)):
+        if key not in DEMOSAICNET_PATTERNS or not resolved.equals(builtin(key)):
             raise ValueError(
                 f"demosaicnet has released networks for the {' and '.join(DEMOSAICNET_PATTERNS)} "
                 f"patterns only, got {resolved.name!r}"

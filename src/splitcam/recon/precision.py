@@ -97,13 +97,14 @@ def measure(device: torch.device | str, *, steps: int = 3, batch: int = 8) -> Pr
 
     bfloat16 counts only if it really runs: a convolution under the autocast must give bfloat16.
     """
+    from ..patterns import builtin
     from ..physics.sensor import pattern_pixel_kernels
     from .networks import build_network
 
     device = torch.device(device)
     gen = torch.Generator().manual_seed(0)
     raw = torch.rand(batch, 1, 64, 64, generator=gen).to(device)
-    kernels = pattern_pixel_kernels("D").to(device)
+    kernels = pattern_pixel_kernels(builtin("D")).to(device)
     sigma = torch.full((batch,), 10.0, device=device)
     with torch.autocast(device.type, dtype=torch.bfloat16):
         probe = torch.nn.functional.conv2d(raw[:1], torch.ones(1, 1, 3, 3, device=device))

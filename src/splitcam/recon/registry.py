@@ -103,6 +103,16 @@ def build_model(
         PatternError: An unknown pattern name or a bad pattern file (the message names it).
         ValueError: ``domain`` is not the one the model was trained in.
     """
+    return _model_method(spec, _given(pattern), tile, precision, domain)
+
+
+def _model_method(
+    spec: str | os.PathLike,
+    given: _Given | None,
+    tile: int | None,
+    precision: str,
+    domain: str | None,
+) -> NetworkReconstructor:
     loaded = load_model(spec)
     meta = loaded.meta
     name = meta.get("name") or Path(str(spec)).stem
@@ -112,7 +122,7 @@ def build_model(
     return _network_method(
         loaded,
         f"net-{name}",
-        pattern,
+        given,
         own_pattern=_trained_on_one_pattern(meta.get("config")),
         identity=f"model:{name}:{meta.get('sha256', '')}{fields}",
         tile=tile,
@@ -165,7 +175,7 @@ def _trained_on_one_pattern(config: dict | None) -> bool:
 def _network_method(
     loaded: LoadedNetwork,
     label: str,
-    pattern,
+    given: _Given | None,
     *,
     own_pattern: bool,
     identity: str,
@@ -176,25 +186,23 @@ def _network_method(
     ``identity`` (the file) followed by what else identifies its results (the pattern's values).
     A network of any pattern fine-tuned on one (``own_pattern``) reconstructs that one unless
     told another. ``options``: the reconstructor's ``tile``, ``precision`` and ``domain``."""
-    if not serves_any_pattern(loaded.network) and pattern is not None:
-        given = patterns.get(pattern)
-        if not given.equals(loaded.pattern):
+    if not serves_any_pattern(loaded.network) and given is not None:
+        if not given.pattern.equals(loaded.pattern):
             raise ValueError(
                 f"{label} reconstructs the raw images of pattern {loaded.pattern.name} only, not "
-                f"of {_pattern_label(pattern, given)}: use a network of that pattern, the "
-                f"universal network or lmmse"
+                f"of {given.label}: use a network of that pattern, the universal network or "
+                f"lmmse"
             )
-    if not serves_any_pattern(loaded.network) or (own_pattern and pattern is None):
+    if not serves_any_pattern(loaded.network) or (own_pattern and given is None):
         return NetworkReconstructor(
             loaded.network, loaded.pattern, label, fingerprint=identity, **options
         )
-    if pattern is None:
+    if given is None:
         raise ValueError(
             f"{label} reconstructs any pattern: name the pattern of the raw images "
             f"(--pattern, a library name or a pattern file)"
         )
-    resolved = patterns.get(pattern)
-    name = _pattern_label(pattern, resolved)
+    resolved, name = given.pattern, given.label
     values = ",".join(f"{v:.9g}" for v in resolved.kernels.reshape(-1))
     layout = ",".join(str(v) for v in resolved.layout.reshape(-1))
     return NetworkReconstructor(
@@ -251,6 +259,22 @@ def _pattern_label(
     return pattern.name
 
 
+@dataclass(frozen=True)
+class _Given:
+    """The pattern a method was asked for, read once: the pattern and its label in tables."""
+
+    pattern: patterns.Pattern
+    label: str
+
+
+def _given(spec: str | os.PathLike | patterns.Pattern | None) -> _Given | None:
+    """Read the pattern a caller named (the registry's one call of :func:`patterns.get`)."""
+    if spec is None:
+        return None
+    pattern = patterns.get(spec)
+    return _Given(pattern, _pattern_label(spec, pattern))
+
+
 def _pattern_key(pattern: str | os.PathLike | patterns.Pattern) -> str:
     """A pattern's name as typed (lower case), or a Pattern's own."""
     return (pattern.name if isinstance(pattern, patterns.Pattern) else str(pattern)).lower()
@@ -260,7 +284,7 @@ def _pattern_key(pattern: str | os.PathLike | patterns.Pattern) -> str:
 class _Request:
     """What :func:`build_method` was asked, besides the method's name."""
 
-    pattern: str | os.PathLike | patterns.Pattern | None
+    pattern: _Given | None
     lmmse_train: str | os.PathLike | None
     tile: int | None
     precision: str
@@ -274,7 +298,7 @@ def _build_demosaic(key: str, request: _Request) -> Reconstructor:
 
 def _build_demosaicnet(key: str, request: _Request) -> Reconstructor:
     return Demosaicnet(
-        request.pattern if request.pattern is not None else "bayer",
+        request.pattern.pattern if request.pattern is not None else "bayer",
         tile=request.tile,
         domain=request.domain or SRGB,
     )
@@ -283,8 +307,8 @@ def _build_demosaicnet(key: str, request: _Request) -> Reconstructor:
 def _build_lmmse(key: str, request: _Request) -> Reconstructor:
     if request.pattern is None:
         raise ValueError("method 'lmmse' needs a pattern (a name such as D, or a file)")
-    resolved = patterns.get(request.pattern)
-    name = f"lmmse-{_pattern_label(request.pattern, resolved)}"
+    resolved = request.pattern.pattern
+    name = f"lmmse-{request.pattern.label}"
     if request.domain == LINEAR:
         if request.lmmse_train is not None:
             raise ValueError(
@@ -374,7 +398,7 @@ def build_method(
     """
     key = str(spec).strip().lower()
     request = _Request(
-        pattern,
+        _given(pattern),
         lmmse_train,
         tile,
         precision,
@@ -388,7 +412,7 @@ def build_method(
     if model is None and _is_path(spec) and str(spec).endswith(".json") and Path(spec).is_file():
         model = spec
     if model is not None:
-        return build_model(model, pattern=pattern, tile=tile, precision=precision, domain=domain)
+        return _model_method(model, request.pattern, tile, precision, domain)
     if _is_path(spec):
         return _build_network_file(spec, request)
     raise ValueError(

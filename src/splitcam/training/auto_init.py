@@ -23,6 +23,7 @@ from .. import patterns
 from ..recon.loading import load_model, model_names
 from ..recon.registry import trained_domain
 from .config import ConfigError, TrainConfig
+from .setup import config_patterns
 
 __all__ = ["SEARCH_SHARE", "Probe", "candidates", "choose_start"]
 
@@ -88,7 +89,7 @@ def choose_start(
         )
     if not config.data.val_split and not config.data.val and config.data.val_split is not None:
         raise ConfigError("--init-from auto chooses by validation: leave --val-split above 0")
-    pattern = patterns.get(config.pattern.name)
+    pattern = config_patterns(config).first()
     names = candidates(pattern, config.data.domain)
     if not names:
         raise ConfigError(

@@ -12,6 +12,7 @@ from __future__ import annotations
 import logging
 import os
 import warnings
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -57,7 +58,8 @@ def prepare(
     device, dist = _processes(config)
     torch.manual_seed(seeds.global_seed(config))
     start = patterns.Pattern.from_dict(loaded.meta["start_pattern"]) if loaded else None
-    system = build_system(config, start, design=loaded is None).to(device)
+    named = config_patterns(config, start)
+    system = build_system(config, start, design=loaded is None, named=named).to(device)
     run = Run(
         config,
         run_dir,
@@ -66,12 +68,12 @@ def prepare(
         fast=config.run.bf16 or fast_precision(config.run.precision, device),
         device_label=device_name(device),
         start_pattern=system.sensor._meta.to_dict(),
-        mix=pattern_mix(config),
+        mix=named.mix,
     )
     if not run.fast:
         strict_float32(device)
     if run.mix is not None:
-        run.val_patterns = [patterns.get(p) for p in config.pattern.val_patterns]
+        run.val_patterns = list(named.validation)
     if config.optim.adapter != "none" and dist.world_size > 1:
         raise ConfigError("optim.adapter trains in one process; leave it out under torchrun")
     adapters.attach(system, config.optim.adapter)
@@ -261,18 +263,23 @@ def device_name(device: torch.device) -> str:
 
 
 def build_system(
-    config: TrainConfig, pattern: patterns.Pattern | None = None, *, design: bool = True
+    config: TrainConfig,
+    pattern: patterns.Pattern | None = None,
+    *,
+    design: bool = True,
+    named: ConfigPatterns | None = None,
 ) -> ImagingSystem:
     """Sensor + network from a configuration (network weights freshly initialised; the LMMSE
     inside a ``physics`` or ``universal`` network from the image statistics of ``data.domain``).
 
     A learned pattern with ``pattern.design_steps`` starts from the kernels that
     :func:`~splitcam.design.design_pattern` finds from its initialisation (unless
-    ``design`` is false: a resumed run loads its own kernels).
+    ``design`` is false: a resumed run loads its own kernels). ``named``: the configuration's
+    patterns, where the caller has read them (:func:`config_patterns`).
     """
-    mix = pattern_mix(config)
-    pattern = pattern or (mix.pattern(0) if mix else patterns.get(config.pattern.name))
-    sensor = _sensor(config, pattern, mix, design)
+    named = named or config_patterns(config, pattern)
+    pattern = pattern or named.first()
+    sensor = _sensor(config, pattern, named.mix, design)
     net = build_network(
         {
             "arch": config.network.arch,
@@ -310,12 +317,36 @@ def _sensor(
     return SplitterSensor(pattern)
 
 
-def pattern_mix(config: TrainConfig) -> PatternMix | None:
-    """The patterns of a ``--pattern random`` run (one per step), or None for one pattern."""
-    if config.pattern.name.strip().lower() != "random":
-        return None
-    named = [patterns.get(name) for name in config.pattern.mix]
-    return PatternMix(named, config.pattern.mix_fraction, seed=seeds.mix_seed(config))
+@dataclass(frozen=True)
+class ConfigPatterns:
+    """The patterns a training configuration names, read once."""
+
+    #: A one-pattern run's pattern (None for a run over many patterns).
+    start: patterns.Pattern | None
+    #: The patterns of a ``--pattern random`` run, one per step (None for one pattern).
+    mix: PatternMix | None
+    #: What a run over many patterns is validated on.
+    validation: tuple[patterns.Pattern, ...]
+
+    def first(self) -> patterns.Pattern:
+        """The pattern of the first step."""
+        return self.mix.pattern(0) if self.mix is not None else self.start
+
+
+def config_patterns(config: TrainConfig, start: patterns.Pattern | None = None) -> ConfigPatterns:
+    """Read the pattern names and files of a configuration: the one place in training where
+    they become :class:`~splitcam.patterns.Pattern` objects. ``start``: the pattern a resumed
+    run recorded, used instead of reading its name or file again."""
+    random = config.pattern.name.strip().lower() == "random"
+    if not random and start is not None:
+        return ConfigPatterns(start, None, ())
+    names = [*config.pattern.mix, *config.pattern.val_patterns] if random else [config.pattern.name]
+    read = [patterns.get(name) for name in names]
+    if not random:
+        return ConfigPatterns(read[0], None, ())
+    mixed = len(config.pattern.mix)
+    mix = PatternMix(read[:mixed], config.pattern.mix_fraction, seed=seeds.mix_seed(config))
+    return ConfigPatterns(None, mix, tuple(read[mixed:]))
 
 
 def _metasurface_sensor(spec: str, period: tuple[int, int], config: TrainConfig) -> SplitterSensor:
