@@ -156,7 +156,6 @@ NAME_TAKERS = {
         "build_method",
         "build_methods",
         "_given",
-        "_pattern_label",
         "_pattern_key",
     },
     "integrations/deepinv.py": {"SplitterPhysics.__init__"},
@@ -164,15 +163,15 @@ NAME_TAKERS = {
 
 
 def _pattern_reads(path: Path) -> list[str]:
-    """``Class.function`` of every call of ``splitcam.patterns.get`` in a module (under any
-    name it is imported as, or as ``patterns.get``)."""
+    """``Class.function`` of every call of ``splitcam.patterns.get`` or ``.read`` in a module
+    (under any name it is imported as, or as ``patterns.get``)."""
     tree = ast.parse(path.read_text(encoding="utf-8"))
     aliases = {
         a.asname or a.name
         for node in ast.walk(tree)
         if isinstance(node, ast.ImportFrom) and (node.module or "").endswith("patterns")
         for a in node.names
-        if a.name == "get"
+        if a.name in ("get", "read")
     }
     found = []
 
@@ -185,7 +184,7 @@ def _pattern_reads(path: Path) -> list[str]:
                 f = child.func
                 by_module = (
                     isinstance(f, ast.Attribute)
-                    and f.attr == "get"
+                    and f.attr in ("get", "read")
                     and isinstance(f.value, ast.Name)
                     and f.value.id == "patterns"
                 )
@@ -218,9 +217,9 @@ def test_the_pattern_reader_check_sees_every_spelling(tmp_path):
     module.write_text(
         "from splitcam import patterns\nfrom splitcam.patterns import get as read\n\n"
         "class S:\n    def __init__(self, p):\n        self.p = patterns.get(p)\n\n"
-        "def f(p):\n    return read(p)\n\nx = read('D')\n"
+        "def f(p):\n    return read(p)\n\nx = read('D')\ny = patterns.read('D')\n"
     )
-    assert _pattern_reads(module) == ["S.__init__", "f", "<module>"]
+    assert _pattern_reads(module) == ["S.__init__", "f", "<module>", "<module>"]
 
 
 def _union(annotation: ast.expr | None) -> set[str]:

@@ -257,3 +257,17 @@ def test_a_16_bit_jpeg_is_refused_before_any_work(photo, tmp_path, capsys, monke
     assert main([*args, "--out", str(tmp_path / "r.jpg"), "--bits", "16", "--quiet"]) == 1
     assert "--bits 16 writes .png or .tif files, not .jpg" in capsys.readouterr().err
     assert not (tmp_path / "r.jpg").exists()
+
+
+@pytest.mark.parametrize("method", ["lmmse", "D", "malvar2004"])
+def test_the_pattern_named_is_read_once(tmp_path, monkeypatch, method):
+    """``--pattern D`` becomes a Pattern once per command, whatever the method (the library's
+    functions below the CLI take it as read)."""
+    made = []
+    factory = patterns.NAMES["d"]
+    monkeypatch.setitem(patterns.NAMES, "d", lambda: made.append(1) or factory())
+    image = tmp_path / "x.png"
+    Image.fromarray(np.full((21, 30, 3), 120, np.uint8)).save(image)
+    args = ["reconstruct", "--image", str(image), "--pattern", "D", "--method", method]
+    main([*args, "--out", str(tmp_path / "y.png"), "--quiet"])
+    assert len(made) == 1

@@ -65,7 +65,6 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     import torch
 
-    from .. import patterns
     from ..data.imageio import read_image, read_raw
     from ..physics.light import decode_scene, encode_estimate
     from ..physics.sensor import SplitterSensor
@@ -77,8 +76,8 @@ def run(args: argparse.Namespace) -> int:
     sigma = 0.0 if sigma is None else sigma
     method = with_flips([_method(args, spec, pattern, domain)], args.flips)[0]
     domain = method_domain(method)  # a network's own where none was asked for
-    if pattern is not None and not patterns.get(pattern).equals(method.pattern):
-        name = pattern.name if isinstance(pattern, patterns.Pattern) else pattern
+    if pattern is not None and not pattern.pattern.equals(method.pattern):
+        name = pattern.label
         where = f"the raw image's pattern {name}" if recorded is not None else f"--pattern {name}"
         raise ValueError(f"{where} differs from the pattern of {spec} ({method.pattern.name})")
     if args.image:
@@ -125,7 +124,9 @@ def _as_recorded(args: argparse.Namespace):
     from .. import patterns
     from ..data.imageio import read_raw_meta
 
-    sigma, pattern, domain = args.sigma, args.pattern, args.domain
+    sigma, domain = args.sigma, args.domain
+    # The pattern named, read once: the method is built from it and checked against it.
+    pattern = patterns.read(args.pattern) if args.pattern is not None else None
     if not args.raw:
         return sigma, pattern, domain, None
     made = read_raw_meta(args.raw)
@@ -142,9 +143,9 @@ def _as_recorded(args: argparse.Namespace):
             f"--sigma {sigma:g} contradicts the noise level recorded in {args.raw} "
             f"(sigma {made.get('sigma'):g}); leave --sigma out"
         )
-    if pattern is not None and not patterns.get(pattern).equals(recorded):
+    if pattern is not None and not pattern.pattern.equals(recorded):
         raise ValueError(
-            f"--pattern {pattern} contradicts the pattern recorded in {args.raw} "
+            f"--pattern {args.pattern} contradicts the pattern recorded in {args.raw} "
             f"({recorded.name}); leave --pattern out"
         )
     made_in = made.get("domain", SRGB)  # files that do not record it are of srgb
@@ -153,7 +154,8 @@ def _as_recorded(args: argparse.Namespace):
             f"--domain {domain} contradicts the light domain recorded in {args.raw} "
             f"({made_in}); leave --domain out"
         )
-    return float(made.get("sigma", 0.0)), pattern or recorded, made_in, recorded
+    given = pattern or patterns.Given(recorded, recorded.name)
+    return float(made.get("sigma", 0.0)), given, made_in, recorded
 
 
 def _method(args: argparse.Namespace, spec: str, pattern, domain):

@@ -7,6 +7,7 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
 from .core import COLOURS, Pattern, PatternError, check_pattern, kernel_offsets
@@ -17,6 +18,7 @@ from .measures import PatternMeasures, measure, pixel_response
 __all__ = [
     "COLOURS",
     "NAMES",
+    "Given",
     "PARSERS",
     "Pattern",
     "PatternError",
@@ -29,6 +31,7 @@ __all__ = [
     "measure",
     "names",
     "pixel_response",
+    "read",
     "router",
     "save",
 ]
@@ -101,3 +104,30 @@ def get(name: str | Path | Pattern) -> Pattern:
     raise PatternError(
         f"unknown pattern {key!r}; valid names: {', '.join(names())} (or {' or '.join(PARSERS)})"
     )
+
+
+@dataclass(frozen=True)
+class Given:
+    """A pattern as a user named it: the pattern, and its label in tables."""
+
+    pattern: Pattern
+    label: str
+
+
+def read(spec: str | Path | Pattern | Given) -> Given:
+    """:func:`get`, keeping the label a table gives the pattern: its own name (``D``, or
+    ``zou`` for a file whose pattern is called so), except for a file whose pattern is named
+    like a built-in one: then the file's name, so a table never passes an edited copy off as
+    the built-in. A :class:`Given` is returned as it is, so a name read once travels read.
+
+    >>> from splitcam import patterns
+    >>> patterns.read("d").label
+    'D'
+    """
+    if isinstance(spec, Given):
+        return spec
+    pattern = get(spec)
+    builtins = set(NAMES)
+    from_file = isinstance(spec, (str, Path)) and str(spec).strip().lower() not in builtins
+    label = Path(spec).name if from_file and pattern.name.lower() in builtins else pattern.name
+    return Given(pattern, label)

@@ -81,7 +81,7 @@ def method_names() -> list[str]:
 def build_model(
     spec: str | os.PathLike,
     *,
-    pattern: str | os.PathLike | patterns.Pattern | None = None,
+    pattern: str | os.PathLike | patterns.Pattern | patterns.Given | None = None,
     tile: int | None = 512,
     precision: str = "auto",
     domain: str | None = None,
@@ -108,7 +108,7 @@ def build_model(
 
 def _model_method(
     spec: str | os.PathLike,
-    given: _Given | None,
+    given: patterns.Given | None,
     tile: int | None,
     precision: str,
     domain: str | None,
@@ -175,7 +175,7 @@ def _trained_on_one_pattern(config: dict | None) -> bool:
 def _network_method(
     loaded: LoadedNetwork,
     label: str,
-    given: _Given | None,
+    given: patterns.Given | None,
     *,
     own_pattern: bool,
     identity: str,
@@ -244,39 +244,17 @@ def _is_path(spec: str | os.PathLike) -> bool:
     )
 
 
-def _pattern_label(
-    pattern_spec: str | os.PathLike | patterns.Pattern, pattern: patterns.Pattern
-) -> str:
-    """A pattern's label in tables: its own name (``D``, or ``zou`` for a file whose pattern
-    is called so), except for a file whose pattern is named like a built-in one: then the file
-    name, so a table never passes an edited copy off as the built-in."""
-    builtins = {n.lower() for n in patterns.names()}
-    from_file = isinstance(pattern_spec, (str, os.PathLike)) and (
-        str(pattern_spec).lower() not in builtins
-    )
-    if from_file and pattern.name.lower() in builtins:
-        return Path(pattern_spec).name
-    return pattern.name
+def _given(
+    spec: str | os.PathLike | patterns.Pattern | patterns.Given | None,
+) -> patterns.Given | None:
+    """The pattern a caller named, read once (:func:`splitcam.patterns.read`)."""
+    return None if spec is None else patterns.read(spec)
 
 
-@dataclass(frozen=True)
-class _Given:
-    """The pattern a method was asked for, read once: the pattern and its label in tables."""
-
-    pattern: patterns.Pattern
-    label: str
-
-
-def _given(spec: str | os.PathLike | patterns.Pattern | None) -> _Given | None:
-    """Read the pattern a caller named (the registry's one call of :func:`patterns.get`)."""
-    if spec is None:
-        return None
-    pattern = patterns.get(spec)
-    return _Given(pattern, _pattern_label(spec, pattern))
-
-
-def _pattern_key(pattern: str | os.PathLike | patterns.Pattern) -> str:
+def _pattern_key(pattern: str | os.PathLike | patterns.Pattern | patterns.Given) -> str:
     """A pattern's name as typed (lower case), or a Pattern's own."""
+    if isinstance(pattern, patterns.Given):
+        pattern = pattern.pattern
     return (pattern.name if isinstance(pattern, patterns.Pattern) else str(pattern)).lower()
 
 
@@ -284,7 +262,7 @@ def _pattern_key(pattern: str | os.PathLike | patterns.Pattern) -> str:
 class _Request:
     """What :func:`build_method` was asked, besides the method's name."""
 
-    pattern: _Given | None
+    pattern: patterns.Given | None
     lmmse_train: str | os.PathLike | None
     tile: int | None
     precision: str
@@ -357,7 +335,7 @@ BUILDERS: dict[str, Callable[[str, _Request], Reconstructor]] = {
 def build_method(
     spec: str | os.PathLike,
     *,
-    pattern: str | os.PathLike | patterns.Pattern | None = None,
+    pattern: str | os.PathLike | patterns.Pattern | patterns.Given | None = None,
     lmmse_train: str | os.PathLike | None = None,
     tile: int | None = 512,
     precision: str = "auto",
