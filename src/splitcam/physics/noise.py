@@ -1,23 +1,27 @@
 """Sensor noise. The paper's model (model.md §3): additive Gaussian noise in 8-bit units on the
 raw image's scale. The physical model at equal exposure (model.md §11): :class:`Exposure`
-(photo-electrons, shot and read noise, full well, ADC) and :class:`PhotonNoise` for training.
+(photo-electrons, shot and read noise, dark current, full well, ADC).
 
 One interface, :class:`NoiseModel`, is all the rest of splitcam asks of noise at one level: the
-sensor's simulation draws it (:meth:`NoiseModel.apply`, :meth:`NoiseModel.add`), the LMMSE
-takes its covariance from :meth:`NoiseModel.variance_coefficients`, the networks their
-noise-level input from :meth:`NoiseModel.level_map`, tables their label from
-:meth:`NoiseModel.label`. :class:`Gaussian` (the paper's) and :class:`Exposure` (the photon
-model) implement it; a plain number is shorthand for :class:`Gaussian` (:func:`as_noise`). A new
-noise model (dark current, a measured read-noise curve) is a new subclass here and nothing else.
+sensor's simulation draws it (:meth:`NoiseModel.apply`, :meth:`NoiseModel.add`), training draws
+a batch of levels at once (:meth:`NoiseModel.apply_batch`), the LMMSE takes its covariance from
+:meth:`NoiseModel.variance_coefficients`, the networks their noise-level input from
+:meth:`NoiseModel.level_map`, tables their label from :meth:`NoiseModel.label`, files record it
+with :meth:`NoiseModel.to_dict` (:func:`noise_from_dict` reads it back). :class:`Gaussian` (the
+paper's) and :class:`Exposure` (the photon model) implement it; a plain number is shorthand for
+:class:`Gaussian` (:func:`as_noise`). A new noise model (a measured read-noise curve, ...) is a
+new subclass, in any module, plus an entry in :data:`NOISE_MODELS` for files to record it and
+one in :data:`splitcam.training.noise.TRAINING_NOISE` to train under it.
 
-Training noise comes from :class:`GaussianNoise` and :class:`PhotonNoise`, which own seeded
-generators (so a resumed run draws the same noise as an uninterrupted one): the noise levels on
-the CPU, the noise itself on the device of the raw images (:class:`_TrainingDraws`). Both hand
-on the level of each image as the :class:`NoiseModel` evaluation uses (:class:`Gaussian`,
-:class:`Exposure`), so training and evaluation tell the LMMSE and the networks the same things.
-Evaluation noise comes from :func:`evaluation_noise`, seeded from the image's name and sigma, so
-that every pattern and every method is scored on identical noise. Nothing here touches Python's
-``random`` or global RNGs.
+Training noise is one class, :class:`TrainingNoise`: each step's levels come from a level
+sampler (:class:`UniformSigma`, :class:`LogUniformExposure`, or any function ``(n, generator)
+-> levels``) and the noise from the levels' own batch draw. It owns seeded generators (so a
+resumed run draws the same noise as an uninterrupted one): the levels on the CPU, the noise on
+the device of the raw images (:class:`_TrainingDraws`). :func:`GaussianNoise` and
+:func:`PhotonNoise` build it for the two shipped models. Evaluation noise comes from
+:meth:`NoiseModel.add`, seeded from the image's name and the level, so that every pattern and
+every method is scored on identical noise. Nothing here touches Python's ``random`` or global
+RNGs.
 """
 
 from __future__ import annotations
@@ -26,6 +30,7 @@ import dataclasses
 import hashlib
 import math
 from abc import ABC, abstractmethod
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from numbers import Real
 from typing import Any
@@ -44,7 +49,12 @@ __all__ = [
     "parse_level_label",
     "Exposure",
     "GaussianNoise",
+    "LogUniformExposure",
+    "NOISE_MODELS",
     "PhotonNoise",
+    "TrainingNoise",
+    "UniformSigma",
+    "noise_from_dict",
     "add_exposure_noise",
     "add_evaluation_noise",
     "photon_noise",
@@ -112,50 +122,6 @@ class _TrainingDraws:
         return True
 
 
-class GaussianNoise(_TrainingDraws):
-    """``raw + n`` with ``n ~ N(0, (sigma / 255)^2)``; sigma fixed or drawn from ``U[lo, hi]``.
-
-    Args:
-        sigma: A fixed sigma, or a ``(lo, hi)`` range to draw from (the paper: ``(0, 30)``).
-        per_sample: Draw one sigma per sample instead of one per batch (the paper's choice).
-        seed: Seed of the generators that draw sigmas and noise.
-        device: Where the noise is drawn (see :class:`_TrainingDraws`; default the CPU).
-
-    Returns (when called on ``(N, 1, H, W)`` raw images): the noisy images and the
-    :class:`Gaussian` of each image, the same objects evaluation uses (what the LMMSE solves
-    for and the physics-informed networks are told).
-    """
-
-    def __init__(
-        self,
-        sigma: float | tuple[float, float] = (0.0, 30.0),
-        *,
-        per_sample: bool = False,
-        seed: int = 0,
-        device: torch.device | str | None = None,
-    ) -> None:
-        lo, hi = (sigma, sigma) if isinstance(sigma, (int, float)) else tuple(sigma)
-        if not 0 <= lo <= hi < float("inf"):
-            raise ValueError(f"expected 0 <= sigma_lo <= sigma_hi, got {sigma!r}")
-        self.range = (float(lo), float(hi))
-        self.per_sample = per_sample
-        self._seed(seed, device)
-
-    def __call__(self, raw: torch.Tensor) -> tuple[torch.Tensor, list[Gaussian]]:
-        lo, hi = self.range
-        n = raw.shape[0] if self.per_sample else 1
-        sigma = lo + (hi - lo) * torch.rand(n, generator=self.generator, dtype=torch.float64)
-        sigma = sigma.expand(raw.shape[0]) if n == 1 else sigma
-        noise = torch.randn(
-            raw.shape, generator=self.field, dtype=torch.float32, device=self.field.device
-        )
-        noise = noise.to(device=raw.device, dtype=raw.dtype)
-        scale = (sigma / 255.0).to(device=raw.device, dtype=raw.dtype).view(-1, 1, 1, 1)
-        # The levels as the float32 numbers the noise was scaled by, so that what the networks
-        # are told is exactly what was drawn.
-        return raw + scale * noise, [Gaussian(float(s)) for s in sigma.float()]
-
-
 class NoiseModel(ABC):
     """Sensor noise at one level: what the simulation adds, the LMMSE assumes and the networks
     are told.
@@ -168,6 +134,21 @@ class NoiseModel(ABC):
     @abstractmethod
     def apply(self, raw: torch.Tensor, generator: torch.Generator) -> torch.Tensor:
         """The noisy raw image of a clean one, drawn from ``generator`` (a CPU generator)."""
+
+    @classmethod
+    def apply_batch(
+        cls, raw: torch.Tensor, levels: Sequence[NoiseModel], generator: torch.Generator
+    ) -> torch.Tensor:
+        """A training batch made noisy, one level per image (``levels``, all of this class),
+        drawn from ``generator`` on its device. The default applies each image's level in
+        turn (:meth:`apply`); a model overrides it to draw the whole batch at once.
+
+        Shape:
+            raw: ``(N, 1, H, W)``; ``len(levels) == N``; output like ``raw``.
+        """
+        if len(levels) != raw.shape[0]:
+            raise ValueError(f"expected one noise level per image, got {len(levels)}")
+        return torch.cat([lv.apply(raw[i : i + 1], generator) for i, lv in enumerate(levels)])
 
     @abstractmethod
     def variance_coefficients(self) -> tuple[float, float]:
@@ -213,6 +194,15 @@ class NoiseModel(ABC):
         ``evaluation.json``), or None."""
         return None
 
+    def to_dict(self) -> dict[str, Any]:
+        """The level as JSON-ready fields, with its kind (``model``: its key in
+        :data:`NOISE_MODELS`), so that files can record any noise model
+        (:func:`noise_from_dict` reads it back)."""
+        kind = next((k for k, c in NOISE_MODELS.items() if c is type(self)), None)
+        if kind is None:
+            raise TypeError(f"{type(self).__name__} is not in NOISE_MODELS: add it to be saved")
+        return {"model": kind, **dataclasses.asdict(self)}
+
 
 @dataclass(frozen=True)
 class Gaussian(NoiseModel):
@@ -233,6 +223,21 @@ class Gaussian(NoiseModel):
             return raw
         noise = torch.randn(tuple(raw.shape), generator=generator, dtype=torch.float64)
         return raw + (noise * (self.sigma / 255.0)).to(device=raw.device, dtype=raw.dtype)
+
+    @classmethod
+    def apply_batch(
+        cls, raw: torch.Tensor, levels: Sequence[NoiseModel], generator: torch.Generator
+    ) -> torch.Tensor:
+        """The training draw: float32 noise on ``generator``'s device, scaled per image."""
+        if len(levels) != raw.shape[0]:
+            raise ValueError(f"expected one noise level per image, got {len(levels)}")
+        noise = torch.randn(
+            raw.shape, generator=generator, dtype=torch.float32, device=generator.device
+        )
+        noise = noise.to(device=raw.device, dtype=raw.dtype)
+        sigma = torch.tensor([lv.sigma for lv in levels], dtype=torch.float64)
+        scale = (sigma / 255.0).to(device=raw.device, dtype=raw.dtype).view(-1, 1, 1, 1)
+        return raw + scale * noise
 
     def variance_coefficients(self) -> tuple[float, float]:
         return 0.0, (self.sigma / 255.0) ** 2
@@ -386,21 +391,54 @@ class Exposure(NoiseModel):
         return a, b
 
     def apply(self, raw: torch.Tensor, generator: torch.Generator) -> torch.Tensor:
-        """The noisy raw image of a clean one (``raw``, values >= 0 in the units of model.md §1)."""
-        e = raw.detach().to(torch.float64).clamp_min(0).cpu() * self.electrons_per_unit
+        """The noisy raw image of a clean one (``raw``, values >= 0 in the units of model.md §1),
+        drawn on the CPU (:meth:`apply_batch` with one exposure for the whole tensor)."""
+        out = self._electrons(raw.detach().cpu(), self.electrons_per_unit, generator)
+        return out.to(device=raw.device, dtype=raw.dtype)
+
+    @classmethod
+    def apply_batch(
+        cls, raw: torch.Tensor, levels: Sequence[NoiseModel], generator: torch.Generator
+    ) -> torch.Tensor:
+        """The whole batch at once, one exposure per image, on ``generator``'s device in
+        float64. The exposures must share their sensor settings (read noise, dark current, full
+        well, gain, bits, shot): only the photons may differ.
+
+        Shape:
+            raw: ``(N, 1, H, W)``, values >= 0 in the units of model.md §1; ``len(levels) ==
+            N``; output: like ``raw``, on its device and in its dtype.
+        """
+        first = levels[0]
+        if len(levels) != raw.shape[0] or any(
+            dataclasses.replace(e, photons=first.photons) != first for e in levels
+        ):
+            raise ValueError("expected one exposure per image, all with the same sensor settings")
+        per_unit = torch.tensor(
+            [e.electrons_per_unit for e in levels], dtype=torch.float64, device=generator.device
+        ).view(-1, 1, 1, 1)
+        out = first._electrons(raw.detach().to(generator.device), per_unit, generator)
+        return out.to(device=raw.device, dtype=raw.dtype)
+
+    def _electrons(
+        self, raw: torch.Tensor, per_unit: float | torch.Tensor, generator: torch.Generator
+    ) -> torch.Tensor:
+        """The photon model, once: shot, dark, read noise, full well, ADC, in that order, in
+        float64 on ``raw``'s device (``generator``'s); ``per_unit``: electrons per raw unit,
+        one number or one per image. Returns raw units, float64."""
+        e = raw.to(torch.float64).clamp_min(0) * per_unit
         if self.shot:
             e = torch.poisson(e, generator=generator)
         if self.dark > 0:
             e = e + torch.poisson(torch.full_like(e, self.dark), generator=generator)
         if self.read_noise > 0:
-            e = e + self.read_noise * torch.randn(e.shape, generator=generator, dtype=torch.float64)
+            noise = torch.randn(e.shape, generator=generator, dtype=torch.float64, device=e.device)
+            e = e + self.read_noise * noise
         if self.full_well is not None:
             e = e.clamp(0, self.full_well)
         if self.gain is not None:
-            dn = torch.round(e / self.gain).clamp(0, 2**self.bits - 1)
-            e = dn * self.gain
+            e = torch.round(e / self.gain).clamp(0, 2**self.bits - 1) * self.gain
         e = e - self.dark  # the dark frame's mean subtracted; its noise stays
-        return (e / self.electrons_per_unit).to(device=raw.device, dtype=raw.dtype)
+        return e / per_unit
 
     def key(self) -> str:
         key = (
@@ -437,91 +475,140 @@ def add_exposure_noise(raw: torch.Tensor, image_name: str, exposure: Exposure) -
     return exposure.add(raw, image_name)
 
 
-class PhotonNoise(_TrainingDraws):
-    """Training noise of the photon model: exposure ``N`` drawn log-uniformly from a range.
+def photon_noise(
+    raw: torch.Tensor, exposures: Sequence[Exposure], generator: torch.Generator
+) -> torch.Tensor:
+    """A batch made noisy by the photon model, one :class:`Exposure` per image
+    (:meth:`Exposure.apply_batch`)."""
+    return Exposure.apply_batch(raw, exposures, generator)
 
-    The whole batch is made noisy at once on the generator's device (:func:`photon_noise`), one
-    exposure per image: no loop over images and no host copy.
+
+#: The noise models a file can record, by the ``model`` key of :meth:`NoiseModel.to_dict`.
+#: A new noise model that files should record is one entry here.
+NOISE_MODELS: dict[str, type[NoiseModel]] = {"gaussian": Gaussian, "photon": Exposure}
+
+
+def noise_from_dict(fields: dict[str, Any]) -> NoiseModel:
+    """The level :meth:`NoiseModel.to_dict` wrote.
+
+    Raises:
+        ValueError: An unknown ``model`` (the message lists :data:`NOISE_MODELS`) or bad fields.
+    """
+    fields = dict(fields)
+    kind = fields.pop("model", None)
+    if kind not in NOISE_MODELS:
+        raise ValueError(f"unknown noise model {kind!r}; known: {', '.join(NOISE_MODELS)}")
+    try:
+        return NOISE_MODELS[kind](**fields)
+    except TypeError as exc:
+        raise ValueError(f"noise model {kind}: {exc}") from None
+
+
+# --- training: one noise, levels from a sampler ----------------------------------------------
+
+
+@dataclass(frozen=True)
+class UniformSigma:
+    """The paper's training levels: Gaussian sigma (8-bit units) drawn from ``U[lo, hi]``."""
+
+    lo: float = 0.0
+    hi: float = 30.0
+
+    def __post_init__(self) -> None:
+        if not 0 <= self.lo <= self.hi < float("inf"):
+            raise ValueError(f"expected 0 <= sigma_lo <= sigma_hi, got {(self.lo, self.hi)!r}")
+
+    def __call__(self, n: int, generator: torch.Generator) -> list[Gaussian]:
+        sigma = self.lo + (self.hi - self.lo) * torch.rand(
+            n, generator=generator, dtype=torch.float64
+        )
+        # The levels as float32 numbers: what the networks are told is what the noise is.
+        return [Gaussian(float(s)) for s in sigma.float()]
+
+
+@dataclass(frozen=True)
+class LogUniformExposure:
+    """The photon model's training levels: exposure ``N`` drawn log-uniformly from
+    ``[lo, hi]``, the other sensor settings (``read_noise``, ``full_well``, ...) fixed."""
+
+    lo: float = 10.0
+    hi: float = 1e4
+    sensor: dict[str, Any] = dataclasses.field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        Exposure(self.lo, **self.sensor)  # validates the sensor settings and the range ends
+        Exposure(self.hi, **self.sensor)
+        if self.lo > self.hi:
+            raise ValueError(f"expected photons lo <= hi, got {(self.lo, self.hi)!r}")
+
+    def __call__(self, n: int, generator: torch.Generator) -> list[Exposure]:
+        lo, hi = math.log(self.lo), math.log(self.hi)
+        photons = torch.exp(
+            lo + (hi - lo) * torch.rand(n, generator=generator, dtype=torch.float64)
+        )
+        return [Exposure(float(p), **self.sensor) for p in photons]
+
+
+class TrainingNoise(_TrainingDraws):
+    """Training noise: each step's levels from ``sampler`` (a function ``(n, generator) ->
+    [NoiseModel] * n``, e.g. :class:`UniformSigma`), the noise itself drawn by the levels' own
+    :meth:`NoiseModel.apply_batch`, so any noise model trains through this one class.
 
     Args:
-        photons: ``(lo, hi)`` full-light photo-electrons (or one value).
-        per_sample: One exposure per sample instead of one per batch.
+        sampler: Draws the levels on the CPU generator.
+        per_sample: One level per sample instead of one per batch (the paper's choice).
         seed: Seed of the generators.
         device: Where the noise is drawn (see :class:`_TrainingDraws`; default the CPU).
-        **sensor: ``read_noise``, ``full_well``, ``gain``, ``bits``, ``shot`` of
-            :class:`Exposure`.
 
-    Returns (when called on ``(N, 1, H, W)`` raw images): the noisy images and the
-    :class:`Exposure` of each image (what the physics-informed network is told).
+    Returns (when called on ``(N, 1, H, W)`` raw images): the noisy images and the level of
+    each image, the objects evaluation uses (what the LMMSE solves for and the networks are
+    told).
     """
 
     def __init__(
         self,
-        photons: float | tuple[float, float] = (10.0, 1e4),
+        sampler: Callable[[int, torch.Generator], list[NoiseModel]],
         *,
         per_sample: bool = False,
         seed: int = 0,
         device: torch.device | str | None = None,
-        **sensor: Any,
     ) -> None:
-        lo, hi = (photons, photons) if isinstance(photons, (int, float)) else tuple(photons)
-        Exposure(lo, **sensor)  # validates the sensor settings and the range ends
-        Exposure(hi, **sensor)
-        if lo > hi:
-            raise ValueError(f"expected photons lo <= hi, got {photons!r}")
-        self.range = (float(lo), float(hi))
-        self.sensor = sensor
+        self.sampler = sampler
         self.per_sample = per_sample
         self._seed(seed, device)
 
-    def __call__(self, raw: torch.Tensor) -> tuple[torch.Tensor, list[Exposure]]:
-        lo, hi = (math.log(v) for v in self.range)
+    def __call__(self, raw: torch.Tensor) -> tuple[torch.Tensor, list[NoiseModel]]:
         n = raw.shape[0] if self.per_sample else 1
-        photons = torch.exp(
-            lo + (hi - lo) * torch.rand(n, generator=self.generator, dtype=torch.float64)
-        )
-        photons = photons.expand(raw.shape[0]) if n == 1 else photons
-        exposures = [Exposure(float(p), **self.sensor) for p in photons]
-        return photon_noise(raw, exposures, self.field), exposures
+        levels = list(self.sampler(n, self.generator))
+        levels = levels * raw.shape[0] if n == 1 else levels
+        return type(levels[0]).apply_batch(raw, levels, self.field), levels
 
 
-def photon_noise(
-    raw: torch.Tensor, exposures: list[Exposure], generator: torch.Generator
-) -> torch.Tensor:
-    """A batch made noisy by the photon model, one :class:`Exposure` per image, in one pass.
+def GaussianNoise(  # noqa: N802 - the paper's training noise, by the name it always had
+    sigma: float | tuple[float, float] = (0.0, 30.0),
+    *,
+    per_sample: bool = False,
+    seed: int = 0,
+    device: torch.device | str | None = None,
+) -> TrainingNoise:
+    """:class:`TrainingNoise` of :class:`UniformSigma` (one sigma, or a ``(lo, hi)`` range)."""
+    lo, hi = (sigma, sigma) if isinstance(sigma, (int, float)) else tuple(sigma)
+    return TrainingNoise(UniformSigma(lo, hi), per_sample=per_sample, seed=seed, device=device)
 
-    The same model as :meth:`Exposure.apply` (shot, read noise, full well, ADC, in that order),
-    applied to every image at once on ``generator``'s device in float64. The exposures must
-    share their sensor settings (read noise, full well, gain, bits, shot): only the photons may
-    differ, as in :class:`PhotonNoise`.
 
-    Shape:
-        raw: ``(N, 1, H, W)``, values >= 0 in the units of model.md §1; ``len(exposures) == N``;
-        output: like ``raw``, on its device and in its dtype.
-    """
-    first = exposures[0]
-    if len(exposures) != raw.shape[0] or any(
-        dataclasses.replace(e, photons=first.photons) != first for e in exposures
-    ):
-        raise ValueError("expected one exposure per image, all with the same sensor settings")
-    device = generator.device
-    per_unit = torch.tensor(
-        [e.electrons_per_unit for e in exposures], dtype=torch.float64, device=device
-    ).view(-1, 1, 1, 1)
-    e = raw.detach().to(device=device, dtype=torch.float64).clamp_min(0) * per_unit
-    if first.shot:
-        e = torch.poisson(e, generator=generator)
-    if first.dark > 0:
-        e = e + torch.poisson(torch.full_like(e, first.dark), generator=generator)
-    if first.read_noise > 0:
-        noise = torch.randn(e.shape, generator=generator, dtype=torch.float64, device=device)
-        e = e + first.read_noise * noise
-    if first.full_well is not None:
-        e = e.clamp(0, first.full_well)
-    if first.gain is not None:
-        e = torch.round(e / first.gain).clamp(0, 2**first.bits - 1) * first.gain
-    e = e - first.dark
-    return (e / per_unit).to(device=raw.device, dtype=raw.dtype)
+def PhotonNoise(  # noqa: N802 - the photon model's training noise, by the name it always had
+    photons: float | tuple[float, float] = (10.0, 1e4),
+    *,
+    per_sample: bool = False,
+    seed: int = 0,
+    device: torch.device | str | None = None,
+    **sensor: Any,
+) -> TrainingNoise:
+    """:class:`TrainingNoise` of :class:`LogUniformExposure` (``sensor``: the
+    :class:`Exposure` settings besides the photons)."""
+    lo, hi = (photons, photons) if isinstance(photons, (int, float)) else tuple(photons)
+    sampler = LogUniformExposure(float(lo), float(hi), dict(sensor))
+    return TrainingNoise(sampler, per_sample=per_sample, seed=seed, device=device)
 
 
 # The label of a noise level, the one convention of tables, metrics files and figures: "15" for

@@ -393,6 +393,18 @@ class OptimConfig:
         ]
 
 
+def _noise_types() -> list[str]:
+    from .noise import TRAINING_NOISE
+
+    return list(TRAINING_NOISE)
+
+
+def _noise_check(config: TrainConfig) -> None:
+    from .noise import TRAINING_NOISE
+
+    TRAINING_NOISE[config.noise.model].check(config)
+
+
 @dataclass
 class NoiseConfig:
     model: str = _opt(
@@ -426,8 +438,8 @@ class NoiseConfig:
         """``(holds, message)`` of every range and choice of this section."""
         return [
             (
-                self.model in ("gaussian", "photon"),
-                f"noise.model must be gaussian or photon, got {self.model!r}",
+                self.model in _noise_types(),
+                f"noise.model must be {' or '.join(_noise_types())}, got {self.model!r}",
             ),
             (
                 len(self.photons) == 2
@@ -589,13 +601,10 @@ class TrainConfig:
         for ok, message in checks:
             if not ok:
                 raise ConfigError(message)
-        if self.noise.model == "photon":
-            from ..physics.noise import Exposure
-
-            try:
-                Exposure(self.noise.photons[0], **self.noise.sensor())
-            except ValueError as exc:
-                raise ConfigError(f"noise: {exc}") from None
+        try:
+            _noise_check(self)
+        except ValueError as exc:
+            raise ConfigError(f"noise: {exc}") from None
 
     def write(self, path: str | Path) -> Path:
         path = Path(path)

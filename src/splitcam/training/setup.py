@@ -24,13 +24,13 @@ from ..data.patches import ImageCache, PatchSampler, list_images
 from ..design.kernels import design_pattern
 from ..io import checkpoints as ckpt_io
 from ..patterns.random import PatternMix
-from ..physics.noise import GaussianNoise, PhotonNoise
+from ..physics.noise import TrainingNoise
 from ..physics.sensor import LearnableSplitterSensor, SplitterSensor, SwitchingSensor
 from ..physics.system import ImagingSystem
 from ..recon.base import fast_precision, strict_float32
 from ..recon.closed_form import estimate_image_statistics, shipped_image_statistics
 from ..recon.networks import build_network
-from . import adapters, seeds
+from . import adapters, noise, seeds
 from .config import ConfigError, TrainConfig
 from .distributed import DistInfo, init_distributed
 from .ema import WeightAverage
@@ -461,22 +461,7 @@ def images_device(device: torch.device) -> torch.device | None:
 
 def build_noise(
     config: TrainConfig, start_step: int, rank: int, device: torch.device | None = None
-) -> GaussianNoise | PhotonNoise:
-    """This rank's simulated sensor noise: Gaussian over ``optim.sigma_min..sigma_max``, or the
-    photon model at ``noise.photons``, drawn on ``device`` (the batches' device; default the
-    CPU)."""
-    seed = seeds.noise_seed(config, start_step, rank)
-    if config.noise.model == "photon":
-        return PhotonNoise(
-            tuple(config.noise.photons),
-            per_sample=config.optim.per_sample_sigma,
-            seed=seed,
-            device=device,
-            **config.noise.sensor(),
-        )
-    return GaussianNoise(
-        (config.optim.sigma_min, config.optim.sigma_max),
-        per_sample=config.optim.per_sample_sigma,
-        seed=seed,
-        device=device,
-    )
+) -> TrainingNoise:
+    """This rank's simulated sensor noise (:data:`~splitcam.training.noise.TRAINING_NOISE`
+    of ``noise.model``), drawn on ``device`` (the batches' device; default the CPU)."""
+    return noise.build_noise(config, seeds.noise_seed(config, start_step, rank), device)

@@ -22,7 +22,7 @@ from ..data.patches import PatchSampler
 from ..io import atomic_path
 from ..io import checkpoints as ckpt_io
 from ..patterns.random import PatternMix
-from ..physics.noise import Exposure, GaussianNoise, PhotonNoise
+from ..physics.noise import Exposure, TrainingNoise
 from ..physics.system import ImagingSystem
 from . import seeds
 from .adapters import BASE_PREFIX, folded_state, restore_base
@@ -75,7 +75,7 @@ class TrainState:
     optimizer: torch.optim.Optimizer
     guard: DivergenceGuard
     sampler: PatchSampler
-    noise: GaussianNoise | PhotonNoise
+    noise: TrainingNoise
     #: Steps done (of the whole schedule, for a run continued from another's weights).
     step: int
     #: The step this run's optimiser began at (its moments warm up from there).
@@ -243,7 +243,7 @@ def replica_report(
 
 
 def gather_rng(
-    sampler: PatchSampler, noise: GaussianNoise | PhotonNoise, info: DistInfo
+    sampler: PatchSampler, noise: TrainingNoise, info: DistInfo
 ) -> dict[str, torch.Tensor]:
     """RNG states of every rank (collected on rank 0) so a resume draws the same batches: the
     patch sampler's, the noise's CPU generator's and, for noise drawn on an accelerator, its
@@ -261,7 +261,7 @@ def gather_rng(
 def restore_rng(
     loaded: ckpt_io.Checkpoint,
     sampler: PatchSampler,
-    noise: GaussianNoise | PhotonNoise,
+    noise: TrainingNoise,
     info: DistInfo,
 ) -> None:
     """Set this rank's generators (and torch's) to the checkpoint's; a rank it holds none for

@@ -118,10 +118,11 @@ def say_held_out(config: TrainConfig, images: list[tuple[str, torch.Tensor]]) ->
 
 
 def val_levels(config: TrainConfig) -> list[float] | list[Exposure]:
-    """The noise levels validated: ``data.val_sigmas``, or the photon model's exposures."""
-    if config.noise.model == "photon":
-        return [Exposure(n, **config.noise.sensor()) for n in config.noise.val_photons]
-    return list(config.data.val_sigmas)
+    """The noise levels validated (:func:`~splitcam.training.noise.validation_levels`):
+    ``data.val_sigmas``, or the photon model's exposures."""
+    from .noise import validation_levels
+
+    return validation_levels(config)
 
 
 def validate(
