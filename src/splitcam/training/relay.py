@@ -1,7 +1,7 @@
 """One command for a GPU's minutes: fine-tune a queue of shipped networks, then gate them on a CPU.
 
-    python experiments/gpu/relay.py --minutes 9 --out DIR [--data PHOTOS] [--batch 256]
-    python experiments/gpu/relay.py --gate DIR [--dry-run] [--data PHOTOS]
+    python -m splitcam.training.relay --minutes 9 --out DIR [--data PHOTOS] [--batch 256]
+    python -m splitcam.training.relay --gate DIR [--dry-run] [--data PHOTOS]
 
 **The relay** trains each network of the queue from its shipped weights, on its own recipe (the
 configuration its last training segment saved: pattern, noise, light domain, copies at half
@@ -65,7 +65,7 @@ def slot_minutes(left_s: float, queue: list[str], overhead_s: float) -> float:
 
 
 def check_queue(queue: list[str]) -> None:
-    from splitcam.recon.loading import model_names
+    from ..recon.loading import model_names
 
     shipped = model_names()
     unknown = [n for n in queue if n not in shipped]
@@ -80,9 +80,9 @@ def check_queue(queue: list[str]) -> None:
 def relay_config(name: str, args: argparse.Namespace, out: Path, minutes: float):
     """The run of one queued network: its shipped recipe from its weights, at the relay's
     batch, rate, time slot, device and photos."""
-    from splitcam.recon.loading import load_model
-    from splitcam.training import TrainConfig
-    from splitcam.training.schedule import scaled_lr
+    from ..recon.loading import load_model
+    from . import TrainConfig
+    from .schedule import scaled_lr
 
     saved = load_model(name).meta["config"]
     config = TrainConfig.from_saved(saved, source=f"the shipped {name}")
@@ -132,10 +132,10 @@ def start_folder(out: Path, args: argparse.Namespace) -> None:
 
 
 def run_relay(args: argparse.Namespace) -> int:
-    from splitcam.data.patches import list_images
-    from splitcam.recon.loading import load_model
-    from splitcam.training import train
-    from splitcam.training.models import export_model
+    from ..data.patches import list_images
+    from ..recon.loading import load_model
+    from . import train
+    from .models import export_model
 
     if not args.minutes > 0:
         raise RelayError(f"--minutes must be > 0, got {args.minutes}")
@@ -177,8 +177,8 @@ def run_relay(args: argparse.Namespace) -> int:
 
 
 def summarise(name: str, config, result) -> dict:
-    from splitcam.io import checkpoints as ckpt_io
-    from splitcam.training.rundir import metrics_rows
+    from ..io import checkpoints as ckpt_io
+    from .rundir import metrics_rows
 
     meta = ckpt_io.load(result.run_dir / ckpt_io.CHECKPOINT_NAME).meta
     vals = [r for r in metrics_rows(result.run_dir) if any(k.startswith("val_psnr_") for k in r)]
@@ -200,15 +200,13 @@ def summarise(name: str, config, result) -> dict:
 
 
 def write_table(path: Path, rows: list[dict], args: argparse.Namespace) -> None:
-    lines = [
-        f"# Relay: {args.minutes:g} minutes, batch {args.batch}, on {args.device}",
-        "",
-        "| model | steps | patches | minutes | patches/s | validation start → end | device |",
-        "|---|---|---|---|---|---|---|",
-    ]
+    from ..evaluation.tables import markdown_table
+
+    header = ["model", "steps", "patches", "minutes", "patches/s", "validation start → end"]
+    cells = []
     for r in rows:
         if r.get("skipped"):
-            lines.append(f"| {r['model']} | skipped: no time left in its slot | | | | | |")
+            cells.append([r["model"], "skipped: no time left in its slot", "", "", "", "", ""])
             continue
         change = ", ".join(
             f"{k.removeprefix('val_psnr_')}: {r['start'][k]:.2f} → {r['end'][k]:.2f}"
@@ -217,10 +215,19 @@ def write_table(path: Path, rows: list[dict], args: argparse.Namespace) -> None:
         )
         if r["failure"]:
             change += f" (failed, not a candidate: {r['failure']})"
-        lines.append(
-            f"| {r['model']} | {r['steps']} | {r['patches']} | {r['train_s'] / 60:.2f} | "
-            f"{r['patches_per_s']:.0f} | {change} | {r['device']} |"
+        cells.append(
+            [
+                r["model"],
+                str(r["steps"]),
+                str(r["patches"]),
+                f"{r['train_s'] / 60:.2f}",
+                f"{r['patches_per_s']:.0f}",
+                change,
+                r["device"],
+            ]
         )
+    title = f"# Relay: {args.minutes:g} minutes, batch {args.batch}, on {args.device}"
+    lines = [title, "", *markdown_table([*header, "device"], cells)]
     path.write_text("\n".join(lines) + "\n")
 
 
@@ -228,8 +235,8 @@ def write_table(path: Path, rows: list[dict], args: argparse.Namespace) -> None:
 
 
 def run_gate(args: argparse.Namespace) -> int:
-    from splitcam.io.weights import MODELS_DIR
-    from splitcam.training.gate import gate, gate_table, ship
+    from ..io.weights import MODELS_DIR
+    from .gate import gate, gate_table, ship
 
     folder = Path(args.gate)
     found = sorted((folder / "candidates").glob("*.json"))
@@ -253,7 +260,7 @@ def run_gate(args: argparse.Namespace) -> int:
 
 
 def parse(argv: list[str] | None = None) -> argparse.Namespace:
-    from splitcam.data.registry import training_folder
+    from ..data.registry import training_folder
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--minutes", type=float, help="wall-clock minutes the relay may take")

@@ -1,4 +1,4 @@
-"""The GPU relay (experiments/gpu/relay.py) end to end on the CPU, on tiny settings: a queue of a
+"""The GPU relay (splitcam.training.relay) end to end on the CPU, on tiny settings: a queue of a
 fixed-pattern network (D) and one that learns its pattern (A-opt) trained within its minutes,
 candidates exported with their provenance, the gate's decision applied as its table says for
 both, a candidate that is no continuation of its namesake skipped with its reason, and bad input
@@ -6,7 +6,6 @@ refused with one line and nothing changed."""
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import shutil
 from pathlib import Path
@@ -14,14 +13,11 @@ from pathlib import Path
 import pytest
 from conftest import odd_photos
 
-REPO = Path(__file__).resolve().parents[2]
-
 
 def _relay():
-    spec = importlib.util.spec_from_file_location("relay", REPO / "experiments/gpu/relay.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    from splitcam.training import relay
+
+    return relay
 
 
 @pytest.fixture(scope="module")
