@@ -192,23 +192,27 @@ def sensor_flags_given(args: argparse.Namespace) -> list[str]:
 
 
 def model_methods(
-    models: Sequence[str], pattern_specs: Sequence[str], *, main_job: bool, options: dict
+    models: Sequence[str], pattern_specs: Sequence, *, main_job: bool, options: dict
 ) -> list:
     """The methods of ``--model`` names: a model of one pattern as itself, a model for any
-    pattern (``universal``) once per pattern of ``--patterns``. In the main job the universal
-    model reconstructs only the patterns that no shipped network serves, and says so."""
+    pattern (``universal``) once per pattern of ``--patterns`` (names, files, or patterns read
+    already: :class:`splitcam.patterns.Given`). In the main job the universal model
+    reconstructs only the patterns that no shipped network serves, and says so."""
     from .. import patterns
     from ..recon.loading import model_serves_any_pattern
     from ..recon.registry import build_model
 
     universal = [spec for spec in models if model_serves_any_pattern(spec)]
     single = [build_model(spec, **options) for spec in models if spec not in universal]
+    # (as typed, read once) of each pattern: messages name a pattern as the user did.
+    given = [(p, patterns.read(p)) for p in pattern_specs] if universal else []
     for spec in universal:
-        wanted = list(pattern_specs)
+        wanted = list(given)
         if main_job:
             served = [m.pattern for m in single]
-            wanted = [p for p in wanted if not any(patterns.get(p).equals(s) for s in served)]
-            for p in wanted:
-                print(f"pattern {p} has no shipped network: reconstructed by the {spec} network")
-        single += [build_model(spec, pattern=p, **options) for p in wanted]
+            wanted = [g for g in wanted if not any(g[1].pattern.equals(s) for s in served)]
+            for typed, read in wanted:
+                name = read.label if isinstance(typed, patterns.Given) else typed
+                print(f"pattern {name} has no shipped network: reconstructed by the {spec} network")
+        single += [build_model(spec, pattern=read, **options) for _, read in wanted]
     return single

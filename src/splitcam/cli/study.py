@@ -97,6 +97,18 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--tol", type=float, default=0.0, help="breakeven: differences within this count as ties"
     )
+    _add_camera_options(p)
+    p.add_argument("--out", help="default results/exposure or results/breakeven")
+    p.add_argument("--quiet", action="store_true", help="no progress bars")
+    p.set_defaults(handler=run)
+
+
+def _command(args: argparse.Namespace) -> str:
+    return f"`splitcam study {' '.join(sys.argv[2:])}`"
+
+
+def _add_camera_options(p: argparse.ArgumentParser) -> None:
+    """The camera of ``study exposure``: what turns N into lux, and the optical stack."""
     lux = p.add_argument_group(
         "exposure: the crossovers in lux (splitcam.physics.radiometry: the camera equation, "
         "a white scene, a lossless pixel)"
@@ -113,13 +125,13 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="µm: the pixel's QE is silicon's absorption within this depth (Green 2008); "
         "default a lossless pixel",
     )
-    p.add_argument("--out", help="default results/exposure or results/breakeven")
-    p.add_argument("--quiet", action="store_true", help="no progress bars")
-    p.set_defaults(handler=run)
-
-
-def _command(args: argparse.Namespace) -> str:
-    return f"`splitcam study {' '.join(sys.argv[2:])}`"
+    p.add_argument(
+        "--stack",
+        help="exposure: one optical stack in front of every pixel of every sensor, "
+        "comma-separated: silicon (QE of 3 µm of silicon), ir-cut (the D5100's UV/IR cut, "
+        "estimated), lens (ISO 7589 lens), or CSV files of wavelength_nm,transmission "
+        "(splitcam.physics.stack); default none: a bare, lossless pixel",
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -129,6 +141,14 @@ def run(args: argparse.Namespace) -> int:
 
     if args.points < 1:
         raise ValueError(f"--points must be at least 1, got {args.points}")
+    if args.stack and args.silicon_depth is not None:
+        raise ValueError(
+            "--stack puts the pixel's QE in front of every sensor already; with it, the lux "
+            "are those of a lossless pixel: leave --silicon-depth out"
+        )
+    if args.stack and args.study == "breakeven":
+        raise ValueError("--stack is for study exposure; study breakeven takes none")
+    args.optical_stack = _stack(args.stack)
     qe = SiliconQE(args.silicon_depth) if args.silicon_depth is not None else None
     args.camera = Camera(args.pitch, args.f_number, args.exposure_time, args.illuminant, qe=qe)
     photons = args.photons or default_exposures(args.points)
@@ -142,6 +162,15 @@ def run(args: argparse.Namespace) -> int:
     if args.study == "breakeven":
         return _run_breakeven(args, images, names, photons)
     return _run_exposure(args, images, names, photons)
+
+
+def _stack(text: str | None):
+    """The optical stack of ``--stack`` (checked before any image is read), or None."""
+    if not text:
+        return None
+    from ..physics.stack import stack_of
+
+    return stack_of([t for t in text.split(",") if t.strip()])
 
 
 def _run_breakeven(args: argparse.Namespace, images: list, names: str, photons: list) -> int:
@@ -201,15 +230,22 @@ def _run_breakeven(args: argparse.Namespace, images: list, names: str, photons: 
 
 
 def _run_exposure(args: argparse.Namespace, images: list, names: str, photons: list) -> int:
+    from .. import patterns
     from ..evaluation.exposure import exposure_study, raw_snr_check, write_study
-    from ..patterns import get as get_pattern
+    from ..patterns import read as get_pattern
     from ..recon.registry import build_method
 
     options = {"domain": args.domain}
-    methods = model_methods(args.model, args.patterns, main_job=False, options=options)
+    # Each pattern read once, behind the optical stack if one is given.
+    given = [get_pattern(p) for p in args.patterns]
+    stack = args.optical_stack
+    if stack is not None:
+        given = [patterns.Given(stack.apply(g.pattern), g.label) for g in given]
+        _check_stacked_models(args.model)
+    methods = model_methods(args.model, given, main_job=False, options=options)
     methods += [build_method(c, domain=args.domain) for c in args.checkpoint]
     out = args.out or "results/exposure"
-    loaded = [get_pattern(p) for p in args.patterns]
+    loaded = [g.pattern for g in given]
     results = exposure_study(
         images,
         patterns=loaded,
@@ -232,6 +268,7 @@ def _run_exposure(args: argparse.Namespace, images: list, names: str, photons: l
         + (f"dark {sensor['dark']:g} e- per exposure, " if sensor.get("dark") else "")
         + (f"full well {args.full_well:g} e-, " if args.full_well else "no saturation, ")
         + (f"ADC {sensor['bits']} bits at {args.gain:g} e-/DN. " if args.gain else "no ADC. ")
+        + (f"Every pixel behind: {stack}. " if stack is not None else "")
         + f"Command: {_command(args)}"
     )
     networks = {m.name: m.pattern.name for m in methods}
@@ -248,6 +285,19 @@ def _run_exposure(args: argparse.Namespace, images: list, names: str, photons: l
     print(path.read_text(encoding="utf-8"))
     print(f"wrote {path}, exposure.json and exposure.png")
     return 0
+
+
+def _check_stacked_models(models: list[str]) -> None:
+    """Behind a stack, a network must serve any pattern: one trained on one sensor knows that
+    sensor without the stack."""
+    from ..recon.loading import model_serves_any_pattern
+
+    single = [m for m in models if not model_serves_any_pattern(m)]
+    if single:
+        raise ValueError(
+            f"--stack changes every sensor: --model {', '.join(single)} knows its sensor without "
+            "the stack; use a model for any pattern (universal-photon)"
+        )
 
 
 def _references(text: str | None, default: list[str]) -> list[str]:

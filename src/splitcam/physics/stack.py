@@ -1,0 +1,261 @@
+"""One optical stack for every pixel: the curves all light passes through on its way to being
+counted (a lens, the UV/IR-cut filter, the photodiode's quantum efficiency), applied alike to
+every pixel of every sensor.
+
+Without a stack, splitcam's sensors see light as a bare, lossless pixel does: a W pixel and a
+router count every photon from 400 to 700 nm the same. A measured camera's curves (the D5100
+arrays of :mod:`splitcam.patterns.measured`) already contain that camera's cut and silicon
+response, so comparing them with a bare W pixel or a router gives the filters a handicap the
+routers do not carry. :meth:`OpticalStack.apply` puts every sensor behind the same curves:
+
+- **spectral sensors** (routers from full-wave solves, measured arrays): each splitter's kernel
+  at each wavelength is multiplied by the stack's transmission there;
+- **measured filters**, whose curves hold a camera's own stack already: the filter itself is
+  estimated as the measured curve divided by the stack where the stack passes at least 30 % of
+  the light (below that a fitted edge's error dominates), scaled to a peak transmission of 1,
+  and then put behind the stack: the measured curve's shape wherever the stack is the
+  camera's, and never a filter passing more than all of the light;
+- **RGB sensors** (the ideal arrays, the splitters A-E, the (eta, chi) routers), which have no
+  spectra: each colour's kernels are scaled by the stack's mean transmission over that colour's
+  light (the scene basis of :mod:`splitcam.patterns.spectral`), as if the sensor treated every
+  wavelength of a colour alike.
+
+The elements (:data:`ELEMENTS`, ``splitcam study exposure --stack``):
+
+- ``silicon``: silicon absorbing within 3 µm (:class:`~splitcam.physics.radiometry.SiliconQE`,
+  M. A. Green 2008's extinction coefficients);
+- ``ir-cut``: the UV/IR-cut of the Nikon D5100, estimated from the camera's own measured red
+  channel (NPL, in colour-science): above 590 nm a red filter passes nearly all light, so the
+  fall of the red curve there, divided by silicon's QE, is the cut's edge; a logistic edge is
+  fitted to it (:func:`d5100_ir_cut`: 50 % at about 650 nm). An estimate, stated as such: the
+  camera's cut itself is not published;
+- ``lens``: the ISO 7589 standard camera lens transmission (colour-science's
+  ``SDS_LENSES``);
+- a CSV file of ``wavelength_nm,transmission`` rows: a user's own curve.
+
+Bad curves are refused: a value outside [0, 1] or a curve that does not cover 400-700 nm.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from functools import lru_cache
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..patterns import Pattern, check_pattern
+from ..patterns.spectral import SpectralPattern, scene_basis
+from .radiometry import SiliconQE
+
+__all__ = ["ELEMENTS", "IRCut", "OpticalStack", "TabulatedCurve", "d5100_ir_cut", "stack_of"]
+
+#: The band every curve must cover (nm): the band of the sensor model.
+BAND = (400.0, 700.0)
+#: The grid RGB sensors' band factors are taken on (nm).
+GRID = np.arange(400.0, 700.0 + 1e-9, 10.0)
+#: Where a measured curve is divided by the stack: the stack passes at least this share.
+DIVIDE_ABOVE = 0.3
+
+
+@dataclass(frozen=True)
+class IRCut:
+    """An infrared-cut filter: transmission ``1 / (1 + exp((nm - edge_nm) / width_nm))``."""
+
+    edge_nm: float
+    width_nm: float
+    source: str = ""
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.edge_nm) and self.width_nm > 0):
+            raise ValueError(f"an IR cut needs a finite edge and a width > 0, got {self}")
+
+    def __call__(self, nm: Any) -> np.ndarray:
+        return 1.0 / (1.0 + np.exp((np.asarray(nm, dtype=float) - self.edge_nm) / self.width_nm))
+
+    def __str__(self) -> str:
+        return f"IR cut, 50 % at {self.edge_nm:.0f} nm (width {self.width_nm:.1f} nm)"
+
+
+@dataclass(frozen=True)
+class TabulatedCurve:
+    """A curve given at wavelengths (nm), linearly interpolated."""
+
+    wavelengths: tuple[float, ...]
+    values: tuple[float, ...]
+    name: str
+
+    def __post_init__(self) -> None:
+        lams, vals = np.asarray(self.wavelengths, float), np.asarray(self.values, float)
+        if lams.ndim != 1 or lams.shape != vals.shape or len(lams) < 2:
+            raise ValueError(f"{self.name}: expected matching wavelengths and values, 2 or more")
+        if np.any(np.diff(lams) <= 0):
+            raise ValueError(f"{self.name}: wavelengths must increase")
+        if lams[0] > BAND[0] or lams[-1] < BAND[1]:
+            raise ValueError(
+                f"{self.name} covers {lams[0]:g}-{lams[-1]:g} nm; a stack curve must cover "
+                f"{BAND[0]:g}-{BAND[1]:g} nm"
+            )
+        if not np.all(np.isfinite(vals)) or vals.min() < 0 or vals.max() > 1:
+            raise ValueError(f"{self.name}: a transmission must lie within [0, 1]")
+
+    def __call__(self, nm: Any) -> np.ndarray:
+        return np.interp(np.asarray(nm, dtype=float), self.wavelengths, self.values)
+
+    def __str__(self) -> str:
+        return self.name
+
+    @classmethod
+    def read_csv(cls, path: str | Path) -> TabulatedCurve:
+        """``wavelength_nm,transmission`` rows (a header line is skipped)."""
+        path = Path(path)
+        if not path.is_file():
+            raise ValueError(f"no stack curve file {str(path)!r}")
+        rows = []
+        for line in path.read_text(encoding="utf-8").splitlines():
+            cells = [c.strip() for c in line.split(",")]
+            try:
+                rows.append((float(cells[0]), float(cells[1])))
+            except (ValueError, IndexError):
+                if rows:  # only a first line may be a header
+                    raise ValueError(f"{path}: cannot read the row {line!r}") from None
+        if not rows:
+            raise ValueError(f"{path}: no wavelength,transmission rows")
+        lams, vals = zip(*rows, strict=True)
+        return cls(tuple(lams), tuple(vals), f"{path.name}")
+
+
+@lru_cache(maxsize=1)
+def d5100_ir_cut() -> IRCut:
+    """The D5100's UV/IR cut, estimated from its red channel (module docstring): the logistic
+    edge whose product with silicon's QE best matches (least squares) the red curve's fall from
+    590 to 700 nm, both scaled to 1 at 590 nm."""
+    import colour
+
+    curves = colour.MSDS_CAMERA_SENSITIVITIES["Nikon 5100 (NPL)"]
+    lams = np.arange(590.0, 700.0 + 1e-9, 5.0)
+    red = np.interp(lams, curves.wavelengths, curves.values[:, 0])
+    red = red / red[0]
+    qe = SiliconQE(3.0)(lams)
+    qe = qe / qe[0]
+    best = (math.inf, 0.0, 0.0)
+    for edge in np.arange(600.0, 700.0 + 1e-9, 0.5):
+        for width in np.arange(1.0, 40.0 + 1e-9, 0.25):
+            cut = IRCut(float(edge), float(width))(lams)
+            model = cut * qe / (cut[0] * qe[0])
+            error = float(np.sum((model - red) ** 2))
+            if error < best[0]:
+                best = (error, float(edge), float(width))
+    return IRCut(best[1], best[2], source="fitted to the Nikon D5100's red channel (NPL)")
+
+
+def _lens() -> TabulatedCurve:
+    import colour
+
+    sd = colour.SDS_LENSES["ISO Standard Lens"]
+    values = np.clip(np.asarray(sd.values, float), 0.0, 1.0)
+    return TabulatedCurve(
+        tuple(float(v) for v in sd.wavelengths), tuple(values), "ISO 7589 standard lens"
+    )
+
+
+#: The named stack elements (see the module docstring).
+ELEMENTS: dict[str, Callable[[], Callable]] = {
+    "silicon": lambda: SiliconQE(3.0),
+    "ir-cut": d5100_ir_cut,
+    "lens": _lens,
+}
+
+
+@dataclass(frozen=True)
+class OpticalStack:
+    """Curves every pixel's light passes through; its transmission is their product."""
+
+    elements: tuple[Callable, ...]
+
+    def __call__(self, nm: Any) -> np.ndarray:
+        nm = np.asarray(nm, dtype=float)
+        if nm.min() < BAND[0] - 1e-9 or nm.max() > BAND[1] + 1e-9:
+            raise ValueError(f"a stack is defined on {BAND[0]:g}-{BAND[1]:g} nm")
+        out = np.ones_like(nm)
+        for element in self.elements:
+            values = np.asarray(element(nm), dtype=float)
+            if not np.all(np.isfinite(values)) or values.min() < 0 or values.max() > 1 + 1e-12:
+                raise ValueError(f"{element}: a transmission must lie within [0, 1]")
+            out = out * values
+        return out
+
+    def __str__(self) -> str:
+        return " × ".join(str(e) for e in self.elements) or "no stack"
+
+    def band_factors(self) -> np.ndarray:
+        """The stack's mean transmission over each colour's light (linear sRGB R, G, B)."""
+        return self(GRID) @ scene_basis(GRID)
+
+    def apply(self, pattern: Pattern) -> Pattern:
+        """``pattern`` behind this stack (module docstring), under the same name; its
+        metadata records the stack."""
+        pattern = check_pattern(pattern)
+        spectral = pattern.metadata.get("spectral")
+        if spectral is None:
+            kernels = np.asarray(pattern.kernels) * self.band_factors()[None, :, None, None]
+            return _renamed(pattern, kernels, self)
+        lams = np.asarray(spectral["wavelengths"], float)
+        kernels = np.asarray(spectral["kernels"], float)
+        t = self(lams)
+        measured = pattern.metadata.get("measured_splitters", [])
+        out = kernels * t[None, :, None, None]
+        for s in measured:
+            out[s] = _measured_filter(kernels[s], t) * t[:, None, None]
+        info = {k: v for k, v in pattern.metadata.items() if k not in ("spectral", "stack")}
+        stacked = SpectralPattern(
+            pattern.name,
+            pattern.layout,
+            lams,
+            out,
+            provenance=pattern.provenance,
+            description=pattern.description,
+            reference=pattern.reference,
+            metadata={**info, "stack": str(self)},
+        )
+        return stacked.to_pattern()
+
+
+def _measured_filter(kernel: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """A measured curve ``(L, kh, kw)`` (a filter already behind a camera's stack) divided by
+    the stack ``t`` where it passes at least :data:`DIVIDE_ABOVE`, scaled to peak at 1, and
+    clipped to [0, 1]; where the stack passes less, the measured curve itself."""
+    seen = t >= DIVIDE_ABOVE
+    ratio = np.where(seen[:, None, None], kernel / np.maximum(t, 1e-12)[:, None, None], kernel)
+    peak = ratio[seen].max() if seen.any() else 1.0
+    return np.clip(ratio / max(peak, 1e-12), 0.0, 1.0)
+
+
+def _renamed(pattern: Pattern, kernels: np.ndarray, stack: OpticalStack) -> Pattern:
+    from dataclasses import replace
+
+    return replace(pattern, kernels=kernels, metadata={**pattern.metadata, "stack": str(stack)})
+
+
+def stack_of(specs: Sequence[str]) -> OpticalStack:
+    """The stack of element names (:data:`ELEMENTS`) and CSV curve files.
+
+    Raises:
+        ValueError: An unknown element (the message lists the known ones) or a bad curve file.
+    """
+    elements = []
+    for spec in specs:
+        spec = spec.strip()
+        if spec.lower().endswith(".csv"):
+            elements.append(TabulatedCurve.read_csv(spec))
+        elif spec in ELEMENTS:
+            elements.append(ELEMENTS[spec]())
+        else:
+            raise ValueError(
+                f"unknown stack element {spec!r}; known: {', '.join(ELEMENTS)}, or a CSV file "
+                "of wavelength_nm,transmission rows"
+            )
+    return OpticalStack(tuple(elements))
