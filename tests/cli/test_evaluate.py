@@ -404,3 +404,17 @@ def test_the_srgb_main_job_leaves_the_photon_networks_out(tmp_path, capsys) -> N
     assert f"left out of this srgb-domain evaluation: {', '.join(linear)}" in out
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert {e["domain"] for e in summary.values()} == {"srgb"} and "net-D" in summary
+
+
+def test_each_pattern_named_is_read_once(tmp_path, monkeypatch):
+    """``--patterns D`` with the LMMSE and a network for any pattern: one read of ``D``."""
+    made = []
+    factory = patterns.NAMES["d"]
+    monkeypatch.setitem(patterns.NAMES, "d", lambda: made.append(1) or factory())
+    folder = tmp_path / "photos"
+    folder.mkdir()
+    Image.fromarray(np.full((21, 30, 3), 120, np.uint8)).save(folder / "x.png")
+    args = ["evaluate", "--method", "lmmse", "--model", "universal", "--patterns", "D"]
+    args += ["--datasets", str(folder), "--sigmas", "0", "--quiet", "--out", str(tmp_path / "e")]
+    assert main(args) == 0
+    assert len(made) == 1

@@ -204,15 +204,13 @@ def model_methods(
 
     universal = [spec for spec in models if model_serves_any_pattern(spec)]
     single = [build_model(spec, **options) for spec in models if spec not in universal]
-    # (as typed, read once) of each pattern: messages name a pattern as the user did.
-    given = [(p, patterns.read(p)) for p in pattern_specs] if universal else []
+    given = [patterns.read(p) for p in pattern_specs] if universal else []
     for spec in universal:
         wanted = list(given)
         if main_job:
             served = [m.pattern for m in single]
-            wanted = [g for g in wanted if not any(g[1].pattern.equals(s) for s in served)]
-            for typed, read in wanted:
-                name = read.label if isinstance(typed, patterns.Given) else typed
-                print(f"pattern {name} has no shipped network: reconstructed by the {spec} network")
-        single += [build_model(spec, pattern=read, **options) for _, read in wanted]
+            wanted = [g for g in wanted if not any(g.pattern.equals(s) for s in served)]
+            for g in wanted:
+                print(f"pattern {g} has no shipped network: reconstructed by the {spec} network")
+        single += [build_model(spec, pattern=g, **options) for g in wanted]
     return single

@@ -24,16 +24,15 @@ from ._common import (
 MAIN_JOB_MAX_SIZE = 256
 
 
-def _serves_one_of(model: str, specs: list[str]) -> bool:
-    """Whether a shipped model reconstructs one of the patterns ``specs``: a network for any
-    pattern does; a network of one pattern if it is among them."""
-    from .. import patterns
+def _serves_one_of(model: str, given: list) -> bool:
+    """Whether a shipped model reconstructs one of the patterns ``given`` (read already): a
+    network for any pattern does; a network of one pattern if it is among them."""
     from ..recon.loading import load_model, model_serves_any_pattern
 
     if model_serves_any_pattern(model):
         return True
     own = load_model(model).pattern
-    return any(patterns.get(spec).equals(own) for spec in specs)
+    return any(g.pattern.equals(own) for g in given)
 
 
 def _shipped_models() -> list[str]:
@@ -202,7 +201,7 @@ def run(args: argparse.Namespace) -> int:
     # on centre crops of the built-in photos (within 3 minutes on a 2-core CPU): the shipped
     # networks of the evaluation's light domain (srgb by default; linear: those trained on
     # photons in linear light).
-    models = _models(args, chosen)
+    models = _models(args, chosen)  # reads --patterns (args.given)
     max_size = args.max_size
     if max_size is None and not chosen and args.datasets == "default":
         max_size = MAIN_JOB_MAX_SIZE
@@ -211,10 +210,10 @@ def run(args: argparse.Namespace) -> int:
         *(args.method or ([] if chosen else ["lmmse", "malvar2004"])),
     ]
     warn_failed_runs([*args.checkpoint, *(args.method or [])])
-    methods = model_methods(models, args.patterns, main_job=not chosen, options=options)
+    methods = model_methods(models, args.given, main_job=not chosen, options=options)
     methods += build_methods(
         specs,
-        patterns_for_lmmse=args.patterns,
+        patterns_for_lmmse=args.given,
         lmmse_train=args.lmmse_train,
         tile=args.tile,
         precision=args.precision,
@@ -263,19 +262,21 @@ def _models(args: argparse.Namespace, chosen: bool) -> list[str]:
     """The shipped models to evaluate: those named, or for the main job every shipped network
     of the evaluation's light domain (of the patterns asked for, where ``--patterns`` is
     given; it defaults to the paper's)."""
+    from .. import patterns
     from ..recon.loading import model_names
     from ..recon.registry import model_domain
 
     given_patterns = args.patterns is not None
     if not given_patterns:
         args.patterns = list(PAPER_PATTERNS)
+    args.given = [patterns.read(p) for p in args.patterns]  # each pattern read once
     if chosen:
         return args.model
     models = model_names()
     if given_patterns:
         # The main job on the patterns asked for: their own networks and the network for any
         # pattern, not every shipped network.
-        models = [m for m in models if _serves_one_of(m, args.patterns)]
+        models = [m for m in models if _serves_one_of(m, args.given)]
         print(f"the main job on {', '.join(args.patterns)}: {', '.join(models) or 'no network'}")
     other = [m for m in models if model_domain(m) != args.domain]
     if other:

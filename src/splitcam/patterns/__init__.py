@@ -108,10 +108,15 @@ def get(name: str | Path | Pattern) -> Pattern:
 
 @dataclass(frozen=True)
 class Given:
-    """A pattern as a user named it: the pattern, and its label in tables."""
+    """A pattern as a user named it: the pattern, its label in tables, and the name or path as
+    typed (what messages repeat back)."""
 
     pattern: Pattern
     label: str
+    typed: str = ""
+
+    def __str__(self) -> str:
+        return self.typed or self.label
 
 
 def read(spec: str | Path | Pattern | Given) -> Given:
@@ -130,4 +135,4 @@ def read(spec: str | Path | Pattern | Given) -> Given:
     builtins = set(NAMES)
     from_file = isinstance(spec, (str, Path)) and str(spec).strip().lower() not in builtins
     label = Path(spec).name if from_file and pattern.name.lower() in builtins else pattern.name
-    return Given(pattern, label)
+    return Given(pattern, label, str(spec) if isinstance(spec, (str, Path)) else "")
