@@ -10,6 +10,7 @@ from dataclasses import dataclass
 
 import pytest
 import torch
+from conftest import tiny_config
 
 from splitcam import patterns
 from splitcam.cli import main
@@ -58,25 +59,10 @@ def toy(monkeypatch):
 
 def test_a_toy_noise_model_trains_simulates_reconstructs_and_evaluates(toy, image_folder, tmp_path):
     out = tmp_path / "run"
-    flags = {
-        "--pattern": "D",
-        "--noise": "dark-gaussian",
-        "--data": image_folder,
-        "--out": out,
-        "--val-split": 2,
-        "--val-images": 2,
-        "--val-crop": 32,
-        "--patch-size": 16,
-        "--batch-size": 4,
-        "--features": 8,
-        "--blocks": 1,
-        "--steps": 4,
-        "--warmup-steps": 2,
-        "--val-every": 4,
-        "--checkpoint-every": 4,
-        "--threads": 1,
-    }
-    assert main(["train", *[str(x) for kv in flags.items() for x in kv], "--quiet"]) == 0
+    steps = {"optim.steps": 4, "optim.warmup_steps": 2, "run.val_every": 4}
+    config = tiny_config(image_folder, out, **steps, **{"run.checkpoint_every": 4})
+    path = config.write(tmp_path / "toy.json")
+    assert main(["train", "--config", str(path), "--noise", "dark-gaussian", "--quiet"]) == 0
     rows = [json.loads(line) for line in (out / "metrics.jsonl").read_text().splitlines()]
     validated = [r for r in rows if "val_psnr_DG5" in r]
     assert [r["step"] for r in validated] == [0, 4]
