@@ -134,3 +134,21 @@ def test_design_against_a_frozen_network(tiny_universal):
     assert sum(after_db.values()) > sum(before_db.values())
     with pytest.raises(ValueError, match="needs a network"):
         design_pattern(patterns.get("D"), objective="network", steps=1)
+
+
+def test_design_settings_are_one_object_checked_once_and_recorded():
+    """``design_pattern(start, DesignSettings(...))`` and keyword changes design alike; bad
+    settings fail in DesignSettings; the designed pattern records them."""
+    from splitcam.design.kernels import DesignSettings
+
+    d = patterns.get("D")
+    settings = DesignSettings(steps=3, sigmas=(0.0, 10.0), radius=2)
+    a = design_pattern(d, settings)
+    b = design_pattern(d, steps=3, sigmas=[0.0, 10.0], radius=2)
+    assert a.pattern.equals(b.pattern) and a.history == b.history
+    assert a.pattern.metadata["steps"] == 3 and a.pattern.metadata["sigmas"] == [0.0, 10.0]
+    for bad, message in [({"steps": 0}, "steps"), ({"lr": -1.0}, "lr"), ({"objective": "x"}, "x")]:
+        with pytest.raises(ValueError, match=message):
+            DesignSettings(**bad)
+    with pytest.raises(TypeError, match="temperature"):
+        design_pattern(d, temperature=1.0)

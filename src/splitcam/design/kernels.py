@@ -36,6 +36,7 @@ __all__ = [
     "DEFAULT_STEPS",
     "OBJECTIVES",
     "DesignResult",
+    "DesignSettings",
     "closed_form_psnr",
     "design_pattern",
     "network_psnr",
@@ -143,23 +144,68 @@ def network_psnr(
         }
 
 
+@dataclass(frozen=True)
+class DesignSettings:
+    """How :func:`design_pattern` optimises (recorded in the designed pattern's metadata).
+
+    Attributes:
+        init: ``support``, ``exact`` or ``random`` (see
+            :class:`~splitcam.physics.sensor.LearnableSplitterSensor`).
+        sigmas: Noise levels (8-bit units) of the objective, each >= 0.
+        steps: Adam steps, >= 1.
+        lr: Adam learning rate on the logits, > 0.
+        seed: Seed of the ``random`` initialisation (and of the ``network`` objective's noise).
+        radius: LMMSE filter radius (filters are ``2r+1`` square).
+        objective: ``mse``, ``psnr`` or ``network`` (:data:`OBJECTIVES`).
+        batch_size: For ``network``: patches per step.
+    """
+
+    init: str = "support"
+    sigmas: tuple[float, ...] = tuple(DEFAULT_SIGMAS)
+    steps: int = DEFAULT_STEPS
+    lr: float = DEFAULT_LR
+    seed: int = 0
+    radius: int = DEFAULT_RADIUS
+    objective: str = "mse"
+    batch_size: int = 8
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "sigmas", tuple(check_sigmas(self.sigmas)))
+        check_count(self.steps, "steps", 1)
+        lr = self.lr
+        if (
+            isinstance(lr, bool)
+            or not isinstance(lr, (int, float))
+            or not (math.isfinite(lr) and lr > 0)
+        ):
+            raise ValueError(f"expected lr as a finite number > 0, got {lr!r}")
+        check_count(self.radius, "radius", 0)
+        if self.objective not in OBJECTIVES:
+            raise ValueError(
+                f"expected objective to be one of {', '.join(OBJECTIVES)}, got {self.objective!r}"
+            )
+
+    def record(self) -> dict[str, Any]:
+        """The settings a designed pattern's metadata keeps."""
+        return {"init": self.init, "seed": self.seed, "sigmas": list(self.sigmas)} | {
+            "objective": self.objective,
+            "steps": self.steps,
+            "lr": float(self.lr),
+            "radius": self.radius,
+        }
+
+
 def design_pattern(
     start: Pattern,
+    settings: DesignSettings | None = None,
     *,
-    init: str = "support",
-    sigmas: Iterable[float] | torch.Tensor = DEFAULT_SIGMAS,
-    steps: int = DEFAULT_STEPS,
-    lr: float = DEFAULT_LR,
-    seed: int = 0,
-    radius: int = DEFAULT_RADIUS,
     statistics: ImageStatistics | None = None,
-    objective: str = "mse",
     name: str | None = None,
     threads: int | None = 1,
     progress: bool = False,
     network: torch.nn.Module | None = None,
     patches: Any = None,
-    batch_size: int = 8,
+    **changes: Any,
 ) -> DesignResult:
     """Optimise a pattern's kernels for the closed-form LMMSE, averaged over ``sigmas``, or for
     a network of any pattern (``objective="network"``).
@@ -177,28 +223,19 @@ def design_pattern(
     Args:
         start: Starting pattern; its layout and kernel size are kept. Colour filters (kernels
             summing below 1, e.g. ``bayer``) are refused.
-        init: ``support``, ``exact`` or ``random`` (see
-            :class:`~splitcam.physics.sensor.LearnableSplitterSensor`).
-        sigmas: Noise levels (8-bit units) of the objective, each >= 0: a sequence, a range or
-            a 1-D tensor.
-        steps: Adam steps, >= 1.
-        lr: Adam learning rate on the logits, > 0.
-        seed: Seed of the ``random`` initialisation.
-        radius: LMMSE filter radius (filters are ``2r+1`` square).
+        settings: How to optimise (:class:`DesignSettings`; default its defaults).
         statistics: Image statistics (default: the shipped ones).
-        objective: ``mse`` (the mean closed-form MSE over the sigmas), ``psnr`` (the mean
-            closed-form PSNR) or ``network``; see :data:`OBJECTIVES`.
         network: For ``network``: the frozen network (called ``network(raw, sigma, kernels)``;
             gradients reach the kernels through its LMMSE estimate, its data-consistency
             residual and its kernel encoder).
         patches: For ``network``: where training patches come from (an object with
             ``sample(n) -> (n, 3, h, w)``, e.g. :class:`~splitcam.data.patches.PatchSampler`).
-        batch_size: For ``network``: patches per step.
         name: Name of the designed pattern (default ``<start>-designed``).
         threads: Intra-op threads during the optimisation (restored afterwards; ``None`` leaves
             them). The problem is small: on a 2-core CPU with other work running, a step takes
             11 ms with 1 thread and 800 ms with 2 (threads waiting for each other).
         progress: Show a progress bar (tqdm).
+        changes: Fields of ``settings`` to change (``steps=5``, ``sigmas=[0, 10]``...).
 
     Raises:
         ValueError: Bad ``init``, ``sigmas``, ``steps``, ``lr``, ``radius`` or ``objective``;
@@ -216,10 +253,16 @@ def design_pattern(
     True
     """
     start = check_pattern(start, "start")
-    sigma_list = check_sigmas(sigmas)
-    _check_design(
-        steps, lr, radius, objective, threads, network is not None and patches is not None
-    )
+    try:
+        settings = dataclasses.replace(settings or DesignSettings(), **changes)
+    except TypeError as exc:  # a change that is not a setting
+        raise TypeError(f"design_pattern(): {exc}") from None
+    if threads is not None:
+        check_count(threads, "threads", 1)
+    if settings.objective == "network" and (network is None or patches is None):
+        raise ValueError("objective 'network' needs a network and training patches")
+    init, seed, objective = settings.init, settings.seed, settings.objective
+    sigma_list, radius = list(settings.sigmas), settings.radius
     stats = statistics if statistics is not None else shipped_image_statistics()
     sig = torch.tensor(sigma_list, dtype=torch.float64)
     generator = torch.Generator().manual_seed(seed)
@@ -237,23 +280,21 @@ def design_pattern(
     def value_of(step: int) -> torch.Tensor:
         if objective == "network":
             sigma = sigma_list[step % len(sigma_list)]
-            return _network_db(sensor, network, patches.sample(batch_size), sigma, noise)
+            return _network_db(sensor, network, patches.sample(settings.batch_size), sigma, noise)
         return _objective_db(mse_of(sensor.pixel_kernels()), objective)
 
     history, seconds = ascend(
         [sensor.logits],
         value_of,
-        steps=steps,
-        lr=lr,
+        steps=settings.steps,
+        lr=settings.lr,
         threads=threads,
         progress=f"design from {start.name} ({init})" if progress else None,
     )
     designed = sensor.to_pattern(name or f"{start.name}-designed")
     with torch.no_grad():
         after = mse_of(designed)
-    settings = {"init": init, "seed": seed, "sigmas": sigma_list, "objective": objective}
-    settings |= {"steps": steps, "lr": float(lr), "radius": radius}
-    designed = _with_provenance(designed, start, settings)
+    designed = _with_provenance(designed, start, settings.record())
     return DesignResult(
         pattern=designed,
         start=start,
@@ -266,28 +307,6 @@ def design_pattern(
         seconds=seconds,
         logits=sensor.logits.detach().clone(),
     )
-
-
-def _check_design(
-    steps: Any, lr: Any, radius: Any, objective: Any, threads: Any, has_network: bool
-) -> None:
-    """The checks of :func:`design_pattern`'s settings (its Raises)."""
-    check_count(steps, "steps", 1)
-    if (
-        isinstance(lr, bool)
-        or not isinstance(lr, (int, float))
-        or not (math.isfinite(lr) and lr > 0)
-    ):
-        raise ValueError(f"expected lr as a finite number > 0, got {lr!r}")
-    check_count(radius, "radius", 0)
-    if objective not in OBJECTIVES:
-        raise ValueError(
-            f"expected objective to be one of {', '.join(OBJECTIVES)}, got {objective!r}"
-        )
-    if threads is not None:
-        check_count(threads, "threads", 1)
-    if objective == "network" and not has_network:
-        raise ValueError("objective 'network' needs a network and training patches")
 
 
 def _with_provenance(designed: Pattern, start: Pattern, settings: dict[str, Any]) -> Pattern:
