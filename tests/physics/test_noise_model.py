@@ -156,3 +156,31 @@ def test_one_level_for_the_batch_gives_the_maps_of_one_per_image():
     assert torch.equal(noise_level_map(raw, sigmas, (2, 2)), as_tensor)
     with pytest.raises(ValueError, match="expected 1 or 3 noise levels, got 2"):
         noise_level_map(raw, [Exposure(50.0)] * 2, (2, 2))
+
+
+def test_a_batchs_levels_are_one_object_read_from_any_form():
+    """NoiseLevels.of reads numbers, noise models, tensors and lists alike; what the LMMSE and
+    the networks ask of a batch equals asking each level on its own."""
+    from splitcam.physics.noise import Exposure, Gaussian, NoiseLevels
+
+    assert NoiseLevels.of(5) == [Gaussian(5.0)]
+    assert NoiseLevels.of(torch.tensor([3.0, 7.0])) == [Gaussian(3.0), Gaussian(7.0)]
+    mixed = NoiseLevels.of([4.0, Exposure(50.0, read_noise=1.0)])
+    assert NoiseLevels.of(mixed) is mixed and mixed.shared is None
+    assert NoiseLevels.of([Gaussian(2.0)] * 3).shared == Gaussian(2.0)
+    naive = [level.variance_coefficients() for level in mixed]
+    assert mixed.variance_coefficients().tolist() == [list(c) for c in naive]
+    cells = torch.rand(2, 4, 5, 6, generator=torch.Generator().manual_seed(0))
+    per_image = torch.cat([lv.level_map(cells[i : i + 1]) for i, lv in enumerate(mixed)])
+    torch.testing.assert_close(mixed.level_map(cells), per_image, rtol=0, atol=0)
+    sigmas = NoiseLevels.of([1.0, 9.0])
+    torch.testing.assert_close(
+        sigmas.level_map(cells),
+        torch.cat([Gaussian(s).level_map(cells[i : i + 1]) for i, s in enumerate((1.0, 9.0))]),
+        rtol=0,
+        atol=0,
+    )
+    with pytest.raises(ValueError, match="expected 1 or 3 noise levels, got 2"):
+        mixed.for_batch(3)
+    with pytest.raises(ValueError, match="one or more noise levels"):
+        NoiseLevels.of([])

@@ -41,6 +41,7 @@ from ..checks import check_count
 
 __all__ = [
     "NoiseModel",
+    "NoiseLevels",
     "Gaussian",
     "as_noise",
     "level_heading",
@@ -279,6 +280,73 @@ def check_level(level: Any) -> float | NoiseModel:
     """A noise level: a :class:`NoiseModel` as it is, anything else through
     :func:`check_sigma` (a Gaussian sigma in 8-bit units)."""
     return level if isinstance(level, NoiseModel) else check_sigma(level)
+
+
+class NoiseLevels(list):
+    """The noise levels of a batch as one object: one :class:`NoiseModel` per image, or one for
+    the whole batch. :meth:`of` reads every form a caller may give (a number, a noise model, a
+    1-D tensor of sigmas, a list of either); what the LMMSE and the networks need of a batch is
+    asked of it (:meth:`variance_coefficients`, :meth:`level_map`), so no other module converts
+    levels.
+
+    >>> levels = NoiseLevels.of([5, Exposure(100.0)])
+    >>> [lv.label() for lv in levels], levels.shared is None
+    (['5', 'N100'], True)
+    """
+
+    @classmethod
+    def of(cls, levels: Any) -> NoiseLevels:
+        """A batch's levels from a number or noise model (one for the batch), a tensor of
+        sigmas (8-bit units), or a list or tuple of numbers and noise models.
+
+        Raises:
+            TypeError, ValueError: A level that is neither a noise model nor a valid sigma, or
+                no level at all.
+        """
+        if isinstance(levels, NoiseLevels):
+            return levels
+        if isinstance(levels, torch.Tensor):
+            levels = levels.detach().reshape(-1).to("cpu", torch.float64).tolist()
+        if isinstance(levels, (list, tuple)):
+            if not levels:
+                raise ValueError("expected one or more noise levels, got none")
+            return cls(as_noise(lv) for lv in levels)
+        return cls([as_noise(levels)])
+
+    @property
+    def shared(self) -> NoiseModel | None:
+        """The batch's one level, where every image has the same; else None."""
+        return self[0] if all(lv == self[0] for lv in self[1:]) else None
+
+    def for_batch(self, n: int) -> NoiseLevels:
+        """These levels checked against a batch of ``n`` images: one, or one per image.
+
+        Raises:
+            ValueError: Neither.
+        """
+        if len(self) not in (1, n):
+            raise ValueError(f"expected 1 or {n} noise levels, got {len(self)}")
+        return self
+
+    def variance_coefficients(self) -> torch.Tensor:
+        """``(len, 2)`` float64: each level's ``(a, b)``
+        (:meth:`NoiseModel.variance_coefficients`)."""
+        return torch.tensor([lv.variance_coefficients() for lv in self], dtype=torch.float64)
+
+    def level_map(self, cells: torch.Tensor) -> torch.Tensor:
+        """The noise level a network is told, ``(N, 1, h, w)``, from the raw image's period
+        cells ``(N, P, h, w)``: each image's :meth:`NoiseModel.level_map` (one map where the
+        batch shares one level; Gaussian sigmas as one tensor)."""
+        n = cells.shape[0]
+        self.for_batch(n)
+        shared = self.shared
+        if shared is not None:
+            return shared.level_map(cells)
+        if all(isinstance(lv, Gaussian) for lv in self):
+            sigma = torch.tensor([lv.sigma for lv in self], dtype=torch.float64)
+            sigma = sigma.to(dtype=cells.dtype, device=cells.device)
+            return sigma.view(n, 1, 1, 1).expand(n, 1, *cells.shape[-2:])
+        return torch.cat([lv.level_map(cells[i : i + 1]) for i, lv in enumerate(self)])
 
 
 def evaluation_seed(image_name: str, sigma: float) -> int:

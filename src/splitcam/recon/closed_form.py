@@ -43,7 +43,7 @@ from ..io.tensorfiles import load_pair, save_pair
 from ..io.weights import IMAGE_STATISTICS, IMAGE_STATISTICS_LINEAR
 from ..patterns import Pattern, check_pattern, get
 from ..physics.light import check_domain, srgb_to_linear
-from ..physics.noise import NoiseModel, as_noise, check_level
+from ..physics.noise import NoiseLevels, NoiseModel, check_level
 from ..physics.sensor import pattern_pixel_kernels
 from .lmmse import DEFAULT_RADIUS, LMMSE, LMMSEFileError, apply_filters
 
@@ -369,17 +369,11 @@ def _as_kernels(pattern_or_kernels: Pattern | torch.Tensor) -> torch.Tensor:
 def _as_sigmas(sigma: Any) -> tuple[torch.Tensor, bool]:
     """Noise level(s) → ``((S, 2) variance coefficients, several?)``: a sigma (8-bit units) or
     a :class:`~splitcam.physics.noise.NoiseModel`, a 1-D tensor of sigmas, or a list of
-    levels."""
-    if isinstance(sigma, (list, tuple)) and sigma:
-        coefficients = [as_noise(s).variance_coefficients() for s in sigma]
-        return torch.tensor(coefficients, dtype=torch.float64), True
-    if isinstance(sigma, torch.Tensor) and sigma.ndim == 1:
-        if not torch.isfinite(sigma).all() or bool((sigma < 0).any()):
-            raise ValueError("expected finite sigmas >= 0")
-        s = sigma.detach().to(torch.float64)
-        return torch.stack([torch.zeros_like(s), (s / 255.0) ** 2], 1), True
-    level = as_noise(sigma.item() if isinstance(sigma, torch.Tensor) else sigma)
-    return torch.tensor([level.variance_coefficients()], dtype=torch.float64), False
+    levels (:class:`~splitcam.physics.noise.NoiseLevels`)."""
+    several = isinstance(sigma, (list, tuple)) or (
+        isinstance(sigma, torch.Tensor) and sigma.ndim == 1
+    )
+    return NoiseLevels.of(sigma).variance_coefficients(), several
 
 
 def closed_form_filters(
@@ -538,17 +532,8 @@ def lmmse_estimate(
         - raw: ``(N, 1, H, W)``; output ``(N, 3, H, W)``.
     """
     ph, pw = kernels.shape[:2]
-    if isinstance(sigma, (list, tuple)):  # photon model: one Exposure per image
-        if len(set(sigma)) == 1:
-            sigma = sigma[0]
-        elif len(sigma) != raw.shape[0]:
-            raise ValueError(f"expected 1 or {raw.shape[0]} exposures, got {len(sigma)}")
-    if isinstance(sigma, torch.Tensor):
-        sigma = sigma.detach().reshape(-1).to("cpu", torch.float64)
-        if sigma.numel() > 1 and bool((sigma == sigma[0]).all()):
-            sigma = sigma[:1]
-        if sigma.numel() not in (1, raw.shape[0]):
-            raise ValueError(f"expected 1 or {raw.shape[0]} noise levels, got {sigma.numel()}")
+    levels = NoiseLevels.of(sigma).for_batch(raw.shape[0])
+    sigma = levels.shared if levels.shared is not None else levels
     with torch.autocast(raw.device.type, enabled=False):
         # One solve for every noise level of the batch, then one grouped convolution.
         weights, bias = closed_form_filters(

@@ -31,7 +31,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from ..checks import check_count, check_period, check_raw
-from ..physics.noise import NoiseModel, as_noise
+from ..physics.noise import NoiseLevels, NoiseModel
 from ..physics.periodic import period_shuffle, period_unshuffle, phase_conv, phase_map
 from .closed_form import ImageStatistics, lmmse_estimate, shipped_image_statistics
 from .lmmse import DEFAULT_RADIUS
@@ -523,19 +523,8 @@ def noise_level_map(
     :meth:`~splitcam.physics.noise.NoiseModel.level_map` (the photon model's ``255 sqrt(a g +
     b)``, with the raw value as each pixel's signal, averaged over each period cell).
     """
-    n = raw.shape[0]
     cells = period_unshuffle(raw, period)
-    shape = (n, 1, *cells.shape[-2:])
-    if isinstance(sigma, torch.Tensor):
-        sig = sigma.to(dtype=raw.dtype, device=raw.device).reshape(-1)
-        sig = sig.expand(n) if sig.numel() == 1 else sig
-        return sig.view(n, 1, 1, 1).expand(shape)
-    levels = [as_noise(s) for s in (sigma if isinstance(sigma, (list, tuple)) else [sigma])]
-    if len(levels) not in (1, n):
-        raise ValueError(f"expected 1 or {n} noise levels, got {len(levels)}")
-    if len(set(levels)) == 1:  # one level for the batch (training draws one per batch): one map
-        return levels[0].level_map(cells)
-    return torch.cat([lv.level_map(cells[i : i + 1]) for i, lv in enumerate(levels)])
+    return NoiseLevels.of(sigma).level_map(cells)
 
 
 #: Network classes by their ``config()["arch"]`` name.
