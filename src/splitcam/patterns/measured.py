@@ -89,8 +89,5 @@ def measured_array(kind: str, camera: str) -> Pattern:
         f"by NPL ({grid[0]:g}-{grid[-1]:g} nm; splitcam.patterns.measured)",
         reference="NPL camera spectral sensitivities, in colour-science "
         "(colour.MSDS_CAMERA_SENSITIVITIES)",
-        # The splitters whose curves hold the camera's own lens, cut and silicon response
-        # (splitcam.physics.stack divides them out before putting a sensor behind a stack).
-        metadata={"measured_splitters": [s for s in range(len(used)) if used[s] != 0]},
     )
     return spectral.to_pattern()

@@ -206,9 +206,8 @@ class OpticalStack:
         lams = np.asarray(spectral["wavelengths"], float)
         kernels = np.asarray(spectral["kernels"], float)
         t = self(lams)
-        measured = pattern.metadata.get("measured_splitters", [])
         out = kernels * t[None, :, None, None]
-        for s in measured:
+        for s in _measured_filters(pattern, kernels):
             out[s] = _measured_filter(kernels[s], t) * t[:, None, None]
         info = {k: v for k, v in pattern.metadata.items() if k not in ("spectral", "stack")}
         stacked = SpectralPattern(
@@ -222,6 +221,15 @@ class OpticalStack:
             metadata={**info, "stack": str(self)},
         )
         return stacked.to_pattern()
+
+
+def _measured_filters(pattern: Pattern, kernels: np.ndarray) -> list[int]:
+    """The splitters of a measured array (:mod:`splitcam.patterns.measured`, provenance
+    ``measured filters``) that are filters: all but the bare W pixel (a kernel of 1 at every
+    wavelength)."""
+    if not pattern.provenance.startswith("measured filters"):
+        return []
+    return [s for s in range(len(kernels)) if not np.allclose(kernels[s], 1.0)]
 
 
 def _measured_filter(kernel: np.ndarray, t: np.ndarray) -> np.ndarray:
