@@ -23,6 +23,7 @@ def test_registry_names_and_case_insensitive_lookup():
         "router-zou",
         "router-best",
         "router-best-fullwave",
+        "router-best-fullwave-f2",
         "router-zou-fullwave",
         "router-zou-fullwave-f2",
         "bayer-d5100",
