@@ -23,7 +23,12 @@ from splitcam.viz.charts import difference_chart
 
 ROOT = Path(__file__).resolve().parents[2]
 NET = "net-universal-photon-"
-ROUTERS = ("router-best-fullwave", "router-zou-fullwave", "router-zou-fullwave-f2")
+ROUTERS = (
+    "router-best-fullwave",
+    "router-best-fullwave-f2",
+    "router-zou-fullwave",
+    "router-zou-fullwave-f2",
+)
 ARRAYS = ("rgbw-d5100", "bayer-d5100")
 
 

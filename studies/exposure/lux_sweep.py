@@ -23,7 +23,12 @@ from splitcam.evaluation.tables import markdown_table
 from splitcam.io import write_text
 from splitcam.physics.radiometry import Camera
 
-ROUTERS = ["router-best-fullwave", "router-zou-fullwave", "router-zou-fullwave-f2"]
+ROUTERS = [
+    "router-best-fullwave",
+    "router-best-fullwave-f2",
+    "router-zou-fullwave",
+    "router-zou-fullwave-f2",
+]
 REFERENCES = ["rgbw-d5100", "bayer-d5100"]
 ILLUMINANTS = {"D65": "D65 daylight", "A": "CIE A tungsten", "LED": "white LED (LED-B3)"}
 PITCHES = (0.6, 0.8, 1.0)
