@@ -132,3 +132,22 @@ def test_study_exposure_gives_crossovers_per_scene_set(tmp_path) -> None:
     records = json_load(tmp_path / "o" / "exposure.json")["crossovers"]
     assert {r["scene_set"] for r in records} == {"all", "city", "forest"}
     assert {r["images"] for r in records} == {4, 2}
+
+
+def test_study_exposure_restart_discards_scores_of_other_weights(tmp_path, capsys) -> None:
+    """A folder whose scores were made by another method of the same name is refused (one
+    line, naming --restart); with --restart the study starts it afresh."""
+    args = ["study", "exposure", "--max-images", "1", "--crop", "32", "--photons", "30"]
+    args += ["--patterns", "D", "--quiet", "--out", str(tmp_path)]
+    assert main(args) == 0
+    meta = tmp_path / "evaluation" / "evaluation.json"
+    saved = json.loads(meta.read_text())
+    saved["fingerprints"] = {k: "0" * 16 for k in saved["fingerprints"]}  # "other weights"
+    meta.write_text(json.dumps(saved))
+    capsys.readouterr()
+    assert main(args) == 1
+    assert "--restart" in capsys.readouterr().err
+    assert main([*args, "--restart"]) == 0
+    assert json.loads(meta.read_text())["fingerprints"] != saved["fingerprints"]
+    assert main(["study", "breakeven", "--restart", "--out", str(tmp_path / "b")]) == 1
+    assert "--restart is for study exposure" in capsys.readouterr().err

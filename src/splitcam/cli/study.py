@@ -99,6 +99,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     _add_camera_options(p)
     p.add_argument("--out", help="default results/exposure or results/breakeven")
+    p.add_argument(
+        "--restart",
+        action="store_true",
+        help="exposure: discard the scores OUT/evaluation holds (a study of other weights) "
+        "instead of continuing them",
+    )
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.set_defaults(handler=run)
 
@@ -148,6 +154,8 @@ def run(args: argparse.Namespace) -> int:
         )
     if args.stack and args.study == "breakeven":
         raise ValueError("--stack is for study exposure; study breakeven takes none")
+    if args.restart and args.study == "breakeven":
+        raise ValueError("--restart is for study exposure; study breakeven keeps no scores")
     args.optical_stack = _stack(args.stack)
     qe = SiliconQE(args.silicon_depth) if args.silicon_depth is not None else None
     args.camera = Camera(args.pitch, args.f_number, args.exposure_time, args.illuminant, qe=qe)
@@ -256,6 +264,7 @@ def _run_exposure(args: argparse.Namespace, images: list, names: str, photons: l
         domain=args.domain,
         out=Path(out) / "evaluation",
         scene_sets=args.scene_sets,
+        restart=args.restart,
     )
     snr = (
         raw_snr_check(images, patterns=loaded, domain=args.domain)

@@ -80,6 +80,7 @@ def exposure_study(
     domain: str = LINEAR,
     out: str | os.PathLike[str] | None = None,
     scene_sets: dict[str, str] | None = None,
+    restart: bool = False,
     **settings: Any,
 ) -> dict[str, dict[float, dict[str, float]]]:
     """``{label: {photons: {"psnr", "ssim", "ciede2000"}}}``: the closed-form LMMSE of each
@@ -92,7 +93,8 @@ def exposure_study(
     It is :func:`~splitcam.evaluation.protocol.evaluate` at the photon model's exposures, so
     the numbers are the protocol's; with ``out``, its files are written there as each image is
     scored, and a run interrupted and started again with the same ``out`` continues where it
-    stopped (results of the same method, image, exposure and sensor are reused).
+    stopped (results of the same method, image, exposure and sensor are reused); ``restart``
+    discards the results ``out`` holds instead (for instance those of other weights).
     ``scene_sets``: ``{image name: scene set}`` (Kodak24, McMaster, ...), so that crossovers
     are also given per set (:func:`write_study`); the images are scored as one set either way.
 
@@ -117,6 +119,7 @@ def exposure_study(
         out,
         progress=progress,
         domain=domain,
+        resume=not restart,
     )
     results: dict[str, dict[float, dict[str, Any]]] = {}
     for method in todo:
