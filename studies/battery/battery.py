@@ -77,7 +77,9 @@ class Shell:
             if command.startswith("splitcam ")
             else command
         )
-        self.log.append(command)
+        data = self.env.get("SPLITCAM_DATA")
+        # Logged as a user would type it: the data folder by its variable, not this machine's path.
+        self.log.append(command.replace(data, "$SPLITCAM_DATA") if data else command)
         result = subprocess.run(
             line,
             shell=True,
