@@ -138,6 +138,7 @@ def make_report(results: list[str | os.PathLike], out: str | os.PathLike) -> Pat
     out = Path(out)
     (out / "patterns").mkdir(parents=True, exist_ok=True)
     entries = _load(results)
+    sigmas = sorted({s for _, _, e, _ in entries for s in e["all"]}, key=level_key)
     lines = [
         "# splitcam report",
         "",
@@ -149,8 +150,20 @@ def make_report(results: list[str | os.PathLike], out: str | os.PathLike) -> Pat
         "",
         domain_line(e.get("domain", SRGB) for _, _, e, _ in entries),
         "",
+        *_score_tables(entries, sigmas),
+        "",
+        "## Patterns",
+        "",
+        *_pattern_figures(entries, out / "patterns"),
+        *_curve_charts(entries, sigmas, out),
     ]
-    sigmas = sorted({s for _, _, e, _ in entries for s in e["all"]}, key=level_key)
+    report = out / "report.md"
+    write_text(report, "\n".join(lines) + "\n")
+    return report
+
+
+def _score_tables(entries: list, sigmas: list[str]) -> list[str]:
+    """PSNR / SSIM per level (with the paper's where comparable), then CIEDE2000."""
     headings = [level_heading(s) for s in sigmas]
     rows = []
     for folder, method, entry, pattern in entries:
@@ -168,7 +181,7 @@ def make_report(results: list[str | os.PathLike], out: str | os.PathLike) -> Pat
             cells.append(cell)
         n = max(st["n_images"] for st in entry["all"].values())
         rows.append([folder, method, pattern.name, str(n), *cells])
-    lines += markdown_table(["result", "method", "pattern", "images", *headings], rows)
+    lines = markdown_table(["result", "method", "pattern", "images", *headings], rows)
     lines += ["", "## CIEDE2000 (lower is better)", ""]
     rows = [
         [
@@ -178,8 +191,12 @@ def make_report(results: list[str | os.PathLike], out: str | os.PathLike) -> Pat
         ]
         for folder, method, entry, _ in entries
     ]
-    lines += markdown_table(["result", "method", *headings], rows)
-    lines += ["", "## Patterns", ""]
+    return lines + markdown_table(["result", "method", *headings], rows)
+
+
+def _pattern_figures(entries: list, folder: Path) -> list[str]:
+    """One figure per distinct pattern (two different patterns of one name get one each)."""
+    lines: list[str] = []
     drawn: list[tuple[patterns.Pattern, str]] = []
     for *_, pattern in entries:
         if any(pattern.equals(p) and pattern.name == p.name for p, _ in drawn):
@@ -190,9 +207,16 @@ def make_report(results: list[str | os.PathLike], out: str | os.PathLike) -> Pat
         while name in taken:
             name, k = f"{pattern.name}-{k}", k + 1
         drawn.append((pattern, name))
-        path = out / "patterns" / f"{name}.png"
+        path = folder / f"{name}.png"
         draw_pattern(pattern, path)
         lines.append(f"![pattern {name}](patterns/{path.name})")
+    return lines
+
+
+def _curve_charts(entries: list, sigmas: list[str], out: Path) -> list[str]:
+    """The charts against noise (with the paper's curves) and against exposure, where the
+    results hold such levels."""
+    lines: list[str] = []
     several = len({f for f, *_ in entries}) > 1
     curves = [
         (f"{folder}: {method}" if several else method, entry["all"])
@@ -230,9 +254,7 @@ def make_report(results: list[str | os.PathLike], out: str | os.PathLike) -> Pat
             title="at equal exposure (photon model)",
         )
         lines += ["", "## PSNR and CIEDE2000 against exposure", "", f"![exposure]({chart.name})"]
-    report = out / "report.md"
-    write_text(report, "\n".join(lines) + "\n")
-    return report
+    return lines
 
 
 #: The curves of the paper's Fig. 9, by the names of its rows.
