@@ -275,9 +275,102 @@ def _ranks(values: dict[str, float]) -> dict[str, int]:
     return {k: order.index(k) + 1 for k in values}
 
 
-def checks(summary: dict, rows: dict[str, str], sigmas: list[str]) -> list[tuple[str, bool, str]]:
-    """The paper's conclusions (model.md §8), each ``(statement, holds, the numbers)``, on
-    the mean over all images. ``rows`` maps paper row names to method names in ``summary``."""
+Check = tuple[str, bool, str]
+
+
+def _d_ahead_of_a(at, sigmas: list[str], have) -> list[Check]:
+    if not have("A", "D"):
+        return []
+    d = [at("D", s) - at("A", s) for s in sigmas]
+    return [("D ahead of A at every σ", all(x > 0 for x in d), "D − A: " + _db(d))]
+
+
+def _b_and_c_last(at, sigmas: list[str], have) -> list[Check]:
+    if not have("A", "B", "C", "D"):
+        return []
+    # With E not yet evaluated the ranking is among the four there are: B and C last among
+    # A-D is what "last of A-E" requires of them (E is third in the paper).
+    present = [k for k in TABLE1_PATTERNS if have(k)]
+    among = "" if len(present) == len(TABLE1_PATTERNS) else f" (among {', '.join(present)})"
+    bottom = {len(present) - 1, len(present)}
+    last = []
+    for s in sigmas:
+        ranks = _ranks({k: at(k, s) for k in present})
+        last.append({ranks["B"], ranks["C"]} == bottom)
+    spread = {k: at(k, sigmas[0]) - at(k, sigmas[-1]) for k in present}
+    flat = max(spread["B"], spread["C"]) < min(spread["A"], spread["D"])
+    drops = ", ".join(f"{k} {v:.2f}" for k, v in spread.items())
+    return [
+        (
+            "B and C last at every σ" + among,
+            all(last),
+            f"last two at {sum(last)} of {len(sigmas)} σ",
+        ),
+        (
+            "B and C nearly flat in σ (drop smaller than A's and D's)",
+            flat,
+            f"drop σ={sigmas[0]}→{sigmas[-1]}: {drops} dB",
+        ),
+    ]
+
+
+def _optimised_ahead(at, sigmas: list[str], have) -> list[Check]:
+    out = []
+    for start in ("A", "D"):
+        opt = f"{start} optimised"
+        if have(start, opt):
+            d = [at(opt, s) - at(start, s) for s in sigmas]
+            out.append((f"{opt} ahead of {start} at every σ", all(x > 0 for x in d), _db(d)))
+    return out
+
+
+def _optimised_ahead_of_bayer(at, sigmas: list[str], have) -> list[Check]:
+    if not have("D optimised", "bayer"):
+        return []
+    dp = [at("D optimised", s) - at("bayer", s) for s in sigmas]
+    dc = [at("D optimised", s, "ciede2000") - at("bayer", s, "ciede2000") for s in sigmas]
+    return [
+        ("D optimised ahead of bayer in PSNR at every σ", all(x > 0 for x in dp), _db(dp)),
+        (
+            "D optimised ahead of bayer in CIEDE2000 at every σ",
+            all(x < 0 for x in dc),
+            ", ".join(f"{x:+.3f}" for x in dc),
+        ),
+    ]
+
+
+def _random_start_close(at, sigmas: list[str], have) -> list[Check]:
+    if not have("D optimised", FIG9[3]):
+        return []
+    d = [at(FIG9[3], s) - at("D optimised", s) for s in sigmas]
+    return [
+        (
+            "D optimised from random within 0.3 dB of D optimised",
+            all(abs(x) <= 0.3 for x in d),
+            _db(d),
+        )
+    ]
+
+
+def _db(values: list[float]) -> str:
+    return ", ".join(f"{x:+.2f}" for x in values) + " dB"
+
+
+#: The paper's conclusions, each a function ``(at, sigmas, have) -> [(statement, holds,
+#: numbers)]`` that says nothing when its rows are missing; in the order of the report.
+CONCLUSIONS = (
+    _d_ahead_of_a,
+    _b_and_c_last,
+    _optimised_ahead,
+    _optimised_ahead_of_bayer,
+    _random_start_close,
+)
+
+
+def checks(summary: dict, rows: dict[str, str], sigmas: list[str]) -> list[Check]:
+    """The paper's conclusions (model.md §8, :data:`CONCLUSIONS`), each ``(statement, holds,
+    the numbers)``, on the mean over all images. ``rows`` maps paper row names to method names
+    in ``summary``."""
 
     def at(row: str, s: str, metric: str = "psnr") -> float | None:
         method = rows.get(row)
@@ -287,86 +380,7 @@ def checks(summary: dict, rows: dict[str, str], sigmas: list[str]) -> list[tuple
     def have(*names: str) -> bool:
         return all(at(n, s) is not None for n in names for s in sigmas)
 
-    out: list[tuple[str, bool, str]] = []
-    if have("A", "D"):
-        d = [at("D", s) - at("A", s) for s in sigmas]
-        out.append(
-            (
-                "D ahead of A at every σ",
-                all(x > 0 for x in d),
-                "D − A: " + ", ".join(f"{x:+.2f}" for x in d) + " dB",
-            )
-        )
-    if have("A", "B", "C", "D"):
-        # With E not yet evaluated the ranking is among the four there are: B and C last among
-        # A-D is what "last of A-E" requires of them (E is third in the paper).
-        present = [k for k in TABLE1_PATTERNS if have(k)]
-        among = "" if len(present) == len(TABLE1_PATTERNS) else f" (among {', '.join(present)})"
-        bottom = {len(present) - 1, len(present)}
-        last = []
-        for s in sigmas:
-            ranks = _ranks({k: at(k, s) for k in present})
-            last.append({ranks["B"], ranks["C"]} == bottom)
-        spread = {k: at(k, sigmas[0]) - at(k, sigmas[-1]) for k in present}
-        flat = max(spread["B"], spread["C"]) < min(spread["A"], spread["D"])
-        out.append(
-            (
-                "B and C last at every σ" + among,
-                all(last),
-                f"last two at {sum(last)} of {len(sigmas)} σ",
-            )
-        )
-        out.append(
-            (
-                "B and C nearly flat in σ (drop smaller than A's and D's)",
-                flat,
-                "drop σ="
-                + sigmas[0]
-                + "→"
-                + sigmas[-1]
-                + ": "
-                + ", ".join(f"{k} {v:.2f}" for k, v in spread.items())
-                + " dB",
-            )
-        )
-    for start in ("A", "D"):
-        opt = f"{start} optimised"
-        if have(start, opt):
-            d = [at(opt, s) - at(start, s) for s in sigmas]
-            out.append(
-                (
-                    f"{opt} ahead of {start} at every σ",
-                    all(x > 0 for x in d),
-                    ", ".join(f"{x:+.2f}" for x in d) + " dB",
-                )
-            )
-    if have("D optimised", "bayer"):
-        dp = [at("D optimised", s) - at("bayer", s) for s in sigmas]
-        dc = [at("D optimised", s, "ciede2000") - at("bayer", s, "ciede2000") for s in sigmas]
-        out.append(
-            (
-                "D optimised ahead of bayer in PSNR at every σ",
-                all(x > 0 for x in dp),
-                ", ".join(f"{x:+.2f}" for x in dp) + " dB",
-            )
-        )
-        out.append(
-            (
-                "D optimised ahead of bayer in CIEDE2000 at every σ",
-                all(x < 0 for x in dc),
-                ", ".join(f"{x:+.3f}" for x in dc),
-            )
-        )
-    if have("D optimised", FIG9[3]):
-        d = [at(FIG9[3], s) - at("D optimised", s) for s in sigmas]
-        out.append(
-            (
-                "D optimised from random within 0.3 dB of D optimised",
-                all(abs(x) <= 0.3 for x in d),
-                ", ".join(f"{x:+.2f}" for x in d) + " dB",
-            )
-        )
-    return out
+    return [check for conclusion in CONCLUSIONS for check in conclusion(at, sigmas, have)]
 
 
 @dataclass(frozen=True)
