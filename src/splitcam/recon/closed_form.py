@@ -533,7 +533,8 @@ def lmmse_estimate(
     """
     ph, pw = kernels.shape[:2]
     levels = NoiseLevels.of(sigma).for_batch(raw.shape[0])
-    sigma = levels.shared if levels.shared is not None else levels
+    shared = levels.shared  # one solve where the batch shares its level
+    sigma = shared if shared is not None else levels
     with torch.autocast(raw.device.type, enabled=False):
         # One solve for every noise level of the batch, then one grouped convolution.
         weights, bias = closed_form_filters(

@@ -37,8 +37,13 @@ class NoiseType:
     sampler: Callable[[TrainConfig], Callable[[int, torch.Generator], list]]
     #: ``config -> levels``: what validation scores (``val_psnr_<label>``).
     validation: Callable[[TrainConfig], list[Any]]
-    #: ``config -> None``, raising ValueError for settings the model refuses.
-    check: Callable[[TrainConfig], None] = _no_check
+    #: ``config -> anything``, raising ValueError for settings the model refuses.
+    check: Callable[[TrainConfig], Any] = _no_check
+
+
+def _photon_sampler(config: TrainConfig) -> LogUniformExposure:
+    """The photon model's level sampler (it checks the sensor settings and the range)."""
+    return LogUniformExposure(*config.noise.photons, config.noise.sensor())
 
 
 def _photon_levels(config: TrainConfig) -> list[Exposure]:
@@ -53,7 +58,7 @@ TRAINING_NOISE: dict[str, NoiseType] = {
     ),
     # The photon model (model.md §11) at exposures drawn log-uniformly from noise.photons.
     "photon": NoiseType(
-        sampler=lambda c: LogUniformExposure(*c.noise.photons, c.noise.sensor()),
+        sampler=_photon_sampler,
         validation=_photon_levels,
         check=lambda c: (
             _photon_levels(c) and LogUniformExposure(*c.noise.photons, c.noise.sensor())
