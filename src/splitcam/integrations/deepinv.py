@@ -42,7 +42,14 @@ import torch
 
 from ..io.domains import SRGB
 from ..patterns import Pattern
-from ..physics.noise import Exposure, GaussianNoise, NoiseModel, check_level, check_sigma
+from ..physics.noise import (
+    Exposure,
+    GaussianNoise,
+    NoiseModel,
+    UniformSigma,
+    check_level,
+    check_sigma,
+)
 from ..physics.sensor import SplitterSensor
 from ._torchvision import torchvision_mismatch
 
@@ -111,7 +118,7 @@ class SplitcamGaussianNoise(dinv.physics.NoiseModel):
 
     @property
     def sigma_8bit(self) -> float:
-        return self.model.range[0]
+        return self.model.sampler.lo
 
     @property
     def sigma(self) -> torch.Tensor:
@@ -139,7 +146,7 @@ class SplitcamGaussianNoise(dinv.physics.NoiseModel):
             sigma_8bit = check_sigma(sigma) * 255.0
         if sigma_8bit is not None:
             level = check_sigma(sigma_8bit)
-            self.model.range = (level, level)
+            self.model.sampler = UniformSigma(level, level)
 
     def rng_manual_seed(self, seed: int | None = None) -> None:
         if seed is not None:
