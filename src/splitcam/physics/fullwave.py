@@ -329,7 +329,19 @@ class _SolveLog:
     """The solves of one design at one solver setting, kept in a JSON-lines file shared with
     other settings and designs: each line is one solve, tagged with a digest of its setting."""
 
-    def __init__(self, path, design: RouterDesign, solver: str, terms: int, samples: int) -> None:
+    def __init__(
+        self,
+        path,
+        design: RouterDesign,
+        solver: str,
+        terms: int,
+        samples: int,
+        *,
+        extra: dict[str, Any] | None = None,
+        shape: tuple[int, ...] = (2, 2, 2),
+    ) -> None:
+        """``extra``: more of the setting (tagged only where given, so the digests of earlier
+        logs are unchanged); ``shape``: of the array each solve stores."""
         import hashlib
         import json
 
@@ -342,17 +354,20 @@ class _SolveLog:
             "solver": solver,
             "terms": int(terms),
             "samples": int(samples),
+            **(extra or {}),
         }
         self.setting = hashlib.sha256(json.dumps(setting, sort_keys=True).encode()).hexdigest()[:16]
         self.path = Path(path)
         self.done: dict[tuple[str, str, str], tuple[np.ndarray, float, float]] = {}
+        self.notes: dict[tuple[str, str, str], dict[str, Any]] = {}
         rows, _ = read_json_lines(self.path)  # a line cut short by a killed run is skipped
         for _, _, rec in rows:
             try:
                 if rec["setting"] == self.setting:
                     key = self._key(rec["wavelength"], rec["theta"], rec["phi"])
-                    quads = np.asarray(rec["quadrants"], dtype=np.float64).reshape(2, 2, 2)
+                    quads = np.asarray(rec["quadrants"], dtype=np.float64).reshape(shape)
                     self.done[key] = (quads, float(rec["reflection"]), float(rec["seconds"]))
+                    self.notes[key] = dict(rec.get("notes", {}))
             except (ValueError, KeyError, TypeError):
                 continue  # not a solve of this module
 
@@ -363,7 +378,17 @@ class _SolveLog:
     def get(self, lam: float, theta: float, phi: float):
         return self.done.get(self._key(lam, theta, phi))
 
-    def add(self, lam, theta, phi, quads: np.ndarray, reflected: float, seconds: float) -> None:
+    def add(
+        self,
+        lam,
+        theta,
+        phi,
+        quads: np.ndarray,
+        reflected: float,
+        seconds: float,
+        notes: dict[str, Any] | None = None,
+    ) -> None:
+        """``notes``: more numbers of the solve, kept beside it (:attr:`notes`)."""
         import json
 
         rec = {
@@ -374,6 +399,7 @@ class _SolveLog:
             "quadrants": np.asarray(quads, dtype=np.float64).tolist(),
             "reflection": float(reflected),
             "seconds": round(seconds, 2),
+            **({"notes": notes} if notes else {}),
         }
         self.path.parent.mkdir(parents=True, exist_ok=True)
         # After a line cut short by a killed run, start a new line rather than extend it.
@@ -385,6 +411,7 @@ class _SolveLog:
             f.flush()
             os.fsync(f.fileno())
         self.done[self._key(lam, theta, phi)] = (np.asarray(quads), float(reflected), seconds)
+        self.notes[self._key(lam, theta, phi)] = dict(notes or {})
 
 
 #: One solve: ``(wavelength nm, polar angle, azimuth)`` → ``((2, 2, 2)`` quadrant transmissions
