@@ -158,6 +158,29 @@ def test_a_router_s_spectra_written_as_a_file_read_back_as_the_same_pattern(tmp_
     assert not (tmp_path / "bright.toml").exists()
 
 
+def test_a_sensor_s_kernels_written_as_a_file_read_back_as_the_same_pattern(tmp_path):
+    """save_spectral_kernels: the file reads back as the pattern written (to its 6 decimals),
+    kernels that sum to exactly 1 are not pushed above it by rounding, and kernels that create
+    light are refused with nothing written."""
+    from splitcam.patterns.files import save_spectral_kernels
+
+    lams = np.arange(410.0, 691.0, 40.0)
+    rng = np.random.default_rng(5)
+    k = rng.uniform(0.0, 1.0, (4, lams.size, 5, 5)) ** 3
+    k /= k.sum(axis=(-2, -1), keepdims=True)  # every kernel sums to 1 (lossless)
+    k[1] *= 0.9
+    path = save_spectral_kernels(
+        tmp_path / "mine.json", "mine", lams, [[0, 1], [2, 3]], k, provenance="test"
+    )
+    read = patterns.get(str(path))
+    direct = SpectralPattern("mine", [[0, 1], [2, 3]], lams, k).to_pattern()
+    assert read.name == "mine" and read.provenance == "test"
+    assert np.allclose(read.kernels, direct.kernels, atol=1e-5)
+    with pytest.raises(PatternError, match="cannot create light"):
+        save_spectral_kernels(tmp_path / "bright.json", "b", lams, [[0, 1], [2, 3]], k * 1.01)
+    assert not (tmp_path / "bright.json").exists()
+
+
 def test_band_efficiencies_as_the_leaderboard_scores_them():
     """Each band's mean share into its own pixels, the quadrants found by where the ends peak."""
     from splitcam.physics.fullwave import band_efficiencies

@@ -23,6 +23,9 @@ import json
 import os
 import sys
 from pathlib import Path
+from typing import Any
+
+import numpy as np
 
 from ..io import write_text
 from .core import Pattern, PatternError
@@ -134,5 +137,36 @@ def save_transmission(
         lines.append("  ],")
     lines.append("]")
     written = write_text(path, "\n".join(lines) + "\n")
+    load(written)
+    return written
+
+
+def save_spectral_kernels(
+    path: str | os.PathLike, name: str, wavelengths, layout, kernels, **info: Any
+) -> Path:
+    """Write a spectral pattern given by its kernels (``kernels[s, l]``, the ``kh x kw`` kernel
+    of splitter ``s`` at wavelength ``l``; :class:`~splitcam.patterns.spectral.SpectralPattern`,
+    whose checks run first) as JSON, with ``info`` (provenance, description, reference,
+    metadata). Written atomically and read back.
+
+    Raises:
+        PatternError: Kernels that fail those checks (nothing is written).
+    """
+    from .spectral import SpectralPattern
+
+    kernels = np.asarray(kernels, dtype=np.float64)
+    sums = kernels.sum(axis=(-2, -1), keepdims=True)
+    # Six decimals, rounded down where a kernel sums to 1 so that rounding creates no light.
+    kernels = np.where(sums > 1 - 1e-5, np.floor(kernels * 1e6), np.round(kernels * 1e6)) / 1e6
+    pattern = SpectralPattern(name, layout, wavelengths, kernels, **info)
+    data = {
+        "name": pattern.name,
+        **{k: getattr(pattern, k) for k in ("provenance", "description", "reference")},
+        "metadata": pattern.metadata,
+        "wavelengths": pattern.wavelengths.tolist(),
+        "layout": pattern.layout.tolist(),
+        "kernels": pattern.kernels.tolist(),
+    }
+    written = write_text(Path(path), json.dumps(data, ensure_ascii=False) + "\n")
     load(written)
     return written

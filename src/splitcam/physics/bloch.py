@@ -1,40 +1,40 @@
-"""Where a router sends the light that arrives on one pixel: spatial kernels computed from the
+"""Where a router sends the light that arrives on each pixel: spatial kernels computed from the
 full-wave fields, by Brillouin-zone integration (docs/model.md §20).
 
-A full-wave solve of a periodic router lit by a plane wave (:func:`~splitcam.physics.fullwave.
-quadrant_spectra`) gives the period's totals: how much of the light arriving on the whole period
-lands on each pixel. It cannot say whether the red that reaches the red pixel arrived above it,
-above its neighbour, or two pixels away, and the image model needs exactly that (Eq. 2's kernels).
-:meth:`SpectralPattern.from_transmission <splitcam.patterns.spectral.SpectralPattern.
-from_transmission>` assumes it (the nearest-copy rule). This module computes it.
+A periodic solve (:func:`~splitcam.physics.fullwave.quadrant_spectra`) gives the period's totals:
+how much of the light arriving on the whole period lands on each pixel. It cannot say whether the
+red that reaches the red pixel arrived above it or above its neighbour, and Eq. 2's kernels need
+exactly that; the nearest-copy rule of
+:meth:`~splitcam.patterns.spectral.SpectralPattern.from_transmission` assumes it. This module
+computes it for a scene imaged through a lens.
 
-**The computation.** Light that arrives on one pixel only (a plane wave, cut to the pixel's
-square in one period of the router, nothing elsewhere) is not periodic, but it is an integral of
-Bloch waves over the Brillouin zone of the router's lattice, each of which an RCWA solve handles
-exactly (a solve at that in-plane wavevector, with the cut wave's Fourier orders as its incident
-amplitudes). Sampling the zone on an ``M x M`` grid is exactly a supercell of ``M x M`` periods
-(``2M x 2M`` pixels) in which one pixel of the middle period is lit: the field at the monitor
-plane is summed over the ``M^2`` solves (fmmax's Brillouin-zone field reconstruction), and its
-time-averaged Poynting flux integrated over every pixel of the supercell, divided by the flux of
-the cut wave arriving. Light that would travel farther than ``M`` pixels wraps around the
-supercell; the pixel ``M`` away in a direction is reached both ways and its share is split
-between the two kernel edges. ``cells`` sets ``M``; a larger ``M`` resolves longer reach.
+**The light.** A point of the scene makes a focused spot: the lens's plane waves (direction sines
+in a disk of radius ``1/(2N)`` about the chief ray's, equal power each) in phase at the spot's
+centre. Spots are centred on a ``positions x positions`` grid inside each pixel.
 
-**Assumptions (stated, not hidden).**
+**The solve.** A spot is an integral of Bloch waves over the Brillouin zone of the router's
+lattice. Sampling the zone on ``M x M`` wavevectors is exactly a supercell of ``M x M`` periods
+(``2M x 2M`` pixels) with one spot per supercell: one fmmax solve per wavevector (both
+polarisations and every spot share it), the fields at the monitor plane summed over the
+wavevectors, the time-averaged Poynting flux integrated over every pixel of the supercell and
+divided by the spot's incident flux.
 
-- Light arriving on different pixels is mutually incoherent: the kernels add intensities. Under a
-  plane wave (fully coherent over the period) the pixels' fields interfere, and the sum of the
-  four kernels differs from the periodic solve's totals by that interference; the result records
-  the difference (``coherence_gap``), it is not an error of the solve.
-- The cut wave is the forward-going part of the plane wave's fields times the pixel's square,
-  within the solve's Fourier terms (its sharp edge is rounded by the truncation); the shares are
-  of the flux of that wave.
-- One incidence direction per call (a lens's cone: call per direction and weight the results).
+**The lens's own blur taken out.** Eq. 2's input is the light arriving on each pixel, already
+blurred by the lens, and an f/2 spot spills over its pixel before any router acts. What the spots
+of each pixel deliver is therefore fitted by kernels applied to where their light arrives
+(``_unblur``), as shares of light (non-negative, each kernel summing to at most 1). Without a
+router the kernels are the identity.
 
-The cost is ``M^2`` solves per wavelength (both polarisations and the four pixels share them),
-each about as costly as one solve of :func:`quadrant_spectra` at the same terms.
+**What it cannot hold.** Light arriving on neighbouring pixels from one spot is coherent, so the
+true response is not an intensity kernel; the fit's relative residual (``misfit``) says how far
+from one it is. The kernels' totals over the period match the periodic solves of the pupil's
+plane waves (tests/physics/test_bloch.py), so the answer for uniform scenes is kept. Light
+travelling farther than ``M`` pixels wraps round the supercell; the pixel ``M`` away is split
+between the kernel's two edges.
+
+The cost is ``M^2`` solves per wavelength, each about as costly as one solve of
+:func:`~splitcam.physics.fullwave.quadrant_spectra` at the same terms.
 """
-
 from __future__ import annotations
 
 import math
