@@ -163,11 +163,16 @@ def _figure(path: Path, kernels: np.ndarray, rule: np.ndarray, key: str) -> None
         for row, (what, k) in enumerate((("computed", kernels), ("nearest-copy", rule))):
             for s in (0, 2):  # a green and a red/blue pixel of the period
                 ax = axes[row, 2 * column + s // 2]
-                ax.imshow(k[s, li], vmin=0, vmax=1, cmap="magma")
+                pad = (kernels.shape[-1] - k.shape[-1]) // 2  # the rule's 3 x 3 at full size
+                ax.imshow(np.pad(k[s, li], pad), vmin=0, vmax=1, cmap="magma")
                 ax.set_title(f"{what}\n{WAVELENGTHS[li]:g} nm, pixel {divmod(s, 2)}", fontsize=8)
                 ax.set_xticks([])
                 ax.set_yticks([])
-    fig.suptitle(f"{key}: where the light arriving on one pixel lands (f/2)", fontsize=10)
+    fig.suptitle(
+        f"{key}: where the light arriving on one pixel (the centre) lands, f/2; "
+        "share 0 (black) to 1",
+        fontsize=10,
+    )
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
