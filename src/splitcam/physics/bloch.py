@@ -35,11 +35,11 @@ between the kernel's two edges.
 The cost is ``M^2`` solves per wavelength, each about as costly as one solve of
 :func:`~splitcam.physics.fullwave.quadrant_spectra` at the same terms.
 """
+
 from __future__ import annotations
 
 import math
 import os
-import time
 from collections.abc import Callable, Sequence
 from typing import Any
 
@@ -52,6 +52,7 @@ from .fullwave import (
     _fine_grid,
     _off_grazing,
     _permittivities,
+    _solve_logged,
     _SolveLog,
     cone_directions,
 )
@@ -379,19 +380,16 @@ def pixel_kernels(
     cost = {"solves": 0, "reused": 0, "seconds": 0.0}
     count = int(terms)
     for li, lam in enumerate(wavelengths):
-        found = log.get(lam, chief_ray, azimuth) if log is not None else None
-        if found is None:
-            start = time.perf_counter()
-            kernels, reflected, misfit[li], count = _one_wavelength(design, lam, setting)
-            seconds = time.perf_counter() - start
-            if log is not None:
-                notes = {"misfit": misfit[li], "terms": count}
-                log.add(lam, chief_ray, azimuth, kernels, reflected, seconds, notes)
-        else:
-            kernels, reflected, seconds = found
-            notes = log.notes[log._key(lam, chief_ray, azimuth)]
-            misfit[li], count = notes["misfit"], notes["terms"]
-            cost["reused"] += cells * cells
+
+        def solve(lam=lam):
+            found, reflected, fit, used = _one_wavelength(design, lam, setting)
+            return found, reflected, {"misfit": fit, "terms": used}
+
+        kernels, reflected, notes, seconds, reused = _solve_logged(
+            log, (lam, chief_ray, azimuth), solve
+        )
+        misfit[li], count = notes["misfit"], notes["terms"]
+        cost["reused"] += cells * cells * reused
         cost["solves"] += cells * cells
         cost["seconds"] += seconds
         by_pol[:, :, li] = kernels

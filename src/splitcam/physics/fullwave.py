@@ -300,16 +300,10 @@ def quadrant_spectra(
     cost = {"solves": 0, "reused": 0, "seconds": 0.0}
     for li, lam in enumerate(wavelengths):
         for (theta, phi, _), weight in zip(directions, weights, strict=True):
-            found = log.get(lam, theta, phi) if log is not None else None
-            if found is None:
-                start = time.perf_counter()
-                quads, reflected = solve(lam, theta, phi)
-                seconds = time.perf_counter() - start
-                if log is not None:
-                    log.add(lam, theta, phi, quads, reflected, seconds)
-            else:
-                quads, reflected, seconds = found
-                cost["reused"] += 1
+            quads, reflected, _, seconds, reused = _solve_logged(
+                log, (lam, theta, phi), lambda k=(lam, theta, phi): (*solve(*k), None)
+            )
+            cost["reused"] += reused
             cost["solves"] += 1
             cost["seconds"] += seconds
             by_pol[..., li] += weight * quads
@@ -412,6 +406,26 @@ class _SolveLog:
             os.fsync(f.fileno())
         self.done[self._key(lam, theta, phi)] = (np.asarray(quads), float(reflected), seconds)
         self.notes[self._key(lam, theta, phi)] = dict(notes or {})
+
+
+def _solve_logged(
+    log: _SolveLog | None,
+    key: tuple[float, float, float],
+    solve: Callable[[], tuple[np.ndarray, float, dict[str, Any] | None]],
+) -> tuple[np.ndarray, float, dict[str, Any], float, bool]:
+    """One solve at ``key`` (wavelength, polar angle, azimuth): ``solve()`` gives ``(array,
+    reflected share, notes)``, timed and appended to ``log``, unless ``log`` holds it already.
+    Returns ``(array, reflected, notes, seconds, reused)``."""
+    found = log.get(*key) if log is not None else None
+    if found is not None:
+        array, reflected, seconds = found
+        return array, reflected, log.notes[log._key(*key)], seconds, True
+    start = time.perf_counter()
+    array, reflected, notes = solve()
+    seconds = time.perf_counter() - start
+    if log is not None:
+        log.add(*key, array, reflected, seconds, notes)
+    return array, reflected, dict(notes or {}), seconds, False
 
 
 #: One solve: ``(wavelength nm, polar angle, azimuth)`` → ``((2, 2, 2)`` quadrant transmissions
