@@ -18,8 +18,11 @@ for name in "$@"; do
         --table "runs/colour/gates/$name.md"
     out="runs/colour/describe-$name"
     run="runs/colour/$name-cooldown/checkpoint.safetensors"
+    # The photon networks at their validation exposures in linear light, the others at σ 0 / 15.
+    levels=(--sigmas 0 15)
+    case "$name" in *-photon) levels=(--photons 30 300 --domain linear) ;; esac
     splitcam evaluate --model "$name" --checkpoint "$run" --datasets runs/colour/heldout/colourful \
-        --sigmas 0 15 --precision fp32 --out "$out-colourful" --quiet
+        "${levels[@]}" --precision fp32 --out "$out-colourful" --quiet
     splitcam evaluate --model "$name" --checkpoint "$run" --datasets default --max-size 0 \
-        --sigmas 0 15 --precision fp32 --out "$out-skimage" --quiet
+        "${levels[@]}" --precision fp32 --out "$out-skimage" --quiet
 done
