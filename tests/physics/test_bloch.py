@@ -135,3 +135,35 @@ def test_a_cache_continues_without_solving_again(tmp_path):
 def test_bad_settings_are_refused_before_any_solve(bad, says):
     with pytest.raises(FullwaveError, match=says):
         pixel_kernels(_design(), [550.0], **{**SMALL, **bad})
+
+
+@pytest.mark.slow
+def test_the_command_writes_both_patterns_and_refuses_bad_settings(tmp_path, capsys):
+    """`splitcam optics rcwa-kernels`: the computed pattern (and its 5 x 5 cut where larger),
+    the nearest-copy pattern on the same totals, every file a pattern the other commands read;
+    bad settings are one line and write nothing."""
+    from splitcam import patterns
+    from splitcam.cli import main
+
+    design = tmp_path / "d.csv"
+    design.write_text("1,0\n0,1\n")
+    out = tmp_path / "o"
+    args = ["optics", "rcwa-kernels", str(design), "--out", str(out), "--quiet"]
+    small = ["--terms", "21", "--samples", "4", "--positions", "1", "--wavelengths", "500,600"]
+    assert main([*args, *small, "--cells", "3", "--thickness", "0.3", "--depth", "1"]) == 0
+    said = capsys.readouterr().out
+    assert "misfit" in said and "18 Bloch solves" in said
+    computed = patterns.get(str(out / "d-kernels.json"))
+    cut = patterns.get(str(out / "d-kernels-5x5.json"))
+    rule = patterns.get(str(out / "d-nearest.toml"))
+    assert computed.kernels.shape[-1] == 7 and cut.kernels.shape[-1] == 5
+    assert rule.kernels.shape[-1] == 3
+    # The two rules spread the same totals: equal light per colour under uniform light.
+    np.testing.assert_allclose(
+        computed.kernels.sum(axis=(-2, -1)).mean(axis=0),
+        rule.kernels.sum(axis=(-2, -1)).mean(axis=0),
+        atol=1e-4,
+    )
+    bad = tmp_path / "bad"
+    assert main(["optics", "rcwa-kernels", str(design), "--out", str(bad), "--cells", "1"]) == 1
+    assert "cells must be" in capsys.readouterr().err and not bad.exists()

@@ -49,13 +49,14 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--out: the front's trial of highest PSNR)",
     )
     p.set_defaults(handler=run)
-    # `splitcam optics rcwa DESIGN.csv` (the full-wave solver) and `optics rcwa-design` (a
-    # layer designed through it), each in its own module.
-    from . import rcwa, rcwa_design
+    # `splitcam optics rcwa DESIGN.csv` (the full-wave solver), `optics rcwa-design` (a layer
+    # designed through it) and `optics rcwa-kernels` (its spatial kernels), each in its module.
+    from . import rcwa, rcwa_design, rcwa_kernels
 
-    sub = p.add_subparsers(dest="optics_command", metavar="{rcwa,rcwa-design}")
+    sub = p.add_subparsers(dest="optics_command", metavar="{rcwa,rcwa-design,rcwa-kernels}")
     rcwa.register(sub)
     rcwa_design.register(sub)
+    rcwa_kernels.register(sub)
 
 
 #: The settings a metasurface search draws: setting -> (option attribute, default).
