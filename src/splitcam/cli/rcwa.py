@@ -102,6 +102,11 @@ def stack_of(args: argparse.Namespace, grid):
     )
 
 
+def file_stem(name: str) -> str:
+    """A pattern's name as the stem of the files written for it (safe in any file system)."""
+    return re.sub(r"[^A-Za-z0-9._-]+", "_", name).strip("._") or "router"
+
+
 def wavelengths_of(text: str) -> list[float]:
     """``400:700:10`` or ``450,540,650`` as a list of nm."""
     try:
@@ -135,7 +140,7 @@ def run(args: argparse.Namespace) -> int:
     grid = read_design(args.design)
     design = stack_of(args, grid)
     name = args.name or Path(args.design).stem
-    stem = re.sub(r"[^A-Za-z0-9._-]+", "_", name).strip("._") or "router"
+    stem = file_stem(name)
     # The pattern's checks (wavelength range) before minutes of solving.
     SpectralPattern.from_transmission(name, lams, np.zeros((2, 2, len(lams))))
     out = Path(args.out)

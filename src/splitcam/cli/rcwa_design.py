@@ -172,9 +172,9 @@ def _finish(
     from ..io import write_text
     from ..patterns.files import save_transmission
     from ..physics.fullwave import RouterDesign, quadrant_spectra
-    from .rcwa import _say_roles, _write_spectra
+    from .rcwa import _say_roles, _write_spectra, file_stem
 
-    stem = re.sub(r"[^A-Za-z0-9._-]+", "_", name).strip("._") or "router"
+    stem = file_stem(name)
     g = design.geometry
     solved = quadrant_spectra(
         RouterDesign(binary, g.pitch, g.thickness, g.depth, g.pillar, g.background, g.substrate),

@@ -6,10 +6,9 @@ from __future__ import annotations
 
 import argparse
 import math
-import re
 from pathlib import Path
 
-from .rcwa import add_stack_options, stack_of, wavelengths_of
+from .rcwa import add_stack_options, file_stem, stack_of, wavelengths_of
 
 __all__ = ["register"]
 
@@ -76,7 +75,7 @@ def run(args: argparse.Namespace) -> int:
     lams = wavelengths_of(args.wavelengths)
     design = stack_of(args, read_design(args.design))
     name = args.name or Path(args.design).stem
-    stem = re.sub(r"[^A-Za-z0-9._-]+", "_", name).strip("._") or "router"
+    stem = file_stem(name)
     SpectralPattern.from_transmission(name, lams, np.zeros((2, 2, len(lams))))  # the range
     out = Path(args.out)
     if out.exists() and not out.is_dir():

@@ -46,28 +46,19 @@ from typing import Any
 import numpy as np
 
 from .fullwave import (
-    INSTALL_FMMAX,
     FullwaveError,
     RouterDesign,
     _fine_grid,
+    _fmmax,
     _off_grazing,
     _permittivities,
     _solve_logged,
     _SolveLog,
+    check_solver,
     cone_directions,
 )
 
 __all__ = ["pixel_kernels", "quadrant_sums"]
-
-
-def _fmmax():
-    try:
-        import jax
-        from fmmax import basis, fields, fmm, scattering
-    except ImportError:
-        raise FullwaveError(f"computed kernels need fmmax: {INSTALL_FMMAX}") from None
-    jax.config.update("jax_enable_x64", True)
-    return jax, basis, fields, fmm, scattering
 
 
 def _spot_centres(design: RouterDesign, cells: int, positions: int) -> np.ndarray:
@@ -108,13 +99,14 @@ def _one_wavelength(
     design: RouterDesign,
     lam: float,
     setting: dict[str, Any],
-) -> tuple[np.ndarray, float, int]:
+) -> tuple[np.ndarray, float, float, int]:
     """``((2, 4, 2M+1, 2M+1)`` kernels per polarisation and source pixel, the reflected share
-    averaged over both, the Fourier terms)`` at one wavelength.
+    averaged over both, the fit's misfit (the larger of the two polarisations'), the Fourier
+    terms)`` at one wavelength.
 
     One solve per Bloch wavevector, the fields summed over them (each solve on its own: fmmax's
     batched stacking of scattering matrices was seen to stall in XLA's CPU runtime)."""
-    _, basis, fields, fmm, scattering = _fmmax()
+    basis, fields, fmm, scattering = _fmmax()
     import jax.numpy as jnp
 
     cells, samples, positions = setting["cells"], setting["samples"], setting["positions"]
@@ -348,7 +340,7 @@ def pixel_kernels(
     if formulation not in ("JONES_DIRECT", "FFT"):
         raise FullwaveError(f"formulation: JONES_DIRECT or FFT, got {formulation!r}")
     cone_directions(f_number, chief_ray, azimuth)  # the same checks as the periodic solves
-    _fmmax()
+    check_solver("fmmax-jones")  # installed, before any solve
     setting = {
         "cells": int(cells),
         "positions": int(positions),

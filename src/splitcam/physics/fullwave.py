@@ -509,6 +509,21 @@ def _fine_density(design: RouterDesign, density: Any) -> Any:
     return density.repeat_interleave(up, 0).repeat_interleave(up, 1)
 
 
+def _fmmax() -> tuple[Any, Any, Any, Any]:
+    """fmmax's ``basis, fields, fmm, scattering`` modules, JAX set to 64-bit floats.
+
+    Raises:
+        FullwaveError: fmmax not installed (the message names the install command).
+    """
+    try:
+        import jax
+        from fmmax import basis, fields, fmm, scattering
+    except ImportError:
+        raise FullwaveError(f"the fmmax solver is an optional extra: {INSTALL_FMMAX}") from None
+    jax.config.update("jax_enable_x64", True)
+    return basis, fields, fmm, scattering
+
+
 def _fmmax_solver(
     design: RouterDesign, terms: int, formulation: str, samples: int
 ) -> tuple[_Solve, int]:
@@ -516,12 +531,7 @@ def _fmmax_solver(
     background, the patterned layer, the substrate down to the monitor plane. Each
     polarisation's fluxes are divided by its incident flux in the ambient; the reflection is
     the backward wave's flux there."""
-    try:
-        import jax
-        from fmmax import basis, fields, fmm, scattering
-    except ImportError:
-        raise FullwaveError(f"the fmmax solver is an optional extra: {INSTALL_FMMAX}") from None
-    jax.config.update("jax_enable_x64", True)
+    basis, fields, fmm, scattering = _fmmax()
     import jax.numpy as jnp
 
     period = 2.0 * design.pitch

@@ -37,8 +37,8 @@ class NoiseType:
     sampler: Callable[[TrainConfig], Callable[[int, torch.Generator], list]]
     #: ``config -> levels``: what validation scores (``val_psnr_<label>``).
     validation: Callable[[TrainConfig], list[Any]]
-    #: ``config -> anything``, raising ValueError for settings the model refuses.
-    check: Callable[[TrainConfig], Any] = _no_check
+    #: ``config -> None``, raising ValueError for settings the model refuses.
+    check: Callable[[TrainConfig], None] = _no_check
 
 
 def _photon_sampler(config: TrainConfig) -> LogUniformExposure:
@@ -48,6 +48,13 @@ def _photon_sampler(config: TrainConfig) -> LogUniformExposure:
 
 def _photon_levels(config: TrainConfig) -> list[Exposure]:
     return [Exposure(n, **config.noise.sensor()) for n in config.noise.val_photons]
+
+
+def _photon_check(config: TrainConfig) -> None:
+    """The photon model's settings: its validation levels and its sampler are built (each
+    refuses what it cannot take)."""
+    _photon_levels(config)
+    _photon_sampler(config)
 
 
 TRAINING_NOISE: dict[str, NoiseType] = {
@@ -60,9 +67,7 @@ TRAINING_NOISE: dict[str, NoiseType] = {
     "photon": NoiseType(
         sampler=_photon_sampler,
         validation=_photon_levels,
-        check=lambda c: (
-            _photon_levels(c) and LogUniformExposure(*c.noise.photons, c.noise.sensor())
-        ),
+        check=_photon_check,
     ),
 }
 
