@@ -10,11 +10,11 @@ over the 42 whole images at σ 0 and 15, PSNR dB) from the committed evaluation 
 numbers (:data:`splitcam.evaluation.report.PAPER`); each model's mean on the held-out training
 photos the gate scores (the run's validation photos and the last 12 of the folder, whole, at the
 model's cleanest and noisiest validation level; :func:`splitcam.training.gate.held_out_score`),
-kept in docs/results/heldout/scores.json; the recipe that trains each again from
-experiments/recipes/. A score measured on other weights than the model ships now (its
-fingerprint in the evaluation's ``evaluation.json`` differs) is marked as such, so the page never
-passes an older model's score for the current one. ``tests/docs/test_models_page.py`` checks that
-the page is what this script writes.
+kept in docs/results/heldout/scores.json; the number of stages of the recipe that
+trains each again (its own header; splitcam.training.recipe). A score measured on other weights
+than the model ships now (its fingerprint in the evaluation's ``evaluation.json`` differs) is
+marked as such, so the page never passes an older model's score for the current one.
+``tests/docs/test_models_page.py`` checks that the page is what this script writes.
 """
 
 from __future__ import annotations
@@ -127,7 +127,8 @@ def render() -> str:
         "`splitcam reproduce` "
         "([table](results/reproduce/evaluation/table.md)), beside the paper's after 10⁶ GPU "
         "steps ([model.md](model.md) section 8). `splitcam train --recipe MODEL --data DIR` "
-        "trains a model again end to end, stage by stage (`experiments/recipes/`). The last "
+        "trains a model again end to end, stage by stage, from the stages its own header "
+        "records. The last "
         "column is each set's own mean at σ 0 and Kodak24 minus McMaster: how much a network "
         "loses on saturated colour (demosaicnet, a GPU-trained Bayer network, on the same whole "
         "images: 41.84 / 39.14, 2.70; [colour](results/colour/README.md)). Held-out photos: the "

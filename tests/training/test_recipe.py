@@ -1,6 +1,8 @@
-"""``splitcam train --recipe`` (splitcam.training.recipe): every shipped model has a recipe of
-existing stage files; a recipe trains its stages in order, each from the one before, records
-each stage's file in the provenance, and a second call skips what is done."""
+"""``splitcam train --recipe`` (splitcam.training.recipe): every shipped model is its own recipe
+(its header records each stage's file, settings and steps), whose stages agree with the
+configuration files they name except where the record says what ran differently; a model
+exported from a chain of runs replays that chain; a recipe trains its stages in order, each from
+the one before, and a second call skips what is done."""
 
 from __future__ import annotations
 
@@ -10,31 +12,95 @@ import pytest
 from conftest import SMALL, experiment_file
 
 from splitcam.io import checkpoints as ckpt_io
-from splitcam.recon.loading import model_names
+from splitcam.recon.loading import load_model, model_names
 from splitcam.training import TrainConfig
 from splitcam.training.config import ConfigError
-from splitcam.training.models import provenance_of
-from splitcam.training.recipe import read_recipe, recipe_names, run_recipe, stage_folder
+from splitcam.training.models import export_model, provenance_of
+from splitcam.training.recipe import (
+    MACHINE_KEYS,
+    read_recipe,
+    recipe_names,
+    run_recipe,
+    shipped_recipe,
+    stage_folder,
+)
 
 
-def test_every_shipped_model_has_a_recipe_of_valid_stages():
-    assert set(recipe_names()) == set(model_names())
-    for name in recipe_names():
-        recipe = read_recipe(name)
-        assert recipe.model == name
-        for stage in recipe.stages:
-            TrainConfig.from_file(stage).validate()
-    # The provenance of the shipped model has one segment per stage.
-    for name in ("A", "B", "universal-photon"):
-        from splitcam.recon.loading import load_model
+def _flat(config: TrainConfig) -> dict:
+    return {f"{s}.{k}": v for s, values in config.to_dict().items() for k, v in values.items()}
 
-        segments = load_model(name).meta["provenance"]["segments"]
-        assert len(segments) == len(read_recipe(name).stages), name
-    with pytest.raises(ConfigError, match="known: A, A-opt"):
+
+def _record(segment: dict) -> dict:
+    """What a provenance segment states about its run, written out here as dotted settings."""
+    recipe = segment["recipe"]
+    return {
+        "data.batch_size": segment["batch_size"],
+        "data.patch_size": segment["patch_size"],
+        "network.arch": recipe["arch"],
+        "optim.lr": recipe["lr"],
+        "optim.schedule": recipe["schedule"],
+        "optim.warmup_steps": recipe["warmup_steps"],
+        "optim.sigma_min": recipe["sigma"][0],
+        "optim.sigma_max": recipe["sigma"][1],
+        "pattern.learn": recipe["learn_pattern"],
+    }
+
+
+@pytest.mark.parametrize("name", model_names())
+def test_every_shipped_model_is_its_own_recipe_agreeing_with_its_files(name):
+    assert name in recipe_names()
+    segments = load_model(name).meta["provenance"]["segments"]
+    recipe = read_recipe(name)
+    # One stage per run: consecutive segments of one file are a run continued.
+    files = [s["config_file"] for s in segments]
+    runs = [f for i, f in enumerate(files) if i == 0 or files[i - 1] != f]
+    assert [stage.file for stage in recipe.stages] == runs
+    # Each stage replays the steps its segments trained, with no time limit.
+    assert sum(stage.config.optim.steps for stage in recipe.stages) == sum(
+        s["steps"] for s in segments
+    )
+    first = {}
+    for segment in segments:
+        first.setdefault(segment["config_file"], segment)
+    for stage in recipe.stages:
+        stage.config.validate()
+        assert stage.config.run.time_limit is None
+        record = _record(first[stage.file])
+        mine, file = _flat(stage.config), _flat(TrainConfig.from_file(stage.file))
+        # where the record speaks, the stage is the record
+        assert {k: mine[k] for k in record} == record, stage.file
+        # elsewhere it is its configuration file, bar where and on what it trained
+        differ = {k for k in mine if mine[k] != file[k]} - set(MACHINE_KEYS)
+        differ -= {"optim.steps", "run.time_limit", "optim.ema"}  # given on the command line
+        assert differ <= {k for k in record if record[k] != file[k]}, (stage.file, differ)
+
+
+def test_a_shipped_recipe_needs_no_configuration_file(monkeypatch):
+    """From an installed wheel (no experiments/ folder) the header is all a recipe reads."""
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("read a configuration file")
+
+    monkeypatch.setattr(TrainConfig, "from_file", refuse)
+    recipe = read_recipe("D-photon")
+    assert [s.file for s in recipe.stages][-1] == "experiments/colour/D-photon-cooldown.toml"
+    assert recipe.stages[-1].config.optim.lr == 1e-4
+
+
+def test_recipes_refuse_what_they_cannot_replay(tmp_path):
+    with pytest.raises(ConfigError, match="shipped: A, A-opt"):
         read_recipe("nonesuch")
+    meta = json.loads(json.dumps(load_model("C").meta))
+    del meta["provenance"]["segments"][1]["settings"]
+    with pytest.raises(ConfigError, match="segment 2 .* records no configuration file or settings"):
+        shipped_recipe(meta, "C")
+    bad = tmp_path / "bad.toml"
+    bad.write_text('stages = ["missing.toml"]\n')
+    with pytest.raises(ConfigError, match="missing.toml not found"):
+        read_recipe(bad)
 
 
-def test_a_recipe_trains_its_stages_in_order_and_continues(image_folder, tmp_path):
+def test_a_recipe_trains_its_stages_in_order_and_the_model_replays_them(image_folder, tmp_path):
     settings = {k: v for k, v in SMALL.items() if k != "run.threads"}
     (tmp_path / "cfg").mkdir()
     experiment_file(tmp_path / "cfg", "one", **settings)
@@ -58,3 +124,10 @@ def test_a_recipe_trains_its_stages_in_order_and_continues(image_folder, tmp_pat
     assert run_recipe(recipe, out, overrides, progress=False) == []
     assert (two / "checkpoint.json").stat().st_mtime_ns == stamp
     assert json.loads((two / "config.json").read_text())["optim"]["lr"] == 5e-4
+    # The model exported from the last stage is a recipe of the same two stages.
+    exported = export_model(two, tmp_path / "models", name="mine")
+    replay = shipped_recipe(json.loads(exported.read_text()), "mine")
+    assert [s.file for s in replay.stages] == [s.file for s in recipe.stages]
+    for mine, written in zip(replay.stages, recipe.stages, strict=True):
+        a, b = _flat(mine.config), _flat(written.config)
+        assert {k for k in a if a[k] != b[k]} <= set(MACHINE_KEYS)

@@ -21,9 +21,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--recipe",
         metavar="MODEL|FILE",
-        help="train a shipped model again end to end: every stage of experiments/recipes/"
-        "MODEL.toml in order, each from the last, into --out/<n>-<stage>; finished stages are "
-        "skipped and an interrupted one resumed; other flags apply to every stage",
+        help="train a shipped model again end to end: every stage its header records, with "
+        "the settings and steps it recorded, in order, each from the last, into "
+        '--out/<n>-<stage> (or the stages of a recipe FILE: stages = ["a.toml", ...]); '
+        "finished stages are skipped and an interrupted one resumed; other flags apply to "
+        "every stage",
     )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     from ..training.config import train_flags

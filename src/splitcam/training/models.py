@@ -30,6 +30,7 @@ from ..io import checkpoints as ckpt_io
 from ..io.domains import SRGB
 from ..io.tensorfiles import paired_paths, save_pair
 from ..recon.loading import MODEL_FORMAT, MODEL_VERSION, ModelError, load_network
+from .recipe import replayable
 from .rundir import METRICS_NAME, changes_rows, failure_of, last_metrics, metrics_rows
 
 __all__ = ["export_model", "model_summary", "provenance_of", "run_failure", "training_budget"]
@@ -129,6 +130,9 @@ def provenance_of(loaded: ckpt_io.Checkpoint, run_dir: Path | None = None) -> di
         # the divergence guard's learning-rate scale at the end (1: it never rolled back)
         "lr_scale": meta.get("lr_scale", 1.0),
         "finished": meta.get("time"),
+        # every setting it trained with but where and on what: the stage of the model's recipe
+        # (splitcam.training.recipe), so the model can be trained again from its own header
+        "settings": replayable(config),
     }
     folder = run_dir if run_dir is not None else Path(loaded.path).parent
     history = _thread_history(folder, run.get("threads"), segment["steps"])
