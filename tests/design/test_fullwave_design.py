@@ -147,6 +147,46 @@ def test_the_whole_objective_differentiates_to_its_finite_difference():
     assert set(np.unique(binary)) <= {0.0, 1.0}
 
 
+@pytest.mark.slow  # about a minute: fmmax's solve and its gradient compiled
+def test_a_design_solved_by_fmmax_descends_and_the_command_says_its_solver(tmp_path, capsys):
+    """The design loss through fmmax's Jones-direct solve (its gradient holds the
+    formulation's vector field fixed): a few steps of gradient descent lower it, and the
+    command's pattern file and report name the solver and its terms."""
+    pytest.importorskip("fmmax")
+    from splitcam import patterns
+    from splitcam.cli import main
+
+    rng = np.random.default_rng(4)
+    geometry = RouterDesign(rng.random((6, 6)), thickness=0.5, depth=1.0)
+    design = FullwaveDesign(
+        geometry,
+        wavelengths=[460.0, 620.0],
+        photons=100.0,
+        samples=8,
+        radius=1.5,
+        solver="fmmax-jones",
+        terms=21,
+    )
+    theta = design.start().clone().requires_grad_(True)
+    opt = torch.optim.Adam([theta], lr=0.2)
+    first = float(design.objective(theta, beta=2.0)[0].detach())
+    for _ in range(4):
+        opt.zero_grad()
+        loss, _ = design.objective(theta, beta=2.0)
+        loss.backward()
+        opt.step()
+    assert float(design.objective(theta, beta=2.0)[0].detach()) < first
+    out = tmp_path / "d"
+    args = ["optics", "rcwa-design", "noise:6x6", "--steps", "2", "--samples", "8"]
+    args += ["--feature", "0.4", "--wavelengths", "460,620", "--quiet", "--out", str(out)]
+    assert main([*args, "--solver", "fmmax-jones", "--terms", "21"]) == 0
+    assert "fmmax-jones, 21 terms" in patterns.get(str(out / "d.toml")).provenance
+    assert "fmmax-jones, 21 terms" in (out / "report.md").read_text()
+    capsys.readouterr()
+    assert main([*args[:-1], str(tmp_path / "t"), "--terms", "21"]) == 1  # torcwa takes order
+    assert "for an fmmax solver" in capsys.readouterr().err
+
+
 def test_bad_settings_are_refused():
     with pytest.raises(FullwaveError, match="exposure must be > 0"):
         FullwaveDesign(RouterDesign(np.eye(4)), photons=0.0)
@@ -154,6 +194,10 @@ def test_bad_settings_are_refused():
         FullwaveDesign(RouterDesign(np.eye(4)), radius=-1)
     with pytest.raises(FullwaveError, match="density of shape"):
         torcwa_quadrants(RouterDesign(np.eye(4)), torch.zeros(3, 3, dtype=torch.float64), 500.0)
+    with pytest.raises(FullwaveError, match="unknown solver 'meep'"):
+        FullwaveDesign(RouterDesign(np.eye(4)), solver="meep")
+    with pytest.raises(FullwaveError, match="for an fmmax solver"):
+        FullwaveDesign(RouterDesign(np.eye(4)), terms=100)
 
 
 def test_the_design_command_writes_a_solved_binary_design_and_continues_a_stopped_run(

@@ -420,6 +420,58 @@ def test_fmmax_conserves_light_at_an_angle_and_agrees_with_torcwa():
     assert out["transmission"].std() > 0.01  # the layer sorts light
 
 
+def _finite_difference(f, grid: np.ndarray, cells, h: float = 1e-6) -> np.ndarray:
+    out = []
+    for i, j in cells:
+        step = np.zeros_like(grid)
+        step[i, j] = h
+        out.append((f(grid + step) - f(grid - step)) / (2 * h))
+    return np.asarray(out)
+
+
+@pytest.mark.slow  # about 40 s: six compilations of fmmax's solve
+def test_fmmax_quadrants_are_the_spectra_solve_and_differentiate_through_jax():
+    """fmmax_quadrants (PyTorch in and out, JAX inside) is what quadrant_spectra solves with
+    fmmax; in the FFT formulation its gradient with respect to the cell densities is the
+    central difference; in Jones-direct, whose vector field fmmax holds fixed under
+    differentiation, it points the same way (cosine above 0.95), not exactly."""
+    _fmmax()
+    import torch
+
+    from splitcam.physics.fullwave import fmmax_quadrants
+
+    rng = np.random.default_rng(0)
+    grid = rng.uniform(0.2, 0.8, (4, 4))
+    design = RouterDesign(grid, thickness=0.4, depth=0.8)
+    weights = torch.from_numpy(rng.normal(size=(2, 2, 2)))
+    cells = [(0, 0), (0, 1), (1, 2), (2, 0), (3, 1), (3, 3)]
+    for solver, formulation in (("fmmax-fft", "FFT"), ("fmmax-jones", "JONES_DIRECT")):
+        spectra = quadrant_spectra(
+            design, [550.0], samples=4, solver=solver, terms=21, directions=[(0.1, 0.3, 1.0)]
+        )
+        x = torch.tensor(grid, requires_grad=True)
+        quads, reflected = fmmax_quadrants(design, x, 550.0, 0.1, 0.3, 21, 4, formulation)
+        np.testing.assert_allclose(
+            quads.detach().numpy(), spectra["by_polarisation"][..., 0], atol=1e-12
+        )
+        assert float(reflected.detach()) == pytest.approx(spectra["reflection"][0], abs=1e-12)
+        ((quads * weights).sum() + 0.7 * reflected).backward()
+
+        def scalar(v, formulation=formulation):
+            q, r = fmmax_quadrants(design, torch.tensor(v), 550.0, 0.1, 0.3, 21, 4, formulation)
+            return float((q * weights).sum() + 0.7 * r)
+
+        fd = _finite_difference(scalar, grid, cells)
+        ours = np.asarray([float(x.grad[i, j]) for i, j in cells])
+        if formulation == "FFT":
+            np.testing.assert_allclose(ours, fd, rtol=1e-5, atol=1e-8)
+        else:
+            cosine = ours @ fd / np.linalg.norm(ours) / np.linalg.norm(fd)
+            assert 0.95 < cosine < 1.0 - 1e-9  # close, and not the exact derivative
+    with pytest.raises(FullwaveError, match="density of shape"):
+        fmmax_quadrants(design, torch.zeros(3, 3, dtype=torch.float64), 500.0)
+
+
 def test_solver_settings_are_checked(monkeypatch):
     design = RouterDesign(np.ones((2, 2)))
     with pytest.raises(FullwaveError, match="unknown solver 'meep'; expected one of torcwa"):

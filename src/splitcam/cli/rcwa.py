@@ -31,19 +31,6 @@ def register(optics_sub: argparse._SubParsersAction) -> None:
     )
     add_stack_options(p, wavelengths="400:700:10", order=9)
     p.add_argument(
-        "--solver",
-        choices=["torcwa", "fmmax-fft", "fmmax-jones"],
-        default="torcwa",
-        help="torcwa (default; splitcam[fullwave]) or fmmax in its FFT or Jones-direct "
-        "formulation (splitcam[fmmax]; fmmax-jones with --terms 1000 is the invrs-gym "
-        "leaderboard's setting)",
-    )
-    p.add_argument(
-        "--terms",
-        type=int,
-        help="fmmax: about this many Fourier terms, circular truncation (default (2 order + 1)^2)",
-    )
-    p.add_argument(
         "--f-number",
         type=float,
         help="average over the cone of light of a lens at this f-number, > 0.5 (7 directions); "
@@ -68,9 +55,15 @@ def register(optics_sub: argparse._SubParsersAction) -> None:
     p.set_defaults(handler=run)
 
 
-def add_stack_options(p: argparse.ArgumentParser, *, wavelengths: str, order: int) -> None:
-    """The layer stack, the wavelengths and the Fourier order: the options of every command
-    that solves a router (``optics rcwa``, ``optics rcwa-design``)."""
+def add_stack_options(
+    p: argparse.ArgumentParser,
+    *,
+    wavelengths: str,
+    order: int,
+    solvers: tuple[str, ...] | None = None,
+) -> None:
+    """The layer stack, the wavelengths, the solver and its Fourier order or terms: the options
+    of every command that solves a router (``optics rcwa``, ``optics rcwa-design``)."""
     p.add_argument("--pitch", type=float, default=1.0, help="pixel pitch, µm (default 1)")
     p.add_argument("--thickness", type=float, default=0.6, help="layer, µm (default 0.6)")
     p.add_argument("--depth", type=float, default=2.4, help="monitor below it, µm (default 2.4)")
@@ -84,6 +77,22 @@ def add_stack_options(p: argparse.ArgumentParser, *, wavelengths: str, order: in
     )
     p.add_argument(
         "--order", type=int, default=order, help=f"Fourier order per axis (default {order})"
+    )
+    from ..physics.fullwave import SOLVERS
+
+    solvers = solvers or SOLVERS
+    p.add_argument(
+        "--solver",
+        choices=solvers,
+        default=solvers[0],
+        help=f"{' or '.join(solvers)} (default {solvers[0]}): torcwa needs splitcam[fullwave], "
+        "fmmax in its FFT or Jones-direct formulation splitcam[fmmax] (fmmax-jones with "
+        "--terms 1000 is the invrs-gym leaderboard's setting)",
+    )
+    p.add_argument(
+        "--terms",
+        type=int,
+        help="fmmax: about this many Fourier terms, circular truncation (default (2 order + 1)^2)",
     )
 
 

@@ -16,10 +16,12 @@ def register(optics_sub: argparse._SubParsersAction) -> None:
         "rcwa-design",
         help="design a router's layer through Maxwell's equations for the image at an exposure",
         description="Optimises the cells of a 2x2-pixel metasurface layer by gradient descent "
-        "through RCWA (torcwa; splitcam[fullwave]) on the closed-form LMMSE error of the image "
-        "at one exposure (photon model, linear light), with a conic filter (minimum feature) "
-        "and a projection driven to 0/1 over the run (splitcam.design.fullwave). Saved after "
-        "every step in OUT/state.*: the same command continues an interrupted run. At the end "
+        "through RCWA (torcwa, splitcam[fullwave], or fmmax) on the closed-form LMMSE error of "
+        "the image at one exposure (photon model, linear light), with a conic filter (minimum "
+        "feature) and a projection driven to 0/1 over the run (splitcam.design.fullwave). "
+        "Saved after every step in OUT/state.*: the same command continues an interrupted "
+        "run. --solver fmmax-jones (splitcam[fmmax]) solves nearer the converged setting in "
+        "fewer terms (its gradient holds the formulation's vector field fixed). At the end "
         "the binary design is solved again and OUT holds NAME.csv (the design), "
         "NAME-density.csv, NAME-spectra.csv/.png, NAME.toml (its spectral pattern) and "
         "report.md/.png (objective against steps, the layer).",
@@ -82,7 +84,7 @@ def run(args: argparse.Namespace) -> int:
     from ..design.fullwave import FullwaveDesign, run_design
     from ..physics.fullwave import FullwaveError, check_solver, cone_directions
 
-    check_solver("torcwa")
+    check_solver(args.solver)
     grid = _start_grid(args.start, args.seed)
     geometry = stack_of(args, grid)
     cell = 2.0 * args.pitch / max(grid.shape)
@@ -102,6 +104,8 @@ def run(args: argparse.Namespace) -> int:
         order=args.order,
         samples=args.samples,
         radius=radius,
+        solver=args.solver,
+        terms=args.terms,
     )
     out = Path(args.out)
     if out.exists() and not out.is_dir():
@@ -126,6 +130,8 @@ def run(args: argparse.Namespace) -> int:
         "read_noise": args.read_noise,
         "f_number": args.f_number,
         "order": args.order,
+        "solver": args.solver,
+        "terms": args.terms,
         "samples": args.samples,
         "feature": args.feature,
     }
@@ -172,7 +178,7 @@ def _finish(
     from ..io import write_text
     from ..patterns.files import save_transmission
     from ..physics.fullwave import RouterDesign, quadrant_spectra
-    from .rcwa import _say_roles, _write_spectra, file_stem
+    from .rcwa import _say_roles, _solved_by, _write_spectra, file_stem
 
     stem = file_stem(name)
     g = design.geometry
@@ -180,6 +186,8 @@ def _finish(
         RouterDesign(binary, g.pitch, g.thickness, g.depth, g.pillar, g.background, g.substrate),
         lams,
         order=args.order,
+        solver=args.solver,
+        terms=args.terms,
         samples=args.samples,
         directions=design.directions,
         cache=out / f"{stem}-solves.jsonl",
@@ -190,7 +198,8 @@ def _finish(
     write_text(out / f"{stem}-density.csv", _csv(density, "{:.4f}"))
     where = f"f/{args.f_number:g} cone" if args.f_number else "normal incidence"
     info = {
-        "provenance": f"designed through RCWA (torcwa, order {args.order}, {where}) for the "
+        "provenance": f"designed through RCWA ({_solved_by(args, solved['terms'])}, {where}) "
+        "for the "
         f"closed-form LMMSE at N = {args.photons:g}, read noise {args.read_noise:g} e-; "
         f"{len(history)} steps; binary, minimum feature {args.feature:g} µm",
         "description": f"metasurface router {stem}.csv: pitch {g.pitch:g} µm, "
@@ -212,7 +221,7 @@ def _finish(
         f"as given ({args.start}), {history[0]['psnr']:.2f} dB at the first step (its "
         f"densities pulled to [0.25, 0.75]), {history[-1]['psnr']:.2f} dB at the last step "
         f"(continuous densities), {psnr:.2f} dB for the binary design solved again; all at "
-        f"order {args.order}.",
+        f"{_solved_by(args, solved['terms'])}.",
         f"- Reflection {float(solved['reflection'].mean()):.3f}; solving time "
         f"{sum(r['seconds'] for r in history) / 60:.1f} minutes over {len(history)} steps.",
         f"- Files: `{stem}.csv` (the design), `{stem}-density.csv`, `{stem}-spectra.csv`, "

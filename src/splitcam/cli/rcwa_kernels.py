@@ -31,15 +31,7 @@ def register(optics_sub: argparse._SubParsersAction) -> None:
     p.add_argument("design", help="CSV grid of 0/1 or densities in [0, 1]; rows along y")
     p.add_argument("--out", required=True, help="folder for the pattern files")
     p.add_argument("--name", help="the pattern's name (default: the design file's stem)")
-    add_stack_options(p, wavelengths="410:690:20", order=4)
-    p.add_argument(
-        "--terms",
-        type=int,
-        help="about this many Fourier terms, circular truncation (default (2 order + 1)^2)",
-    )
-    p.add_argument(
-        "--formulation", choices=["jones", "fft"], default="jones", help="fmmax's (default jones)"
-    )
+    add_stack_options(p, wavelengths="410:690:20", order=4, solvers=("fmmax-jones", "fmmax-fft"))
     p.add_argument("--f-number", type=float, default=2.0, help="of the lens, > 0.5 (default 2)")
     p.add_argument(
         "--chief-ray", type=float, default=0.0, help="degrees off the normal (default 0)"
@@ -94,7 +86,7 @@ def run(args: argparse.Namespace) -> int:
         cells=args.cells,
         positions=args.positions,
         terms=args.terms or (2 * args.order + 1) ** 2,
-        formulation="JONES_DIRECT" if args.formulation == "jones" else "FFT",
+        formulation="JONES_DIRECT" if args.solver == "fmmax-jones" else "FFT",
         samples=args.samples,
         progress=(lambda n: bar.update(n - bar.n)) if bar else None,
         cache=out / f"{stem}-kernels-solves.jsonl",
@@ -102,7 +94,7 @@ def run(args: argparse.Namespace) -> int:
     if bar:
         bar.close()
     where = f"f/{args.f_number:g}, chief ray {args.chief_ray:g}°"
-    solved = f"fmmax {args.formulation}, {result['terms']} terms, {args.cells}x{args.cells} Bloch"
+    solved = f"{args.solver}, {result['terms']} terms, {args.cells}x{args.cells} Bloch"
     info = {
         "provenance": f"full-wave ({solved}), {where}",
         "reference": "splitcam optics rcwa-kernels",

@@ -37,7 +37,13 @@ import numpy as np
 import torch
 
 from ..patterns.spectral import _nearest_copies, scene_basis
-from ..physics.fullwave import FullwaveError, RouterDesign, torcwa_quadrants
+from ..physics.fullwave import (
+    SOLVERS,
+    FullwaveError,
+    RouterDesign,
+    fmmax_quadrants,
+    torcwa_quadrants,
+)
 from ..physics.noise import Exposure
 from ..physics.sensor import pixel_kernels
 from ..recon.closed_form import closed_form_mse, shipped_image_statistics
@@ -106,9 +112,15 @@ class FullwaveDesign:
         read_noise: Electrons.
         directions: ``(polar angle, azimuth, weight)`` of the incident light
             (:func:`splitcam.physics.fullwave.cone_directions`; default normal incidence).
-        order: torcwa's Fourier order per axis.
+        order: torcwa's Fourier order per axis (and fmmax's terms, ``(2 order + 1)^2``, where
+            ``terms`` is not given).
         samples: Flux grid points per pixel and axis.
         radius: The conic filter's radius in cells (the minimum feature, about radius x cell).
+        solver: One of :data:`~splitcam.physics.fullwave.SOLVERS`: torcwa (exact gradients), or
+            fmmax (:func:`~splitcam.physics.fullwave.fmmax_quadrants`), whose Jones-direct
+            formulation converges in fewer terms; its gradient holds the formulation's vector
+            field fixed (fmmax's own choice), so it is close to, not equal to, the derivative.
+        terms: fmmax's Fourier terms (circular truncation).
     """
 
     geometry: RouterDesign
@@ -119,6 +131,8 @@ class FullwaveDesign:
     order: int = 5
     samples: int = 16
     radius: float = 2.0
+    solver: str = "torcwa"
+    terms: int | None = None
     _stats: Any = field(default=None, init=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -128,6 +142,10 @@ class FullwaveDesign:
             )
         if self.radius < 0:
             raise FullwaveError(f"the filter radius must be >= 0 cells, got {self.radius}")
+        if self.solver not in SOLVERS:
+            raise FullwaveError(f"unknown solver {self.solver!r}; expected one of {SOLVERS}")
+        if self.terms is not None and (self.solver == "torcwa" or self.terms < 1):
+            raise FullwaveError("terms: a number >= 1, for an fmmax solver (torcwa takes order)")
         self._stats = shipped_image_statistics("linear")
 
     def start(self) -> torch.Tensor:
@@ -157,14 +175,27 @@ class FullwaveDesign:
             t = density.new_zeros(2, 2)
             r = density.new_zeros(())
             for (theta, phi, _), w in zip(self.directions, weights, strict=True):
-                quads, refl = torcwa_quadrants(
-                    self.geometry, density, lam, theta, phi, self.order, self.samples
-                )
+                quads, refl = self.quadrants(density, lam, theta, phi)
                 t = t + w * quads.mean(0)
                 r = r + w * refl
             spectra.append(t)
             reflection.append(r)
         return torch.stack(spectra, dim=-1), torch.stack(reflection)
+
+    def quadrants(
+        self, density: torch.Tensor, lam: float, theta: float, phi: float
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """One solve by the design's solver: ``(2, 2, 2)`` quadrant transmissions per
+        polarisation and the reflection, differentiable in ``density``."""
+        if self.solver == "torcwa":
+            return torcwa_quadrants(
+                self.geometry, density, lam, theta, phi, self.order, self.samples
+            )
+        terms = self.terms or (2 * self.order + 1) ** 2
+        formulation = "JONES_DIRECT" if self.solver == "fmmax-jones" else "FFT"
+        return fmmax_quadrants(
+            self.geometry, density, lam, theta, phi, terms, self.samples, formulation
+        )
 
     def image_error(self, transmission: torch.Tensor) -> torch.Tensor:
         """The closed-form LMMSE error (per colour, linear light in [0, 1]) of the router with
