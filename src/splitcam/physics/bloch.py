@@ -38,6 +38,7 @@ The cost is ``M^2`` solves per wavelength, each about as costly as one solve of
 
 from __future__ import annotations
 
+import functools
 import math
 import os
 from collections.abc import Callable, Sequence
@@ -48,7 +49,6 @@ import numpy as np
 from .fullwave import (
     FullwaveError,
     RouterDesign,
-    _fine_grid,
     _fmmax,
     _off_grazing,
     _permittivities,
@@ -77,38 +77,46 @@ def _spot_centres(design: RouterDesign, cells: int, positions: int) -> np.ndarra
     )
 
 
-def _spot_amplitudes(fields, ambient, waves: np.ndarray, inside: np.ndarray, centres) -> Any:
+def _spot_amplitudes(fields, ambient, waves, inside, centres) -> Any:
     """``(2n, 2 * spots)`` forward amplitudes in the ambient: for each of fmmax's two
-    polarisations and each centre, the pupil's plane waves (``inside``) at equal power, phased
-    so that they meet at the centre (a lens's focused spot)."""
+    polarisations and each centre, the pupil's plane waves (``inside``, 1 or 0 per wave) at
+    equal power, phased so that they meet at the centre (a lens's focused spot)."""
     import jax.numpy as jnp
 
-    n = len(waves)
+    n = waves.shape[0]
     unit = jnp.eye(2 * n, dtype=complex)
-    power = np.asarray(fields.amplitude_poynting_flux(unit, jnp.zeros_like(unit), ambient)[0])
+    power = fields.amplitude_poynting_flux(unit, jnp.zeros_like(unit), ambient)[0]
     power = power.sum(axis=0)  # the flux of each unit amplitude
-    phase = np.exp(-1j * waves @ centres.T)  # (n, spots)
-    forward = np.zeros((2 * n, 2, len(centres)), complex)
+    phase = jnp.exp(-1j * waves @ centres.T)  # (n, spots)
+    forward = jnp.zeros((2 * n, 2, centres.shape[0]), complex)
     for p in (0, 1):
-        weight = inside / np.sqrt(np.maximum(power[p * n : (p + 1) * n], 1e-300))
-        forward[p * n : (p + 1) * n, p] = weight[:, None] * phase
-    return jnp.asarray(forward.reshape(2 * n, -1))  # [.., (polarisation, spot)]
+        weight = inside / jnp.sqrt(jnp.maximum(jnp.real(power[p * n : (p + 1) * n]), 1e-300))
+        forward = forward.at[p * n : (p + 1) * n, p].set(weight[:, None] * phase)
+    return forward.reshape(2 * n, -1)  # [.., (polarisation, spot)]
 
 
-def _one_wavelength(
-    design: RouterDesign,
-    lam: float,
-    setting: dict[str, Any],
-) -> tuple[np.ndarray, float, float, int]:
-    """``((2, 4, 2M+1, 2M+1)`` kernels per polarisation and source pixel, the reflected share
-    averaged over both, the fit's misfit (the larger of the two polarisations'), the Fourier
-    terms)`` at one wavelength.
+def _bloch_fields(design: RouterDesign, setting: dict[str, Any]) -> tuple[Callable, Any, int]:
+    """The solve of one Bloch wavevector as a compiled JAX function (one per stack and setting,
+    kept: every wavevector and wavelength reuses the compilation), its expansion's orders and
+    its terms: ``(density, um, eps, wavevector, inside) -> [incident, reflected, arriving]``,
+    each ``(ex, ey, hx, hy)`` over the supercell's grid and the (polarisation, spot) columns."""
+    key = (
+        design.grid.shape,
+        (design.pitch, design.thickness, design.depth),
+        (design.pillar, design.background, design.substrate),
+        tuple(sorted((k, v) for k, v in setting.items() if k not in ("f_number", "chief_sines"))),
+    )
+    return _compiled_bloch(*key)
 
-    One solve per Bloch wavevector, the fields summed over them (each solve on its own: fmmax's
-    batched stacking of scattering matrices was seen to stall in XLA's CPU runtime)."""
+
+@functools.lru_cache(maxsize=8)
+def _compiled_bloch(shape, stack, materials, setting_items) -> tuple[Callable, Any, int]:
     basis, fields, fmm, scattering = _fmmax()
+    import jax
     import jax.numpy as jnp
 
+    setting = dict(setting_items)
+    design = RouterDesign(np.zeros(shape), *stack, *materials)
     cells, samples, positions = setting["cells"], setting["samples"], setting["positions"]
     period = 2.0 * design.pitch
     lattice = basis.LatticeVectors(u=basis.X * period, v=basis.Y * period)
@@ -117,38 +125,28 @@ def _one_wavelength(
         approximate_num_terms=setting["terms"],
         truncation=basis.Truncation.CIRCULAR,
     )
-    n = expansion.num_terms
-    um = _off_grazing(lam, period, design) / 1000.0
-    eps_p, eps_b, eps_s = _permittivities(design, lam)
-    zone = np.asarray(basis.brillouin_zone_in_plane_wavevector((cells, cells), lattice))
-    zone = zone.reshape(-1, 2)
-    fine = _fine_grid(design).T  # fmmax: [x, y]
     orders = np.asarray(expansion.basis_coefficients, dtype=np.float64)  # (n, 2)
-    k0 = 2 * np.pi * math.sqrt(eps_b) / um
-    centre = np.asarray(setting["chief_sines"]) * k0
-    centres = _spot_centres(design, cells, positions)
+    centres = jnp.asarray(_spot_centres(design, cells, positions))
+    rows, cols = shape
+    up = jnp.ones((max(1, math.ceil(256 / max(rows, cols))),) * 2)  # as _fine_grid samples
     grid = (2 * samples, 2 * samples)
-    summed: dict[str, list] = {}
-    pupil = 0
-    for wavevector in zone:
 
-        def modes(permittivity, wavevector=wavevector):
+    @jax.jit
+    def solve(density, um, eps, wavevector, inside):
+        eps_p, eps_b, eps_s = eps[0], eps[1], eps[2]
+        fine = jnp.kron(density, up).T  # fmmax: [x, y]
+
+        def modes(permittivity):
             return fmm.eigensolve_isotropic_media(
-                wavelength=jnp.asarray(um),
-                in_plane_wavevector=jnp.asarray(wavevector),
+                wavelength=um,
+                in_plane_wavevector=wavevector,
                 primitive_lattice_vectors=lattice,
                 permittivity=jnp.asarray(permittivity, dtype=complex),
                 expansion=expansion,
                 formulation=getattr(fmm.Formulation, setting["formulation"]),
             )
 
-        # The lens's pupil: the plane waves of this wavevector whose direction sines lie in the
-        # disk of radius 1/(2N) about the chief ray's, each carrying the same power.
         waves = wavevector + 2 * np.pi * orders / period  # (n, 2)
-        inside = np.linalg.norm(waves - centre, axis=-1) <= k0 / (2.0 * setting["f_number"])
-        if not inside.any():
-            continue
-        pupil += int(inside.sum())
         ambient = modes(jnp.full((1, 1), eps_b))
         substrate = modes(jnp.full((1, 1), eps_s))
         forward = _spot_amplitudes(fields, ambient, waves, inside, centres)
@@ -160,25 +158,79 @@ def _one_wavelength(
         amplitudes = fields.stack_amplitudes_interior(inner, forward, zero)
         f_sub, b_sub = amplitudes[2]
         f_end = fields.propagate_amplitude(f_sub, jnp.asarray(design.depth), substrate)
-        for name, f, b, result in (
-            ("incident", forward, zero, ambient),
-            ("reflected", zero, amplitudes[0][1], ambient),
-            ("arriving", f_end, b_sub, substrate),
+        out = []
+        for f, b, result in (
+            (forward, zero, ambient),  # incident
+            (zero, amplitudes[0][1], ambient),  # reflected
+            (f_end, b_sub, substrate),  # arriving
         ):
             e, h = fields.fields_from_wave_amplitudes(f, b, result)
             (ex, ey, _), (hx, hy, _), _ = fields.fields_on_grid(
                 e, h, result, grid, num_unit_cells=(cells, cells)
             )  # over the supercell, with this wavevector's Bloch phase from cell to cell
-            parts = [np.asarray(a) for a in (ex, ey, hx, hy)]
-            if name in summed:
-                summed[name] = [a + b for a, b in zip(summed[name], parts, strict=True)]
-            else:
-                summed[name] = parts
-    if not pupil:
+            out.append((ex, ey, hx, hy))
+        return out
+
+    return solve, orders, int(expansion.num_terms)
+
+
+def _one_wavelength(
+    design: RouterDesign,
+    lam: float,
+    setting: dict[str, Any],
+) -> tuple[np.ndarray, float, float, int]:
+    """``((2, 4, 2M+1, 2M+1)`` kernels per polarisation and source pixel, the reflected share
+    averaged over both, the fit's misfit (the larger of the two polarisations'), the Fourier
+    terms)`` at one wavelength.
+
+    One solve per Bloch wavevector (compiled once, :func:`_bloch_fields`), the fields summed
+    over them (each solve on its own: fmmax's batched stacking of scattering matrices was seen
+    to stall in XLA's CPU runtime)."""
+    basis, _, _, _ = _fmmax()
+    import jax.numpy as jnp
+
+    cells, samples, positions = setting["cells"], setting["samples"], setting["positions"]
+    solve, orders, n = _bloch_fields(design, setting)
+    period = 2.0 * design.pitch
+    lattice = basis.LatticeVectors(u=basis.X * period, v=basis.Y * period)
+    um = _off_grazing(lam, period, design) / 1000.0
+    eps = _permittivities(design, lam)
+    zone = np.asarray(basis.brillouin_zone_in_plane_wavevector((cells, cells), lattice))
+    zone = zone.reshape(-1, 2)
+    k0 = 2 * np.pi * math.sqrt(eps[1]) / um
+    centre = np.asarray(setting["chief_sines"]) * k0
+    density = jnp.asarray(design.grid)
+    summed: list | None = None
+    pupil = 0
+    for wavevector in zone:
+        # The lens's pupil: the plane waves of this wavevector whose direction sines lie in the
+        # disk of radius 1/(2N) about the chief ray's, each carrying the same power.
+        waves = wavevector + 2 * np.pi * orders / period  # (n, 2)
+        inside = np.linalg.norm(waves - centre, axis=-1) <= k0 / (2.0 * setting["f_number"])
+        if not inside.any():
+            continue
+        pupil += int(inside.sum())
+        parts = solve(
+            density,
+            jnp.asarray(um),
+            jnp.asarray(eps),
+            jnp.asarray(wavevector),
+            jnp.asarray(inside, dtype=float),
+        )
+        parts = [[np.asarray(a) for a in fields] for fields in parts]
+        if summed is None:
+            summed = parts
+        else:
+            summed = [
+                [a + b for a, b in zip(old, new, strict=True)]
+                for old, new in zip(summed, parts, strict=True)
+            ]
+    if not pupil or summed is None:
         raise FullwaveError("no plane wave of the Bloch grid falls in the lens's pupil")
+    named = dict(zip(("incident", "reflected", "arriving"), summed, strict=True))
 
     def flux(name):  # [X, Y, column] over the supercell
-        ex, ey, hx, hy = summed[name]
+        ex, ey, hx, hy = named[name]
         return 0.5 * np.real(ex * np.conj(hy) - ey * np.conj(hx))
 
     arriving_flux, incident_flux = flux("arriving"), flux("incident")
