@@ -71,6 +71,12 @@ class ClassicalDemosaic:
     #: changing one mosaic pixel of random mosaics never changes an output farther away.
     RADIUS = {"bilinear": 1, "malvar2004": 2, "menon2007": 8}
 
+    #: What, beyond the method's name, tells its stored results apart
+    #: (:func:`~splitcam.evaluation.protocol.method_fingerprint`): the rule at the image's edges.
+    #: Change it with any change to the output, so that results computed before are recomputed
+    #: on resume instead of kept beside new ones.
+    fingerprint = "edges: the mosaic extended keeping its RGGB layout"
+
     def __init__(
         self,
         method: str,
