@@ -13,6 +13,7 @@ import pytest
 
 from splitcam.physics.fullwave import (
     MATERIALS,
+    SOLVERS,
     FullwaveError,
     RouterDesign,
     band_efficiencies,
@@ -473,6 +474,9 @@ def test_fmmax_quadrants_are_the_spectra_solve_and_differentiate_through_jax():
 
 
 def test_solver_settings_are_checked(monkeypatch):
+    from splitcam.cli import rcwa
+
+    assert rcwa.SOLVERS == SOLVERS  # the parser's copy of the list
     design = RouterDesign(np.ones((2, 2)))
     with pytest.raises(FullwaveError, match="unknown solver 'meep'; expected one of torcwa"):
         quadrant_spectra(design, [500.0], solver="meep")

@@ -55,6 +55,11 @@ def register(optics_sub: argparse._SubParsersAction) -> None:
     p.set_defaults(handler=run)
 
 
+#: splitcam.physics.fullwave.SOLVERS, written here so that building the parser imports no numpy
+#: (tests/physics/test_fullwave.py checks that the two agree).
+SOLVERS = ("torcwa", "fmmax-fft", "fmmax-jones")
+
+
 def add_stack_options(
     p: argparse.ArgumentParser,
     *,
@@ -78,8 +83,6 @@ def add_stack_options(
     p.add_argument(
         "--order", type=int, default=order, help=f"Fourier order per axis (default {order})"
     )
-    from ..physics.fullwave import SOLVERS
-
     solvers = solvers or SOLVERS
     p.add_argument(
         "--solver",
