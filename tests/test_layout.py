@@ -120,8 +120,11 @@ def test_markdown_tables_have_one_writer():
     assert not wrong, f"Markdown table rules written outside evaluation/tables.py: {wrong}"
 
 
-def test_no_function_body_is_longer_than_100_lines():
-    """A function longer than a screenful does several things: name them (docstrings aside)."""
+def test_no_function_body_is_longer_than_80_lines():
+    """A function longer than a screenful does several things: name them. Lines of code are
+    counted, from the first statement after the docstring to the last: a long docstring is
+    documentation, not complexity (ruff's statement count misses long expressions and
+    argument tables, which this sees)."""
     long = []
     for path in _code_files():
         for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
@@ -130,9 +133,9 @@ def test_no_function_body_is_longer_than_100_lines():
             body = node.body
             if ast.get_docstring(node) is not None:
                 body = body[1:]
-            if body and body[-1].end_lineno - body[0].lineno + 1 > 100:
+            if body and body[-1].end_lineno - body[0].lineno + 1 > 80:
                 long.append(f"{path.relative_to(PACKAGE)}:{node.name}")
-    assert not long, f"functions over 100 lines: {long}"
+    assert not long, f"functions over 80 lines: {long}"
 
 
 #: Where a pattern's name or file may become a Pattern below the CLI: the constructors users

@@ -53,6 +53,21 @@ def register(sub: argparse._SubParsersAction) -> None:
         "the shipped network of every pattern and the training-free baselines (LMMSE for every "
         "pattern, bayer + Malvar 2004).",
     )
+    _add_method_choice(p)
+    _add_scene_options(p)
+    _add_output_options(p)
+    add_method_options(p)
+    p.add_argument(
+        "--restart",
+        action="store_true",
+        help="recompute everything instead of continuing the results in --out",
+    )
+    p.add_argument("--quiet", action="store_true")
+    p.set_defaults(handler=run)
+
+
+def _add_method_choice(p: argparse.ArgumentParser) -> None:
+    """What is scored: runs, shipped models, baselines, and their patterns."""
     p.add_argument(
         "--checkpoint",
         action="append",
@@ -84,6 +99,10 @@ def register(sub: argparse._SubParsersAction) -> None:
         f"names or files (default: {','.join(PAPER_PATTERNS)}); with no method named, the main "
         "job on these patterns only",
     )
+
+
+def _add_scene_options(p: argparse.ArgumentParser) -> None:
+    """What it is scored on: images, noise levels, the sensor, the light domain, crops."""
     p.add_argument(
         "--datasets",
         default="default",
@@ -129,15 +148,6 @@ def register(sub: argparse._SubParsersAction) -> None:
         default=0,
         help="border pixels left out of the scores (default 0, as in the paper)",
     )
-    _add_output_options(p)
-    add_method_options(p)
-    p.add_argument(
-        "--restart",
-        action="store_true",
-        help="recompute everything instead of continuing the results in --out",
-    )
-    p.add_argument("--quiet", action="store_true")
-    p.set_defaults(handler=run)
 
 
 def _draw_charts(out: Path, rows: list, summary: dict) -> list[Path]:

@@ -182,23 +182,7 @@ def run(args: argparse.Namespace) -> int:
     cost = result["cost"]
     if cost["reused"]:
         print(f"{cost['reused']} of {cost['solves']} solves taken from {log} (an earlier run)")
-    t = result["transmission"]
-    # A quadrant that receives almost nothing can come out a rounding error below zero; a
-    # clearly negative net flux means the solve is not converged (raise --order).
-    if not np.all(np.isfinite(t)):
-        li = int(np.argwhere(~np.isfinite(t))[0][2])
-        written = _write_spectra(out, stem, lams, result)
-        raise ValueError(f"the solve at {lams[li]:g} nm is not a number; {written} written")
-    lowest = float(t.min())
-    if lowest < -1e-3:
-        i, j, li = np.unravel_index(int(t.argmin()), t.shape)
-        written = _write_spectra(out, stem, lams, result)
-        raise ValueError(
-            f"quadrant ({i}, {j}) at {lams[li]:g} nm transmits {lowest:.4f} < 0: not converged "
-            f"with {_solved_by(args, result['terms'])}; raise --order or --terms ({written} "
-            "written for a look)"
-        )
-    t = np.clip(t, 0.0, None)
+    t = _checked_transmission(args, result, out, stem, lams)
     info = {
         "provenance": f"full-wave (RCWA, {_solved_by(args, result['terms'])}, {where})",
         "description": f"metasurface router {Path(args.design).name}: pitch {args.pitch:g} µm, "
@@ -217,6 +201,33 @@ def run(args: argparse.Namespace) -> int:
         f"{cost['seconds']:.0f} s of solving)"
     )
     return 0
+
+
+def _checked_transmission(
+    args: argparse.Namespace, result: dict, out: Path, stem: str, lams: list[float]
+):
+    """The transmission, refused (the spectra written for a look) where a solve is not a
+    number or clearly not converged; rounding errors below zero set to zero."""
+    import numpy as np
+
+    t = result["transmission"]
+    # A quadrant that receives almost nothing can come out a rounding error below zero; a
+    # clearly negative net flux means the solve is not converged (raise --order).
+    if not np.all(np.isfinite(t)):
+        li = int(np.argwhere(~np.isfinite(t))[0][2])
+        written = _write_spectra(out, stem, lams, result)
+        raise ValueError(f"the solve at {lams[li]:g} nm is not a number; {written} written")
+    lowest = float(t.min())
+    if lowest < -1e-3:
+        i, j, li = np.unravel_index(int(t.argmin()), t.shape)
+        written = _write_spectra(out, stem, lams, result)
+        raise ValueError(
+            f"quadrant ({i}, {j}) at {lams[li]:g} nm transmits {lowest:.4f} < 0: not converged "
+            f"with {_solved_by(args, result['terms'])}; raise --order or --terms ({written} "
+            "written for a look)"
+        )
+    t = np.clip(t, 0.0, None)
+    return t
 
 
 def _incidence(args: argparse.Namespace) -> tuple[list, str]:

@@ -81,60 +81,20 @@ def run(args: argparse.Namespace) -> int:
     import numpy as np
     import torch
 
-    from ..design.fullwave import FullwaveDesign, run_design
-    from ..physics.fullwave import FullwaveError, check_solver, cone_directions
+    from ..design.fullwave import run_design
+    from ..physics.fullwave import check_solver
 
     check_solver(args.solver)
     grid = _start_grid(args.start, args.seed)
-    geometry = stack_of(args, grid)
-    cell = 2.0 * args.pitch / max(grid.shape)
-    radius = args.feature / cell
-    if args.feature < cell:
-        raise FullwaveError(
-            f"--feature {args.feature:g} µm is below the grid step ({cell:.4g} µm per cell)"
-        )
     lams = wavelengths_of(args.wavelengths)
-    directions = cone_directions(args.f_number) if args.f_number else [(0.0, 0.0, 1.0)]
-    design = FullwaveDesign(
-        geometry,
-        wavelengths=lams,
-        photons=args.photons,
-        read_noise=args.read_noise,
-        directions=directions,
-        order=args.order,
-        samples=args.samples,
-        radius=radius,
-        solver=args.solver,
-        terms=args.terms,
-    )
+    design = _design_of(args, grid, lams)
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise ValueError(f"--out {out} is a file, not a folder")
     name = args.name or out.name
     if args.threads:
         torch.set_num_threads(args.threads)
-    settings = {
-        "start": args.start,
-        "seed": args.seed,
-        "grid": list(grid.shape),
-        "stack": [
-            args.pitch,
-            args.thickness,
-            args.depth,
-            args.pillar,
-            args.background,
-            args.substrate,
-        ],
-        "wavelengths": lams,
-        "photons": args.photons,
-        "read_noise": args.read_noise,
-        "f_number": args.f_number,
-        "order": args.order,
-        "solver": args.solver,
-        "terms": args.terms,
-        "samples": args.samples,
-        "feature": args.feature,
-    }
+    settings = _settings_of(args, grid, lams)
     bar = None
     if not args.quiet:
         from tqdm import tqdm
@@ -167,6 +127,59 @@ def run(args: argparse.Namespace) -> int:
     return _finish(
         args, design, out, name, binary, density, result["history"], lams, np, start_psnr
     )
+
+
+def _design_of(args: argparse.Namespace, grid, lams: list[float]):
+    """The design problem: the stack around the start grid, the feature size in cells, the
+    lens's cone, the exposure and the solver."""
+    from ..design.fullwave import FullwaveDesign
+    from ..physics.fullwave import FullwaveError, cone_directions
+
+    geometry = stack_of(args, grid)
+    cell = 2.0 * args.pitch / max(grid.shape)
+    if args.feature < cell:
+        raise FullwaveError(
+            f"--feature {args.feature:g} µm is below the grid step ({cell:.4g} µm per cell)"
+        )
+    directions = cone_directions(args.f_number) if args.f_number else [(0.0, 0.0, 1.0)]
+    return FullwaveDesign(
+        geometry,
+        wavelengths=lams,
+        photons=args.photons,
+        read_noise=args.read_noise,
+        directions=directions,
+        order=args.order,
+        samples=args.samples,
+        radius=args.feature / cell,
+        solver=args.solver,
+        terms=args.terms,
+    )
+
+
+def _settings_of(args: argparse.Namespace, grid, lams: list[float]) -> dict:
+    """What the run was started with: a continued run must have the same."""
+    return {
+        "start": args.start,
+        "seed": args.seed,
+        "grid": list(grid.shape),
+        "stack": [
+            args.pitch,
+            args.thickness,
+            args.depth,
+            args.pillar,
+            args.background,
+            args.substrate,
+        ],
+        "wavelengths": lams,
+        "photons": args.photons,
+        "read_noise": args.read_noise,
+        "f_number": args.f_number,
+        "order": args.order,
+        "solver": args.solver,
+        "terms": args.terms,
+        "samples": args.samples,
+        "feature": args.feature,
+    }
 
 
 def _finish(

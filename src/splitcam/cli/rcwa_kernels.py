@@ -56,20 +56,34 @@ def register(optics_sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    import numpy as np
-
-    from ..patterns.files import save_spectral_kernels, save_transmission
-    from ..patterns.spectral import SpectralPattern
-    from ..physics.bloch import pixel_kernels, quadrant_sums
     from ..physics.fullwave import check_solver, read_design
 
     check_solver("fmmax-jones")  # a missing extra, before anything is read or shown
     lams = wavelengths_of(args.wavelengths)
     design = stack_of(args, read_design(args.design))
     name = args.name or Path(args.design).stem
-    stem = file_stem(name)
-    SpectralPattern.from_transmission(name, lams, np.zeros((2, 2, len(lams))))  # the range
     out = Path(args.out)
+    result = _solve(args, design, lams, name, out)
+    written = _write_patterns(args, result, lams, name, out)
+    cost = result["cost"]
+    print(
+        f"wrote {', '.join(str(p) for p in written)}: misfit "
+        f"{result['misfit'].min():.3f}-{result['misfit'].max():.3f}, reflection "
+        f"{result['reflection'].mean():.3f} ({cost['solves']} Bloch solves, {cost['reused']} "
+        f"reused, {cost['seconds']:.0f} s of solving)"
+    )
+    return 0
+
+
+def _solve(args: argparse.Namespace, design, lams: list[float], name: str, out: Path) -> dict:
+    """The settings checked (nothing solved or written before), then the kernels, resumable
+    through the solve log in ``out``."""
+    import numpy as np
+
+    from ..patterns.spectral import SpectralPattern
+    from ..physics.bloch import pixel_kernels
+
+    SpectralPattern.from_transmission(name, lams, np.zeros((2, 2, len(lams))))  # the range
     if out.exists() and not out.is_dir():
         raise ValueError(f"--out {out} is a file, not a folder")
     bar = None
@@ -89,10 +103,24 @@ def run(args: argparse.Namespace) -> int:
         formulation="JONES_DIRECT" if args.solver == "fmmax-jones" else "FFT",
         samples=args.samples,
         progress=(lambda n: bar.update(n - bar.n)) if bar else None,
-        cache=out / f"{stem}-kernels-solves.jsonl",
+        cache=out / f"{file_stem(name)}-kernels-solves.jsonl",
     )
     if bar:
         bar.close()
+    return result
+
+
+def _write_patterns(
+    args: argparse.Namespace, result: dict, lams: list[float], name: str, out: Path
+) -> list[Path]:
+    """The computed pattern, its 5 x 5 cut where the kernels are larger, and the nearest-copy
+    pattern on the same totals."""
+    import numpy as np
+
+    from ..patterns.files import save_spectral_kernels, save_transmission
+    from ..physics.bloch import quadrant_sums
+
+    stem = file_stem(name)
     where = f"f/{args.f_number:g}, chief ray {args.chief_ray:g}°"
     solved = f"{args.solver}, {result['terms']} terms, {args.cells}x{args.cells} Bloch"
     info = {
@@ -142,11 +170,4 @@ def run(args: argparse.Namespace) -> int:
             **info,
         )
     )
-    cost = result["cost"]
-    print(
-        f"wrote {', '.join(str(p) for p in written)}: misfit "
-        f"{result['misfit'].min():.3f}-{result['misfit'].max():.3f}, reflection "
-        f"{result['reflection'].mean():.3f} ({cost['solves']} Bloch solves, {cost['reused']} "
-        f"reused, {cost['seconds']:.0f} s of solving)"
-    )
-    return 0
+    return written

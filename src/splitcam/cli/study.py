@@ -36,6 +36,22 @@ def register(sub: argparse._SubParsersAction) -> None:
         "thread). In linear light by default.",
     )
     p.add_argument("study", choices=["exposure", "breakeven"])
+    _add_sensor_choice(p)
+    _add_map_options(p)
+    _add_camera_options(p)
+    p.add_argument("--out", help="default results/exposure or results/breakeven")
+    p.add_argument(
+        "--restart",
+        action="store_true",
+        help="exposure: discard the scores OUT/evaluation holds (a study of other weights) "
+        "instead of continuing them",
+    )
+    p.add_argument("--quiet", action="store_true", help="no progress bars")
+    p.set_defaults(handler=run)
+
+
+def _add_sensor_choice(p: argparse.ArgumentParser) -> None:
+    """The images, the sensors, the exposures, the light domain and the reconstructions."""
     p.add_argument(
         "--datasets",
         default="default",
@@ -76,6 +92,10 @@ def register(sub: argparse._SubParsersAction) -> None:
         default=[],
         help="a trained run too (e.g. one trained with --noise photon)",
     )
+
+
+def _add_map_options(p: argparse.ArgumentParser) -> None:
+    """The break-even map's grid, and what both studies compare with."""
     p.add_argument(
         "--eta", type=float, nargs="+", help="breakeven: efficiencies (default 0.3 to 1, 8 steps)"
     )
@@ -97,16 +117,6 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--tol", type=float, default=0.0, help="breakeven: differences within this count as ties"
     )
-    _add_camera_options(p)
-    p.add_argument("--out", help="default results/exposure or results/breakeven")
-    p.add_argument(
-        "--restart",
-        action="store_true",
-        help="exposure: discard the scores OUT/evaluation holds (a study of other weights) "
-        "instead of continuing them",
-    )
-    p.add_argument("--quiet", action="store_true", help="no progress bars")
-    p.set_defaults(handler=run)
 
 
 def _command(args: argparse.Namespace) -> str:

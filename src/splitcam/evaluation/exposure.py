@@ -623,8 +623,39 @@ def write_study(
     out.mkdir(parents=True, exist_ok=True)
     chart = exposure_chart(results, out / "exposure.png", networks=networks)
     photons = sorted(next(iter(results.values())))
+    lines = _score_sections(results, photons, note, domain, networks)
+    crossing, crossovers = _crossover_sections(results, photons, references, networks)
+    lines += crossing
+    if camera is not None and crossovers:
+        lines += _lux_section(crossovers, camera, photons)
+    if snr:
+        lines += _raw_snr_section(snr)
+    lines += ["", f"![exposure]({chart.name})", ""]
+    record = {
+        "results": {p: {f"{n:g}": v for n, v in r.items()} for p, r in results.items()},
+        "crossovers": crossovers,
+        "camera": None
+        if camera is None
+        else {"settings": camera.describe(), "electrons_per_lux": camera.electrons_per_lux},
+        "raw_snr": snr,
+        "domain": domain,
+    }
+    write_text(out / "exposure.json", json.dumps(record, indent=1) + "\n")
+    path = out / "exposure.md"
+    write_text(path, "\n".join(lines))
+    return path
+
+
+def _score_sections(
+    results: dict[str, dict[float, dict[str, float]]],
+    photons: list[float],
+    note: str,
+    domain: str,
+    networks: dict[str, str] | None,
+) -> list[str]:
+    """The study's opening and its PSNR and CIEDE2000 tables, one column per exposure."""
     head = ["pattern", *(f"N={n:.3g}" if n < 1000 else f"N={n:.0f}" for n in photons)]
-    lines = [
+    return [
         "# Filters and splitters at equal exposure",
         "",
         note,
@@ -650,20 +681,18 @@ def write_study(
             ([p, *(f"{r[n]['ciede2000']:.3f}" for n in photons)] for p, r in results.items()),
         ),
     ]
-    crossing, crossovers = _crossover_sections(results, photons, references, networks)
-    lines += crossing
-    if camera is not None and crossovers:
-        lines += _lux_section(crossovers, camera, photons)
-    if snr:
-        lines += [
-            "",
-            "## Raw SNR against the Bayer filter, before reconstruction",
-            "",
-            "`k`: mean raw signal over the filter's. Shot-limited gain should be "
-            "10·log10 k, read-limited 20·log10 k.",
-            "",
-        ]
-        lines += markdown_table(
+
+
+def _raw_snr_section(snr: dict[str, dict[str, float]]) -> list[str]:
+    """The raw SNR check against the Bayer filter, before any reconstruction."""
+    return [
+        "",
+        "## Raw SNR against the Bayer filter, before reconstruction",
+        "",
+        "`k`: mean raw signal over the filter's. Shot-limited gain should be "
+        "10·log10 k, read-limited 20·log10 k.",
+        "",
+        *markdown_table(
             ["pattern", "k", "shot-limited gain (theory)", "read-limited gain (theory)"],
             (
                 [
@@ -674,27 +703,5 @@ def write_study(
                 ]
                 for p, v in snr.items()
             ),
-        )
-    lines += ["", f"![exposure]({chart.name})", ""]
-    write_text(
-        out / "exposure.json",
-        json.dumps(
-            {
-                "results": {p: {f"{n:g}": v for n, v in r.items()} for p, r in results.items()},
-                "crossovers": crossovers,
-                "camera": None
-                if camera is None
-                else {
-                    "settings": camera.describe(),
-                    "electrons_per_lux": camera.electrons_per_lux,
-                },
-                "raw_snr": snr,
-                "domain": domain,
-            },
-            indent=1,
-        )
-        + "\n",
-    )
-    path = out / "exposure.md"
-    write_text(path, "\n".join(lines))
-    return path
+        ),
+    ]

@@ -334,6 +334,43 @@ def quadrant_sums(kernels: np.ndarray) -> np.ndarray:
     return out
 
 
+def _checked_setting(
+    f_number: float,
+    chief_ray: float,
+    azimuth: float,
+    cells: int,
+    positions: int,
+    terms: int,
+    formulation: str,
+    samples: int,
+) -> dict[str, Any]:
+    """:func:`pixel_kernels`' settings, refused before any solve where they cannot be run."""
+    for name, value, low in (
+        ("cells", cells, 2),
+        ("positions", positions, 1),
+        ("terms", terms, 1),
+        ("samples", samples, 1),
+    ):
+        if int(value) != value or value < low:
+            raise FullwaveError(f"{name} must be a whole number >= {low}, got {value}")
+    if formulation not in ("JONES_DIRECT", "FFT"):
+        raise FullwaveError(f"formulation: JONES_DIRECT or FFT, got {formulation!r}")
+    cone_directions(f_number, chief_ray, azimuth)  # the same checks as the periodic solves
+    check_solver("fmmax-jones")  # installed, before any solve
+    return {
+        "cells": int(cells),
+        "positions": int(positions),
+        "terms": int(terms),
+        "samples": int(samples),
+        "formulation": formulation,
+        "f_number": float(f_number),
+        "chief_sines": (
+            math.sin(chief_ray) * math.cos(azimuth),
+            math.sin(chief_ray) * math.sin(azimuth),
+        ),
+    }
+
+
 def pixel_kernels(
     design: RouterDesign,
     wavelengths: Sequence[float],
@@ -381,30 +418,9 @@ def pixel_kernels(
             cone_directions` refuses, or fmmax not installed (the message names the install
             command).
     """
-    for name, value, low in (
-        ("cells", cells, 2),
-        ("positions", positions, 1),
-        ("terms", terms, 1),
-        ("samples", samples, 1),
-    ):
-        if int(value) != value or value < low:
-            raise FullwaveError(f"{name} must be a whole number >= {low}, got {value}")
-    if formulation not in ("JONES_DIRECT", "FFT"):
-        raise FullwaveError(f"formulation: JONES_DIRECT or FFT, got {formulation!r}")
-    cone_directions(f_number, chief_ray, azimuth)  # the same checks as the periodic solves
-    check_solver("fmmax-jones")  # installed, before any solve
-    setting = {
-        "cells": int(cells),
-        "positions": int(positions),
-        "terms": int(terms),
-        "samples": int(samples),
-        "formulation": formulation,
-        "f_number": float(f_number),
-        "chief_sines": (
-            math.sin(chief_ray) * math.cos(azimuth),
-            math.sin(chief_ray) * math.sin(azimuth),
-        ),
-    }
+    setting = _checked_setting(
+        f_number, chief_ray, azimuth, cells, positions, terms, formulation, samples
+    )
     size = 2 * cells + 1
     log = None
     if cache is not None:
