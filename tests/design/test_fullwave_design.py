@@ -4,7 +4,9 @@ closed-form LMMSE of the same pattern, and gradients against finite differences.
 
 from __future__ import annotations
 
+import json
 import math
+import re
 
 import numpy as np
 import pytest
@@ -147,6 +149,22 @@ def test_the_whole_objective_differentiates_to_its_finite_difference():
     assert set(np.unique(binary)) <= {0.0, 1.0}
 
 
+def test_the_binarised_layer_is_the_binary_design_with_the_densities_gradient():
+    """The straight-through layer: its values are the thresholded design's, its gradient the
+    projected densities' (checked against the densities' own backward pass)."""
+    rng = np.random.default_rng(7)
+    design = FullwaveDesign(RouterDesign(rng.random((6, 6))), radius=1.5)
+    theta = torch.from_numpy(rng.normal(size=(6, 6))).requires_grad_(True)
+    weights = torch.from_numpy(rng.normal(size=(6, 6)))
+    layer = design.binarised(theta, 8.0)
+    assert np.array_equal(layer.detach().numpy(), design.binary(theta, 8.0))
+    (layer * weights).sum().backward()
+    straight = theta.grad.clone()
+    theta.grad = None
+    (design.densities(theta, 8.0) * weights).sum().backward()
+    torch.testing.assert_close(straight, theta.grad)
+
+
 @pytest.mark.slow  # about a minute: fmmax's solve and its gradient compiled
 def test_a_design_solved_by_fmmax_descends_and_the_command_says_its_solver(tmp_path, capsys):
     """The design loss through fmmax's Jones-direct solve (its gradient holds the
@@ -224,6 +242,8 @@ def test_the_design_command_writes_a_solved_binary_design_and_continues_a_stoppe
         "0.4",
         "--wavelengths",
         "460,620",
+        "--binary-steps",
+        "2",
         "--quiet",
     ]
     assert main([*args, "--out", str(tmp_path / "whole")]) == 0
@@ -243,26 +263,37 @@ def test_the_design_command_writes_a_solved_binary_design_and_continues_a_stoppe
     assert (
         "designed through RCWA" in patterns.get(str(tmp_path / "whole" / "whole.toml")).provenance
     )
-    assert "LMMSE PSNR at N = 100" in capsys.readouterr().out
+    said = capsys.readouterr().out
+    assert "LMMSE PSNR at N = 100" in said
+    # Three steps of continuation, two on the binary layer; the design is the best binary one,
+    # and solved again as a binary layer it scores what its step scored.
+    history = json.loads((tmp_path / "whole" / "state.json").read_text())["history"]
+    assert [r["binary"] for r in history] == [False, False, False, True, True]
+    best = max(r["psnr"] for r in history if r["binary"])
+    solved_again = float(re.search(r"-> ([0-9.]+) dB \(binary", said)[1])
+    assert solved_again == pytest.approx(best, abs=0.006)  # both printed to 0.01 dB
+    assert "best of 2 binary steps" in (tmp_path / "whole" / "report.md").read_text()
 
     real = fd.FullwaveDesign.objective
     count = {"n": 0}
 
-    def stopping(self, theta, beta):
+    def stopping(self, theta, beta, binary=False):
         count["n"] += 1
-        if count["n"] == 2:
+        if count["n"] in (2, 6):  # once in the continuation, once in the binary steps
             raise KeyboardInterrupt
-        return real(self, theta, beta)
+        return real(self, theta, beta, binary)
 
     monkeypatch.setattr(fd.FullwaveDesign, "objective", stopping)
-    assert main([*args, "--out", str(tmp_path / "stopped")]) == 130  # Ctrl-C
-    assert "interrupted" in capsys.readouterr().err
-    assert not (tmp_path / "stopped" / "stopped.csv").exists()
+    for _ in range(2):
+        assert main([*args, "--out", str(tmp_path / "stopped")]) == 130  # Ctrl-C
+        assert "interrupted" in capsys.readouterr().err
+        assert not (tmp_path / "stopped" / "stopped.csv").exists()
     monkeypatch.setattr(fd.FullwaveDesign, "objective", real)
     assert main([*args, "--out", str(tmp_path / "stopped")]) == 0
     a = np.loadtxt(tmp_path / "whole" / "whole-density.csv", delimiter=",")
     b = np.loadtxt(tmp_path / "stopped" / "stopped-density.csv", delimiter=",")
     np.testing.assert_allclose(a, b, atol=1e-4)
+    assert np.array_equal(binary, np.loadtxt(tmp_path / "stopped" / "stopped.csv", delimiter=","))
     # Another setting into the same folder is refused, not mixed in.
     assert main([*args[:-1], "--lr", "0.5", "--quiet", "--out", str(tmp_path / "whole")]) == 1
     assert "other settings" in capsys.readouterr().err

@@ -46,6 +46,13 @@ def register(optics_sub: argparse._SubParsersAction) -> None:
         help="projection sharpness, geometric from START to END over the run (default 2 32)",
     )
     p.add_argument(
+        "--binary-steps",
+        type=int,
+        default=0,
+        help="steps after the continuation on the binary layer itself (straight-through "
+        "gradient at the last sharpness); the best binary layer is the design (default 0)",
+    )
+    p.add_argument(
         "--feature",
         type=float,
         default=0.08,
@@ -114,6 +121,7 @@ def run(args: argparse.Namespace) -> int:
         lr=args.lr,
         beta_start=args.beta[0],
         beta_end=args.beta[1],
+        binary_steps=args.binary_steps,
         settings=settings,
         progress=shown,
     )
@@ -232,9 +240,8 @@ def _finish(
         "",
         f"- Closed-form LMMSE PSNR at the target exposure: {start_psnr:.2f} dB for the start "
         f"as given ({args.start}), {history[0]['psnr']:.2f} dB at the first step (its "
-        f"densities pulled to [0.25, 0.75]), {history[-1]['psnr']:.2f} dB at the last step "
-        f"(continuous densities), {psnr:.2f} dB for the binary design solved again; all at "
-        f"{_solved_by(args, solved['terms'])}.",
+        f"densities pulled to [0.25, 0.75]), {_last_steps(history)}, {psnr:.2f} dB for the "
+        f"binary design solved again; all at {_solved_by(args, solved['terms'])}.",
         f"- Reflection {float(solved['reflection'].mean()):.3f}; solving time "
         f"{sum(r['seconds'] for r in history) / 60:.1f} minutes over {len(history)} steps.",
         f"- Files: `{stem}.csv` (the design), `{stem}-density.csv`, `{stem}-spectra.csv`, "
@@ -252,6 +259,21 @@ def _finish(
     return 0
 
 
+def _last_steps(history: list[dict]) -> str:
+    """The report's words for the end of the run: the last continuous step, and the best of the
+    binary steps where there were some."""
+    continuous = [r for r in history if not r.get("binary")]
+    binary = [r for r in history if r.get("binary")]
+    said = f"{continuous[-1]['psnr']:.2f} dB at the last step of continuous densities"
+    if binary:
+        best = max(binary, key=lambda r: r["psnr"])
+        said += (
+            f", {binary[0]['psnr']:.2f} dB for its binary layer and {best['psnr']:.2f} dB for "
+            f"the best of {len(binary)} binary steps (step {best['step']}, the design)"
+        )
+    return said
+
+
 def _csv(grid, fmt: str = "{:g}") -> str:
     return "\n".join(",".join(fmt.format(v) for v in row) for row in grid) + "\n"
 
@@ -263,8 +285,12 @@ def _report_chart(history, density, binary, path: Path) -> Path:
 
     fig = Figure(figsize=(11, 3.6))
     ax1, ax2, ax3 = fig.subplots(1, 3)
-    steps = [r["step"] for r in history]
-    ax1.plot(steps, [r["psnr"] for r in history], "-o", ms=3)
+    for binary_rows, label in ((False, "continuous densities"), (True, "binary layer")):
+        rows = [r for r in history if bool(r.get("binary")) == binary_rows]
+        if rows:
+            ax1.plot([r["step"] for r in rows], [r["psnr"] for r in rows], "-o", ms=3, label=label)
+    if any(r.get("binary") for r in history):
+        ax1.legend(fontsize=8)
     ax1.set_xlabel("step")
     ax1.set_ylabel("closed-form LMMSE PSNR (dB)")
     ax1.grid(alpha=0.3)

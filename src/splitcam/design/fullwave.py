@@ -165,6 +165,13 @@ class FullwaveDesign:
         with torch.no_grad():
             return (self.densities(theta, beta) >= 0.5).to(torch.float64).numpy()
 
+    def binarised(self, theta: torch.Tensor, beta: float) -> torch.Tensor:
+        """The binary layer of :meth:`binary` in the forward pass, the projected densities'
+        gradient in the backward (a straight-through estimator): the loss is the fabricable
+        design's own, which the continuous densities only approach."""
+        d = self.densities(theta, beta)
+        return d + ((d >= 0.5).to(d) - d).detach()
+
     def transmission(self, density: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """``(2, 2, L)`` transmission into each pixel (mean of the polarisations and the
         directions) and ``(L,)`` reflection, differentiable in ``density``."""
@@ -206,10 +213,14 @@ class FullwaveDesign:
         exposure = Exposure(self.photons, read_noise=self.read_noise)
         return closed_form_mse(kernels, exposure, statistics=self._stats)
 
-    def objective(self, theta: torch.Tensor, beta: float) -> tuple[torch.Tensor, dict]:
+    def objective(
+        self, theta: torch.Tensor, beta: float, binary: bool = False
+    ) -> tuple[torch.Tensor, dict]:
         """The design loss (the image error in dB: ``10 log10 mse``, lower is better) and what
-        a report shows: the error, the PSNR it means, each pixel's share of white light."""
-        t, reflection = self.transmission(self.densities(theta, beta))
+        a report shows: the error, the PSNR it means, each pixel's share of white light.
+        ``binary``: of the thresholded layer (:meth:`binarised`)."""
+        layer = self.binarised(theta, beta) if binary else self.densities(theta, beta)
+        t, reflection = self.transmission(layer)
         mse = self.image_error(t)
         loss = 10.0 * torch.log10(mse)
         info = {
@@ -240,6 +251,7 @@ def run_design(
     lr: float = 0.1,
     beta_start: float = 2.0,
     beta_end: float = 32.0,
+    binary_steps: int = 0,
     settings: dict | None = None,
     progress: Any = None,
 ) -> dict[str, Any]:
@@ -248,29 +260,39 @@ def run_design(
     the same call after an interruption continues from the last step saved. ``settings``: what
     the state must match to be continued (a run of other settings in ``out`` is refused).
 
+    ``steps`` of continuation (``beta`` from ``beta_start`` to ``beta_end``), then
+    ``binary_steps`` more on the binary layer itself (:meth:`FullwaveDesign.binarised`, at
+    ``beta_end``): the continuous densities' optimum is lost in part when they are thresholded,
+    and these steps descend on what is fabricated. With binary steps, the design returned is the
+    best binary layer any of them scored (Adam on a thresholded layer does not descend
+    monotonically).
+
     Returns ``{"theta", "history", "beta"}``; ``history``: one row per step (``step``, ``beta``,
-    ``psnr``, ``mse``, ``reflection``, ``seconds``).
+    ``binary``, ``psnr``, ``mse``, ``reflection``, ``seconds``).
 
     Raises:
-        FullwaveError: Steps below 1, a learning rate or sharpness of 0 or less, or ``out``
-            holding a run of other settings.
+        FullwaveError: Steps below 1, binary steps below 0, a learning rate or sharpness of 0 or
+            less, or ``out`` holding a run of other settings.
     """
     import time
     from pathlib import Path
 
     from ..io.tensorfiles import load_pair, paired_paths, save_pair
 
-    if steps < 1 or not lr > 0 or not 0 < beta_start <= beta_end:
+    if steps < 1 or binary_steps < 0 or not lr > 0 or not 0 < beta_start <= beta_end:
         raise FullwaveError(
-            f"steps >= 1, lr > 0 and 0 < beta start <= beta end, got {steps}, {lr}, "
-            f"{beta_start}, {beta_end}"
+            f"steps >= 1, binary steps >= 0, lr > 0 and 0 < beta start <= beta end, got "
+            f"{steps}, {binary_steps}, {lr}, {beta_start}, {beta_end}"
         )
     out = Path(out)
     settings = {**(settings or {}), "steps": steps, "lr": lr, "beta": [beta_start, beta_end]}
+    if binary_steps:  # absent otherwise: runs saved before binary steps existed continue
+        settings["binary_steps"] = binary_steps
     state_path = out / "state"
     theta = design.start().clone().requires_grad_(True)
     opt = torch.optim.Adam([theta], lr=lr)
     history: list[dict] = []
+    best: torch.Tensor | None = None  # the best binary layer's design variables
     if paired_paths(state_path)[1].exists():
         tensors, meta, _ = load_pair(state_path, STATE_FORMAT, 1, "design state", FullwaveError)
         if meta["settings"] != json_safe(settings):
@@ -278,23 +300,29 @@ def run_design(
         with torch.no_grad():
             theta.copy_(tensors["theta"])
         history = meta["history"]
+        best = tensors.get("best")
         if history:
             opt.state[theta] = {
                 "step": torch.tensor(float(len(history))),
                 "exp_avg": tensors["exp_avg"].clone(),
                 "exp_avg_sq": tensors["exp_avg_sq"].clone(),
             }
-    for step in range(len(history), steps):
+    for step in range(len(history), steps + binary_steps):
         start = time.perf_counter()
-        beta = beta_at(step, steps, beta_start, beta_end)
+        binary = step >= steps
+        beta = beta_at(min(step, steps - 1), steps, beta_start, beta_end)
+        before = theta.detach().clone()
         opt.zero_grad()
-        loss, info = design.objective(theta, beta)
+        loss, info = design.objective(theta, beta, binary=binary)
         loss.backward()
         opt.step()
+        if binary and (best is None or info["psnr"] > _best_binary(history)):
+            best = before  # the layer this step scored, before its update
         history.append(
             {
                 "step": step + 1,
                 "beta": round(beta, 4),
+                "binary": binary,
                 "psnr": info["psnr"],
                 "mse": info["mse"],
                 "reflection": info["reflection"],
@@ -302,13 +330,16 @@ def run_design(
             }
         )
         moments = opt.state[theta]
+        tensors = {
+            "theta": theta.detach(),
+            "exp_avg": moments["exp_avg"],
+            "exp_avg_sq": moments["exp_avg_sq"],
+        }
+        if best is not None:
+            tensors["best"] = best
         save_pair(
             state_path,
-            {
-                "theta": theta.detach(),
-                "exp_avg": moments["exp_avg"],
-                "exp_avg_sq": moments["exp_avg_sq"],
-            },
+            tensors,
             STATE_FORMAT,
             1,
             {"settings": json_safe(settings), "history": history},
@@ -316,10 +347,15 @@ def run_design(
         if progress is not None:
             progress(history[-1])
     return {
-        "theta": theta.detach(),
+        "theta": theta.detach() if best is None else best,
         "history": history,
-        "beta": beta_at(steps - 1, steps, beta_start, beta_end),
+        "beta": beta_end if binary_steps else beta_at(steps - 1, steps, beta_start, beta_end),
     }
+
+
+def _best_binary(history: list[dict]) -> float:
+    """The highest PSNR of the binary steps so far (-inf before any)."""
+    return max((r["psnr"] for r in history if r.get("binary")), default=-math.inf)
 
 
 def json_safe(value: Any) -> Any:
