@@ -106,7 +106,7 @@ def run(args: argparse.Namespace) -> int:
     if not args.quiet:
         from tqdm import tqdm
 
-        bar = tqdm(total=args.steps, desc="rcwa-design", unit="step")
+        bar = tqdm(total=args.steps + args.binary_steps, desc="rcwa-design", unit="step")
 
     def shown(row: dict) -> None:
         if bar is not None:
