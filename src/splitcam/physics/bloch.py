@@ -50,7 +50,9 @@ from .fullwave import (
     FullwaveError,
     RouterDesign,
     _fmmax,
+    _FmmaxStack,
     _off_grazing,
+    _periodic_solve,
     _permittivities,
     _solve_logged,
     _SolveLog,
@@ -111,7 +113,9 @@ def _bloch_fields(design: RouterDesign, setting: dict[str, Any]) -> tuple[Callab
 
 @functools.lru_cache(maxsize=8)
 def _compiled_bloch(shape, stack, materials, setting_items) -> tuple[Callable, Any, int]:
-    basis, fields, fmm, scattering = _fmmax()
+    """The Bloch solve of one stack and setting, compiled once: the periodic solve with the
+    spots' plane waves as the incident light, the fields over the supercell."""
+    _, fields, _, _ = _fmmax()
     import jax
     import jax.numpy as jnp
 
@@ -119,50 +123,24 @@ def _compiled_bloch(shape, stack, materials, setting_items) -> tuple[Callable, A
     design = RouterDesign(np.zeros(shape), *stack, *materials)
     cells, samples, positions = setting["cells"], setting["samples"], setting["positions"]
     period = 2.0 * design.pitch
-    lattice = basis.LatticeVectors(u=basis.X * period, v=basis.Y * period)
-    expansion = basis.generate_expansion(
-        primitive_lattice_vectors=lattice,
-        approximate_num_terms=setting["terms"],
-        truncation=basis.Truncation.CIRCULAR,
-    )
-    orders = np.asarray(expansion.basis_coefficients, dtype=np.float64)  # (n, 2)
+    fmmax_stack = _FmmaxStack.of(design, setting["terms"], setting["formulation"])
+    orders = np.asarray(fmmax_stack.expansion.basis_coefficients, dtype=np.float64)  # (n, 2)
     centres = jnp.asarray(_spot_centres(design, cells, positions))
-    rows, cols = shape
-    up = jnp.ones((max(1, math.ceil(256 / max(rows, cols))),) * 2)  # as _fine_grid samples
     grid = (2 * samples, 2 * samples)
 
     @jax.jit
     def solve(density, um, eps, wavevector, inside):
-        eps_p, eps_b, eps_s = eps[0], eps[1], eps[2]
-        fine = jnp.kron(density, up).T  # fmmax: [x, y]
-
-        def modes(permittivity):
-            return fmm.eigensolve_isotropic_media(
-                wavelength=um,
-                in_plane_wavevector=wavevector,
-                primitive_lattice_vectors=lattice,
-                permittivity=jnp.asarray(permittivity, dtype=complex),
-                expansion=expansion,
-                formulation=getattr(fmm.Formulation, setting["formulation"]),
-            )
-
         waves = wavevector + 2 * np.pi * orders / period  # (n, 2)
-        ambient = modes(jnp.full((1, 1), eps_b))
-        substrate = modes(jnp.full((1, 1), eps_s))
-        forward = _spot_amplitudes(fields, ambient, waves, inside, centres)
-        zero = jnp.zeros_like(forward)
-        inner = scattering.stack_s_matrices_interior(
-            [ambient, modes(eps_b + (eps_p - eps_b) * fine), substrate],
-            [jnp.zeros(()), jnp.asarray(design.thickness), jnp.asarray(design.depth)],
-        )
-        amplitudes = fields.stack_amplitudes_interior(inner, forward, zero)
-        f_sub, b_sub = amplitudes[2]
-        f_end = fields.propagate_amplitude(f_sub, jnp.asarray(design.depth), substrate)
+
+        def spots(ambient):
+            return _spot_amplitudes(fields, ambient, waves, inside, centres)
+
+        sol = _periodic_solve(fmmax_stack, density, um, eps, wavevector, spots)
         out = []
         for f, b, result in (
-            (forward, zero, ambient),  # incident
-            (zero, amplitudes[0][1], ambient),  # reflected
-            (f_end, b_sub, substrate),  # arriving
+            (sol["forward"], sol["zero"], sol["ambient"]),  # incident
+            (sol["zero"], sol["amplitudes"][0][1], sol["ambient"]),  # reflected
+            (sol["arriving"], sol["amplitudes"][2][1], sol["substrate"]),  # arriving
         ):
             e, h = fields.fields_from_wave_amplitudes(f, b, result)
             (ex, ey, _), (hx, hy, _), _ = fields.fields_on_grid(
@@ -171,7 +149,7 @@ def _compiled_bloch(shape, stack, materials, setting_items) -> tuple[Callable, A
             out.append((ex, ey, hx, hy))
         return out
 
-    return solve, orders, int(expansion.num_terms)
+    return solve, orders, int(fmmax_stack.expansion.num_terms)
 
 
 def _one_wavelength(

@@ -37,7 +37,7 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -558,6 +558,81 @@ def _fmmax_core(
     return _compiled_core(design.grid.shape, stack, materials, int(terms), formulation, samples)
 
 
+class _FmmaxStack(NamedTuple):
+    """A design's stack as fmmax solves it at one setting (the lattice of the 2x2-pixel period,
+    the Fourier expansion, the formulation, the up-sampling of the cells onto the solve's
+    grid): built once per design shape and setting, and solved inside compiled programs by
+    :func:`_periodic_solve` (the periodic solves here and the Bloch solves of
+    :mod:`splitcam.physics.bloch`)."""
+
+    lattice: Any
+    expansion: Any
+    formulation: str
+    up: Any
+    thickness: float
+    depth: float
+
+    @classmethod
+    def of(cls, design: RouterDesign, terms: int, formulation: str) -> _FmmaxStack:
+        basis, _, _, _ = _fmmax()
+        import jax.numpy as jnp
+
+        period = 2.0 * design.pitch
+        lattice = basis.LatticeVectors(u=basis.X * period, v=basis.Y * period)
+        expansion = basis.generate_expansion(
+            primitive_lattice_vectors=lattice,
+            approximate_num_terms=terms,
+            truncation=basis.Truncation.CIRCULAR,
+        )
+        rows, cols = design.grid.shape
+        up = jnp.ones((max(1, math.ceil(256 / max(rows, cols))),) * 2)  # as _fine_grid samples
+        return cls(lattice, expansion, formulation, up, design.thickness, design.depth)
+
+
+def _periodic_solve(
+    stack: _FmmaxStack, density: Any, um: Any, eps: Any, wavevector: Any, incident: Callable
+) -> dict[str, Any]:
+    """The layer of ``density`` between ambient and substrate solved at one wavelength (``um``)
+    and in-plane wavevector (JAX, traceable); ``incident(ambient)``: the forward amplitudes of
+    the light arriving from the ambient. Returns the outer media's modes (``ambient``,
+    ``substrate``), the amplitudes ``forward`` and ``zero``, the interior amplitudes
+    (``amplitudes``) and the forward amplitude at the monitor (``arriving``)."""
+    _, fields, fmm, scattering = _fmmax()
+    import jax.numpy as jnp
+
+    eps_p, eps_b, eps_s = eps[0], eps[1], eps[2]
+    fine = jnp.kron(density, stack.up).T  # fmmax: [x, y]
+
+    def modes(permittivity):
+        return fmm.eigensolve_isotropic_media(
+            wavelength=um,
+            in_plane_wavevector=wavevector,
+            primitive_lattice_vectors=stack.lattice,
+            permittivity=jnp.asarray(permittivity, dtype=complex),
+            expansion=stack.expansion,
+            formulation=getattr(fmm.Formulation, stack.formulation),
+        )
+
+    ambient = modes(jnp.full((1, 1), eps_b))
+    substrate = modes(jnp.full((1, 1), eps_s))
+    forward = incident(ambient)
+    zero = jnp.zeros_like(forward)
+    inner = scattering.stack_s_matrices_interior(
+        [ambient, modes(eps_b + (eps_p - eps_b) * fine), substrate],
+        [jnp.zeros(()), jnp.asarray(stack.thickness), jnp.asarray(stack.depth)],
+    )
+    amplitudes = fields.stack_amplitudes_interior(inner, forward, zero)
+    arriving = fields.propagate_amplitude(amplitudes[2][0], jnp.asarray(stack.depth), substrate)
+    return {
+        "ambient": ambient,
+        "substrate": substrate,
+        "forward": forward,
+        "zero": zero,
+        "amplitudes": amplitudes,
+        "arriving": arriving,
+    }
+
+
 @functools.lru_cache(maxsize=16)
 def _compiled_core(
     shape: tuple[int, int],
@@ -570,50 +645,24 @@ def _compiled_core(
     """:func:`_fmmax_core` of the stack, kept so that every solve of one setting reuses the
     compilation."""
     design = RouterDesign(np.zeros(shape), *stack, *materials)
-    basis, fields, fmm, scattering = _fmmax()
+    _, fields, _, _ = _fmmax()
     import jax
     import jax.numpy as jnp
 
     period = 2.0 * design.pitch
-    lattice = basis.LatticeVectors(u=basis.X * period, v=basis.Y * period)
-    expansion = basis.generate_expansion(
-        primitive_lattice_vectors=lattice,
-        approximate_num_terms=terms,
-        truncation=basis.Truncation.CIRCULAR,
-    )
-    rows, cols = design.grid.shape
-    up = jnp.ones((max(1, math.ceil(256 / max(rows, cols))),) * 2)  # as _fine_grid samples
-    n = expansion.num_terms
+    setting = _FmmaxStack.of(design, terms, formulation)
+    n = setting.expansion.num_terms
     grid = (2 * samples, 2 * samples)
+
+    def plane_wave(ambient: Any) -> Any:  # each polarisation's zeroth order, amplitude 1
+        return jnp.zeros((2 * n, 2), complex).at[0, 0].set(1.0).at[n, 1].set(1.0)
 
     @jax.jit
     def solved(density: Any, um: Any, eps: Any, wavevector: Any) -> tuple[Any, Any]:
         # compiled once per design shape and setting: the wavelength, permittivities and
         # direction are traced, so every solve after the first reuses the compiled program
-        eps_p, eps_b, eps_s = eps[0], eps[1], eps[2]
-        fine = jnp.kron(density, up).T  # fmmax: [x, y]
-
-        def modes(permittivity):
-            return fmm.eigensolve_isotropic_media(
-                wavelength=um,
-                in_plane_wavevector=wavevector,
-                primitive_lattice_vectors=lattice,
-                permittivity=jnp.asarray(permittivity, dtype=complex),
-                expansion=expansion,
-                formulation=getattr(fmm.Formulation, formulation),
-            )
-
-        ambient = modes(jnp.full((1, 1), eps_b))
-        substrate = modes(jnp.full((1, 1), eps_s))
-        layers = [ambient, modes(eps_b + (eps_p - eps_b) * fine), substrate]
-        inner = scattering.stack_s_matrices_interior(
-            layers, [jnp.zeros(()), jnp.asarray(design.thickness), jnp.asarray(design.depth)]
-        )
-        forward = jnp.zeros((2 * n, 2), complex).at[0, 0].set(1.0).at[n, 1].set(1.0)
-        zero = jnp.zeros_like(forward)
-        amplitudes = fields.stack_amplitudes_interior(inner, forward, zero)
-        f_sub, b_sub = amplitudes[2]
-        f_end = fields.propagate_amplitude(f_sub, jnp.asarray(design.depth), substrate)
+        sol = _periodic_solve(setting, density, um, eps, wavevector, plane_wave)
+        forward, zero, ambient = sol["forward"], sol["zero"], sol["ambient"]
 
         def flux(f, b, result):  # [x, y, polarisation]
             e, h = fields.fields_from_wave_amplitudes(f, b, result)
@@ -621,9 +670,10 @@ def _compiled_core(
             return 0.5 * jnp.real(ex * jnp.conj(hy) - ey * jnp.conj(hx))
 
         incident = jnp.mean(flux(forward, zero, ambient), axis=(0, 1))
-        sz = (flux(f_end, b_sub, substrate) / incident).transpose(2, 1, 0)
+        arriving = flux(sol["arriving"], sol["amplitudes"][2][1], sol["substrate"])
+        sz = (arriving / incident).transpose(2, 1, 0)
         quads = sz.reshape(2, 2, samples, 2, samples).mean(axis=(2, 4)) / 4.0  # [p, y, x]
-        top = jnp.mean(flux(zero, amplitudes[0][1], ambient), axis=(0, 1)) / incident
+        top = jnp.mean(flux(zero, sol["amplitudes"][0][1], ambient), axis=(0, 1)) / incident
         return quads, -top.mean()
 
     def solve(density: Any, lam: float, theta: float, phi: float) -> tuple[Any, Any]:
