@@ -2,6 +2,7 @@
 scene illuminance, with the 90 % band over the images and each crossover with its interval.
 
     python studies/exposure/headline.py [STUDY_FOLDER] [--out docs/results/exposure/headline.png]
+        [--routers NAME,...] [--where "centre of the field"] [--stack "..."]
         [--pitch 1 --f-number 2 --exposure-time 0.0333 --illuminant D65]
 
 STUDY_FOLDER holds ``exposure.json`` of ``splitcam study exposure`` run with per-image scores
@@ -43,11 +44,21 @@ def main() -> None:
     parser.add_argument("--exposure-time", type=float, default=1 / 30)
     parser.add_argument("--illuminant", default="D65")
     parser.add_argument("--read-noise", type=float, default=2.0, help="the study's, for the title")
+    parser.add_argument(
+        "--routers",
+        type=lambda text: [r for r in text.split(",") if r],
+        default=list(ROUTERS),
+        help="the candidates drawn, as the study labels them (default: the four shipped routers)",
+    )
+    parser.add_argument("--where", default="centre of the field", help="for the title")
+    parser.add_argument(
+        "--stack", default="", help="the study's optical stack in words, for the title"
+    )
     args = parser.parse_args()
     camera = Camera(args.pitch, args.f_number, args.exposure_time, args.illuminant)
     data = json.loads((args.study / "exposure.json").read_text())
     results = {label: {float(n): v for n, v in r.items()} for label, r in data["results"].items()}
-    pairs = [(NET + r, NET + a) for a in ARRAYS for r in ROUTERS]
+    pairs = [(NET + r, NET + a) for a in ARRAYS for r in args.routers]
     curves = difference_curves(results, pairs)
     lux = []
     for c in curves:
@@ -69,8 +80,9 @@ def main() -> None:
         lux,
         args.out,
         title=f"Full-wave routers against measured filter arrays, one network for every sensor "
-        f"(universal-photon), read noise {args.read_noise:g} e-, centre of the field\n"
-        f"{camera.describe()}; bands and bars: 90 % intervals over the images",
+        f"(universal-photon), read noise {args.read_noise:g} e-, {args.where}\n"
+        f"{camera.describe()}{'; ' + args.stack if args.stack else ''}; bands and bars: 90 % "
+        "intervals over the images",
         xlabel="scene illuminance (lux)",
         unit="lux",
     )
