@@ -272,7 +272,9 @@ def test_the_design_command_writes_a_solved_binary_design_and_continues_a_stoppe
     best = max(r["psnr"] for r in history if r["binary"])
     solved_again = float(re.search(r"-> ([0-9.]+) dB \(binary", said)[1])
     assert solved_again == pytest.approx(best, abs=0.006)  # both printed to 0.01 dB
-    assert "best of 2 binary steps" in (tmp_path / "whole" / "report.md").read_text()
+    report = (tmp_path / "whole" / "report.md").read_text()
+    assert "best of 2 binary steps" in report
+    assert "| the start as given |" in report and "| the design |" in report  # bands
 
     real = fd.FullwaveDesign.objective
     count = {"n": 0}

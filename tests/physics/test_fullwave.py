@@ -17,6 +17,7 @@ from splitcam.physics.fullwave import (
     FullwaveError,
     RouterDesign,
     band_efficiencies,
+    band_purities,
     cone_directions,
     quadrant_spectra,
     read_design,
@@ -371,6 +372,30 @@ def test_band_efficiencies_into_given_pixels_where_oblique_light_sorts_badly():
     assert eff["quadrants"] == {"blue": 3, "red": 0}
     with pytest.raises(ValueError, match="two different pixels"):
         band_efficiencies(t, lams, {"blue": 2, "red": 2})
+
+
+def test_band_purities_are_the_band_shares_of_what_each_pixel_receives():
+    """Purity by hand on the same layout: a perfect sorter is 1 in every band, a layer that
+    sends every wavelength alike is each band's share of the wavelengths, and a mixed layer's
+    numbers are written out here."""
+    lams = [430.0, 470.0, 530.0, 570.0, 630.0, 670.0]
+    q = {"blue": 3, "red": 0}
+    perfect = np.zeros((2, 2, 6))
+    perfect[1, 1, :2] = 1.0
+    perfect[0, 0, 4:] = 1.0
+    perfect[0, 1, 2:4] = perfect[1, 0, 2:4] = 0.5
+    assert band_purities(perfect, lams, q) == pytest.approx({"blue": 1, "green": 1, "red": 1})
+    assert band_purities(np.full((2, 2, 6), 0.25), lams, q) == pytest.approx(
+        {"blue": 1 / 3, "green": 1 / 3, "red": 1 / 3}
+    )
+    t = np.zeros((2, 2, 6))
+    t[1, 1] = [0.6, 0.5, 0.1, 0.1, 0.05, 0.05]  # blue pixel: 1.1 of 1.4 is blue
+    t[0, 0] = [0.1, 0.1, 0.1, 0.1, 0.5, 0.6]  # red pixel: 1.1 of 1.5
+    t[0, 1] = [0.1, 0.1, 0.3, 0.3, 0.1, 0.1]  # green pixels: (0.6 + 0.5) of (1.0 + 0.9)
+    t[1, 0] = [0.1, 0.1, 0.3, 0.2, 0.1, 0.1]
+    assert band_purities(t, lams, q) == pytest.approx(
+        {"blue": 1.1 / 1.4, "red": 1.1 / 1.5, "green": 1.1 / 1.9}
+    )
 
 
 def test_a_wavelength_where_an_order_grazes_is_solved():

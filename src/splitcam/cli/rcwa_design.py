@@ -131,10 +131,11 @@ def run(args: argparse.Namespace) -> int:
     density = design.densities(result["theta"], result["beta"]).detach().numpy()
     with torch.no_grad():  # the start as given (a published design, or the noise), for scale
         start_t = design.transmission(torch.from_numpy(grid))[0].clamp_min(0.0)
-        start_psnr = -10.0 * math.log10(float(design.image_error(start_t)))
-    return _finish(
-        args, design, out, name, binary, density, result["history"], lams, np, start_psnr
-    )
+        start = {
+            "psnr": -10.0 * math.log10(float(design.image_error(start_t))),
+            "transmission": start_t.numpy(),
+        }
+    return _finish(args, design, out, name, binary, density, result["history"], lams, np, start)
 
 
 def _design_of(args: argparse.Namespace, grid, lams: list[float]):
@@ -191,7 +192,7 @@ def _settings_of(args: argparse.Namespace, grid, lams: list[float]) -> dict:
 
 
 def _finish(
-    args, design, out: Path, name: str, binary, density, history, lams, np, start_psnr: float
+    args, design, out: Path, name: str, binary, density, history, lams, np, start: dict
 ) -> int:
     """Solve the binary design again, write its files and the report, say the result."""
     import torch
@@ -232,6 +233,7 @@ def _finish(
     _write_spectra(out, stem, lams, {**solved, "transmission": t})
     _say_roles(lams, t, solved["reflection"], out / f"{stem}-spectra.png", f"{name}: {where}")
     psnr = -10.0 * math.log10(error)
+    start_psnr = start["psnr"]
     chart = _report_chart(history, density, binary, out / "report.png")
     lines = [
         f"# {name}: a router designed for the image at N = {args.photons:g}",
@@ -247,6 +249,8 @@ def _finish(
         f"- Files: `{stem}.csv` (the design), `{stem}-density.csv`, `{stem}-spectra.csv`, "
         f"`{pattern_file.name}` (use it as `--pattern`).",
         "",
+        *_band_table(lams, {"the start as given": start["transmission"], "the design": t}),
+        "",
         f"![report]({chart.name})",
         "",
     ]
@@ -257,6 +261,31 @@ def _finish(
         f"{pattern_file.name} and report.md"
     )
     return 0
+
+
+def _band_table(lams: list[float], spectra: dict) -> list[str]:
+    """Band efficiency (the leaderboard's) and colour purity per band, of each of ``spectra``
+    (``(2, 2, L)`` transmissions), each by the pixels it sorts each band to."""
+    from ..evaluation.tables import markdown_table
+    from ..physics.fullwave import FullwaveError, band_efficiencies, band_purities
+
+    rows = []
+    for label, t in spectra.items():
+        try:
+            eff = band_efficiencies(t, lams)
+        except FullwaveError:  # blue and red sent to one pixel: no bands to score
+            rows.append([label, *["no sorting"] * 6])
+            continue
+        pur = band_purities(t, lams, eff["quadrants"])
+        bands = ("blue", "green", "red")
+        rows.append([label, *(f"{eff[b]:.3f}" for b in bands), *(f"{pur[b]:.3f}" for b in bands)])
+    head = ["layer", "efficiency: blue", "green", "red", "purity: blue", "green", "red"]
+    return [
+        "Band efficiency (mean transmission of a band into its own pixels) and purity (the "
+        "share of what those pixels receive that is their band), at the design's wavelengths:",
+        "",
+        *markdown_table(head, rows),
+    ]
 
 
 def _last_steps(history: list[dict]) -> str:

@@ -49,6 +49,7 @@ __all__ = [
     "FullwaveError",
     "RouterDesign",
     "band_efficiencies",
+    "band_purities",
     "check_solver",
     "cone_directions",
     "fmmax_quadrants",
@@ -821,4 +822,25 @@ def band_efficiencies(
         inside = (lam >= low) & (lam <= high)
         out[name] = float(t[quads][:, inside].sum(axis=0).mean()) if inside.any() else float("nan")
     out["quadrants"] = {"blue": blue, "red": red}
+    return out
+
+
+def band_purities(transmission: Any, wavelengths: Any, quadrants: dict[str, int]) -> dict[str, Any]:
+    """Colour purity per band of a 2x2 router: of all the light (400-700 nm, the wavelengths
+    weighted alike) that reaches a band's own pixels (``quadrants`` as
+    :func:`band_efficiencies` returns them; green: the other two), the share that belongs to
+    that band. 1 is a pixel that receives its own band only; a third is no sorting at all."""
+    t = np.asarray(transmission).reshape(4, -1)
+    lam = np.asarray(wavelengths)
+    blue, red = int(quadrants["blue"]), int(quadrants["red"])
+    green = [q for q in range(4) if q not in (blue, red)]
+    out: dict[str, Any] = {}
+    for name, quads, low, high in (
+        ("blue", [blue], 400, 500),
+        ("green", green, 500, 600),
+        ("red", [red], 600, 700),
+    ):
+        received = t[quads].sum(axis=0)
+        inside = (lam >= low) & (lam <= high)
+        out[name] = float(received[inside].sum() / received.sum()) if received.sum() > 0 else 0.0
     return out
