@@ -244,6 +244,8 @@ def test_the_design_command_writes_a_solved_binary_design_and_continues_a_stoppe
         "460,620",
         "--binary-steps",
         "2",
+        "--binary-lr",
+        "0.05",
         "--quiet",
     ]
     assert main([*args, "--out", str(tmp_path / "whole")]) == 0
@@ -299,6 +301,34 @@ def test_the_design_command_writes_a_solved_binary_design_and_continues_a_stoppe
     # Another setting into the same folder is refused, not mixed in.
     assert main([*args[:-1], "--lr", "0.5", "--quiet", "--out", str(tmp_path / "whole")]) == 1
     assert "other settings" in capsys.readouterr().err
+
+
+def test_the_binary_steps_start_a_fresh_optimiser_at_their_own_rate(tmp_path):
+    """Adam's first step moves every variable with a gradient by its learning rate: the first
+    binary step, by a fresh optimiser, moves them by ``binary_lr``, whatever the continuation's
+    moments were; the design returned is the layer the binary step scored."""
+    from splitcam.design.fullwave import run_design
+    from splitcam.io.tensorfiles import load_pair
+
+    rng = np.random.default_rng(4)
+    design = FullwaveDesign(
+        RouterDesign(rng.random((6, 6)), thickness=0.5, depth=1.0),
+        wavelengths=[460.0, 620.0],
+        order=1,
+        samples=8,
+        radius=1.5,
+    )
+    result = run_design(
+        design, tmp_path / "b", steps=2, lr=0.5, binary_steps=1, binary_lr=0.01, beta_end=8.0
+    )
+    after = load_pair(tmp_path / "b" / "state", "splitcam-fullwave-design", 1, "", ValueError)[0]
+    continued = run_design(design, tmp_path / "c", steps=2, lr=0.5, beta_end=8.0)["theta"]
+    torch.testing.assert_close(result["theta"], continued)  # the layer the binary step scored
+    moved = (after["theta"] - continued).abs()  # carried moments would not move by 0.01 exactly
+    assert float(moved.max()) == pytest.approx(0.01, rel=1e-6)
+    assert float(moved.median()) == pytest.approx(0.01, rel=1e-3)
+    with pytest.raises(FullwaveError, match="learning rates > 0"):
+        run_design(design, tmp_path / "d", steps=2, binary_steps=1, binary_lr=0.0)
 
 
 @pytest.mark.parametrize(

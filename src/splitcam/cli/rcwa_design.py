@@ -53,6 +53,12 @@ def register(optics_sub: argparse._SubParsersAction) -> None:
         "gradient at the last sharpness); the best binary layer is the design (default 0)",
     )
     p.add_argument(
+        "--binary-lr",
+        type=float,
+        help="Adam's step in the binary steps (default: --lr); a smaller one flips fewer cells "
+        "a step",
+    )
+    p.add_argument(
         "--feature",
         type=float,
         default=0.08,
@@ -122,6 +128,7 @@ def run(args: argparse.Namespace) -> int:
         beta_start=args.beta[0],
         beta_end=args.beta[1],
         binary_steps=args.binary_steps,
+        binary_lr=args.binary_lr,
         settings=settings,
         progress=shown,
     )

@@ -252,6 +252,7 @@ def run_design(
     beta_start: float = 2.0,
     beta_end: float = 32.0,
     binary_steps: int = 0,
+    binary_lr: float | None = None,
     settings: dict | None = None,
     progress: Any = None,
 ) -> dict[str, Any]:
@@ -263,9 +264,11 @@ def run_design(
     ``steps`` of continuation (``beta`` from ``beta_start`` to ``beta_end``), then
     ``binary_steps`` more on the binary layer itself (:meth:`FullwaveDesign.binarised`, at
     ``beta_end``): the continuous densities' optimum is lost in part when they are thresholded,
-    and these steps descend on what is fabricated. With binary steps, the design returned is the
-    best binary layer any of them scored (Adam on a thresholded layer does not descend
-    monotonically).
+    and these steps descend on what is fabricated, by a fresh Adam at ``binary_lr`` (default
+    ``lr``; the continuation's moments describe another loss). A cell flips when its variable
+    crosses 0, and Adam moves every variable by about the learning rate, so a smaller rate flips
+    fewer cells a step. With binary steps, the design returned is the best binary layer any of
+    them scored (Adam on a thresholded layer does not descend monotonically).
 
     Returns ``{"theta", "history", "beta"}``; ``history``: one row per step (``step``, ``beta``,
     ``binary``, ``psnr``, ``mse``, ``reflection``, ``seconds``).
@@ -279,15 +282,18 @@ def run_design(
 
     from ..io.tensorfiles import load_pair, paired_paths, save_pair
 
-    if steps < 1 or binary_steps < 0 or not lr > 0 or not 0 < beta_start <= beta_end:
+    rate = lr if binary_lr is None else binary_lr
+    if steps < 1 or binary_steps < 0 or not min(lr, rate) > 0 or not 0 < beta_start <= beta_end:
         raise FullwaveError(
-            f"steps >= 1, binary steps >= 0, lr > 0 and 0 < beta start <= beta end, got "
-            f"{steps}, {binary_steps}, {lr}, {beta_start}, {beta_end}"
+            f"steps >= 1, binary steps >= 0, learning rates > 0 and 0 < beta start <= beta end, "
+            f"got {steps}, {binary_steps}, {lr}, {rate}, {beta_start}, {beta_end}"
         )
     out = Path(out)
     settings = {**(settings or {}), "steps": steps, "lr": lr, "beta": [beta_start, beta_end]}
     if binary_steps:  # absent otherwise: runs saved before binary steps existed continue
         settings["binary_steps"] = binary_steps
+        if binary_lr is not None:
+            settings["binary_lr"] = binary_lr
     state_path = out / "state"
     theta = design.start().clone().requires_grad_(True)
     opt = torch.optim.Adam([theta], lr=lr)
@@ -301,15 +307,20 @@ def run_design(
             theta.copy_(tensors["theta"])
         history = meta["history"]
         best = tensors.get("best")
-        if history:
+        done = len(history)  # the steps the saved moments have seen
+        if done > steps:  # in the binary steps: their own optimiser
+            opt, done = torch.optim.Adam([theta], lr=rate), done - steps
+        if history and len(history) != steps:  # (at ``steps`` the binary optimiser starts fresh)
             opt.state[theta] = {
-                "step": torch.tensor(float(len(history))),
+                "step": torch.tensor(float(done)),
                 "exp_avg": tensors["exp_avg"].clone(),
                 "exp_avg_sq": tensors["exp_avg_sq"].clone(),
             }
     for step in range(len(history), steps + binary_steps):
         start = time.perf_counter()
         binary = step >= steps
+        if step == steps:  # the binary steps start: a fresh optimiser
+            opt = torch.optim.Adam([theta], lr=rate)
         beta = beta_at(min(step, steps - 1), steps, beta_start, beta_end)
         before = theta.detach().clone()
         opt.zero_grad()
