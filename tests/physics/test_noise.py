@@ -112,12 +112,29 @@ def test_read_and_quantisation_noise_add_their_variance() -> None:
 
 def test_full_well_and_adc_range_saturate() -> None:
     gen = torch.Generator().manual_seed(3)
-    full = Exposure(300.0, read_noise=1.0, full_well=60.0).apply(_flat(1.0, 50), gen)
+    full = Exposure(300.0, read_noise=0.0, full_well=60.0).apply(_flat(1.0, 50), gen)
     assert float(full.max()) == pytest.approx(60.0 * 3 / 300)  # 100 e- clipped at 60
+    # Read noise is added after the well: a full pixel reads 60 e- give or take 1 e-.
+    read = Exposure(300.0, read_noise=1.0, full_well=60.0).apply(_flat(1.0, 100), gen) * 100
+    assert float(read.mean()) == pytest.approx(60.0, abs=0.05)
+    assert float(read.std()) == pytest.approx(1.0, rel=0.05)
     adc = Exposure(300.0, read_noise=0.0, gain=1.0, bits=6).apply(_flat(1.0, 50), gen)
     assert float(adc.max()) == pytest.approx(63 * 3 / 300)  # 2^6 - 1 DN at 1 e-/DN
     dark = Exposure(300.0, read_noise=3.0, gain=1.0).apply(_flat(0.0, 50), gen)
     assert float(dark.min()) == 0.0  # the ADC clips at 0
+
+
+def test_a_full_well_leaves_dim_pixels_unbiased() -> None:
+    """The well saturates collected electrons, not the readout: at 1 e- a pixel with a full
+    well reads the same mean and spread as one without (read noise below zero kept, as a
+    sensor's black level keeps it), where clipping the readout at 0 would raise the mean."""
+    raw = _flat(0.03, 200)  # 0.03 of the raw scale at N = 100: 1 e- a pixel
+    a = Exposure(100.0, read_noise=2.0).apply(raw, torch.Generator().manual_seed(5))
+    b = Exposure(100.0, read_noise=2.0, full_well=6000.0).apply(
+        raw, torch.Generator().manual_seed(5)
+    )
+    assert torch.equal(a, b)
+    assert float(b.mean()) == pytest.approx(0.03, abs=0.002)  # clipped at 0 it would be ~0.049
 
 
 def test_evaluation_noise_is_deterministic_per_image_and_exposure() -> None:
@@ -255,7 +272,11 @@ def test_batched_photon_noise_saturates_and_quantises_like_one_exposure() -> Non
     for image, e in zip(out, exposures, strict=True):
         dn = image * e.electrons_per_unit / 2.0
         assert torch.allclose(dn, dn.round(), atol=1e-9)  # whole DN times the gain
-        assert float(dn.max()) <= 30 and float(dn.min()) >= 0  # full well 60 e- = 30 DN < 31
+        # 100 or 50 e- collected, the well holds 60 (30 DN); 1 e- of read noise after it.
+        held = min(e.photons / 3, 60.0) / 2.0
+        assert float(dn.mean()) == pytest.approx(held, abs=0.1) and float(dn.max()) <= 31
+        if e.photons / 3 > 60:  # full: no shot noise left, only the readout's
+            assert float(dn.std()) < 1.0
     with pytest.raises(ValueError, match="same sensor settings"):
         photon_noise(torch.ones(2, 1, 4, 4), [Exposure(10.0), Exposure(10.0, bits=8)], gen)
 

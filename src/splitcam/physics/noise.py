@@ -391,10 +391,11 @@ class Exposure(NoiseModel):
     without filter or splitter collects from a white scene (``f = 1`` in every colour). Its raw
     value in the units of model.md §1 is ``R + G + B = 3``, so a raw value ``g`` means
     ``e = g N / 3`` photo-electrons: every pattern sees the same photon flux, and a filter's lost
-    light shows as lost signal. Noise, in order: shot noise ``Poisson(e)`` (``shot``), read noise
-    ``N(0, read_noise^2)`` electrons (after ``Poisson(dark)`` dark electrons, whose mean a
-    dark frame removes at the end: ``dark`` adds noise, not signal), saturation to
-    ``[0, full_well]`` (``full_well`` not None),
+    light shows as lost signal. Noise, in order: shot noise ``Poisson(e)`` (``shot``) and
+    ``Poisson(dark)`` dark electrons (whose mean a dark frame removes at the end: ``dark`` adds
+    noise, not signal), saturation of the collected electrons at ``full_well`` (the well
+    fills before readout, so read noise is added after it and is never clipped at zero: a
+    sensor's black level keeps it), read noise ``N(0, read_noise^2)`` electrons,
     an ADC ``DN = round(e / gain)`` clipped to ``[0, 2^bits - 1]`` (``gain`` not None); the raw
     image handed on is ``DN * gain * 3 / N`` (or ``e * 3 / N`` without ADC), the same scale for
     every pattern. With ``shot=False``, no full well, no ADC and ``read_noise = N sigma / (3 *
@@ -490,7 +491,7 @@ class Exposure(NoiseModel):
     def _electrons(
         self, raw: torch.Tensor, per_unit: float | torch.Tensor, generator: torch.Generator
     ) -> torch.Tensor:
-        """The photon model, once: shot, dark, read noise, full well, ADC, in that order, in
+        """The photon model, once: shot, dark, full well, read noise, ADC, in that order, in
         float64 on ``raw``'s device (``generator``'s); ``per_unit``: electrons per raw unit,
         one number or one per image. Returns raw units, float64."""
         e = raw.to(torch.float64).clamp_min(0) * per_unit
@@ -498,11 +499,11 @@ class Exposure(NoiseModel):
             e = torch.poisson(e, generator=generator)
         if self.dark > 0:
             e = e + torch.poisson(torch.full_like(e, self.dark), generator=generator)
+        if self.full_well is not None:  # the well holds the collected electrons: before readout
+            e = e.clamp(max=self.full_well)
         if self.read_noise > 0:
             noise = torch.randn(e.shape, generator=generator, dtype=torch.float64, device=e.device)
             e = e + self.read_noise * noise
-        if self.full_well is not None:
-            e = e.clamp(0, self.full_well)
         if self.gain is not None:
             e = torch.round(e / self.gain).clamp(0, 2**self.bits - 1) * self.gain
         e = e - self.dark  # the dark frame's mean subtracted; its noise stays
@@ -510,11 +511,16 @@ class Exposure(NoiseModel):
 
     def key(self) -> str:
         key = (
-            f"N{self.photons:g}|r{self.read_noise:g}|fw{self.full_well}|g{self.gain}"
+            f"N{self.photons:g}|r{self.read_noise:g}|{self._well_key()}|g{self.gain}"
             f"|b{self.bits}|s{int(self.shot)}"
         )
         # Without dark current the key (and so every seed and stored result) is as before.
         return key + (f"|d{self.dark:g}" if self.dark else "")
+
+    def _well_key(self) -> str:
+        """``fwNone`` without a full well, as before; with one, a new spelling: results stored
+        when the well clipped the read noise at zero are not reused."""
+        return "fwNone" if self.full_well is None else f"well{self.full_well}"
 
     def label(self) -> str:
         return f"N{self.photons:g}"
