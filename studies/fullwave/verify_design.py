@@ -4,10 +4,11 @@ band efficiencies and the closed-form LMMSE PSNR at several exposures.
     python studies/fullwave/verify_design.py DESIGNED-spectra.csv START-spectra.csv \
         [--photons 10 30 100 300 1000] [--read-noise 2]
 
-Each file is the ``NAME-spectra.csv`` that ``splitcam optics rcwa`` writes (the same solver,
-terms and wavelengths for both). The PSNR is :meth:`splitcam.design.fullwave.FullwaveDesign.
-image_error` of the spectra: the expected error of the closed-form LMMSE in linear light under
-the photon model, away from image borders, no images needed.
+Each file is the ``NAME-spectra.csv`` that ``splitcam optics rcwa`` writes, or a spectral
+pattern file of transmissions (``.toml``); the same solver, terms and wavelengths for both. The
+PSNR is :meth:`splitcam.design.fullwave.FullwaveDesign.image_error` of the spectra: the expected
+error of the closed-form LMMSE in linear light under the photon model, away from image borders,
+no images needed.
 """
 
 from __future__ import annotations
@@ -24,6 +25,11 @@ from splitcam.physics.fullwave import RouterDesign, band_efficiencies
 
 
 def spectra(path: Path) -> tuple[list[float], np.ndarray]:
+    if path.suffix == ".toml":  # a spectral pattern file (transmission[row][column][wavelength])
+        import tomllib
+
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
+        return [float(v) for v in data["wavelengths"]], np.clip(data["transmission"], 0.0, None)
     rows = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
     lams = rows[:, 0].tolist()
     t = rows[:, 1:5].T.reshape(2, 2, -1)  # T_row0_col0, T_row0_col1, T_row1_col0, T_row1_col1
