@@ -280,8 +280,6 @@ def run_design(
     import time
     from pathlib import Path
 
-    from ..io.tensorfiles import load_pair, paired_paths, save_pair
-
     rate = lr if binary_lr is None else binary_lr
     if steps < 1 or binary_steps < 0 or not min(lr, rate) > 0 or not 0 < beta_start <= beta_end:
         raise FullwaveError(
@@ -296,26 +294,7 @@ def run_design(
             settings["binary_lr"] = binary_lr
     state_path = out / "state"
     theta = design.start().clone().requires_grad_(True)
-    opt = torch.optim.Adam([theta], lr=lr)
-    history: list[dict] = []
-    best: torch.Tensor | None = None  # the best binary layer's design variables
-    if paired_paths(state_path)[1].exists():
-        tensors, meta, _ = load_pair(state_path, STATE_FORMAT, 1, "design state", FullwaveError)
-        if meta["settings"] != json_safe(settings):
-            raise FullwaveError(f"{out} holds a design run of other settings; give another folder")
-        with torch.no_grad():
-            theta.copy_(tensors["theta"])
-        history = meta["history"]
-        best = tensors.get("best")
-        done = len(history)  # the steps the saved moments have seen
-        if done > steps:  # in the binary steps: their own optimiser
-            opt, done = torch.optim.Adam([theta], lr=rate), done - steps
-        if history and len(history) != steps:  # (at ``steps`` the binary optimiser starts fresh)
-            opt.state[theta] = {
-                "step": torch.tensor(float(done)),
-                "exp_avg": tensors["exp_avg"].clone(),
-                "exp_avg_sq": tensors["exp_avg_sq"].clone(),
-            }
+    opt, history, best = _restored(state_path, settings, theta, steps, lr, rate)
     for step in range(len(history), steps + binary_steps):
         start = time.perf_counter()
         binary = step >= steps
@@ -340,21 +319,7 @@ def run_design(
                 "seconds": round(time.perf_counter() - start, 2),
             }
         )
-        moments = opt.state[theta]
-        tensors = {
-            "theta": theta.detach(),
-            "exp_avg": moments["exp_avg"],
-            "exp_avg_sq": moments["exp_avg_sq"],
-        }
-        if best is not None:
-            tensors["best"] = best
-        save_pair(
-            state_path,
-            tensors,
-            STATE_FORMAT,
-            1,
-            {"settings": json_safe(settings), "history": history},
-        )
+        _save_state(state_path, theta, opt, best, settings, history)
         if progress is not None:
             progress(history[-1])
     return {
@@ -362,6 +327,60 @@ def run_design(
         "history": history,
         "beta": beta_end if binary_steps else beta_at(steps - 1, steps, beta_start, beta_end),
     }
+
+
+def _restored(
+    state_path: Any, settings: dict, theta: torch.Tensor, steps: int, lr: float, rate: float
+) -> tuple[torch.optim.Adam, list[dict], torch.Tensor | None]:
+    """The optimiser, history and best binary layer of a run saved at ``state_path`` (the
+    design variables copied into ``theta``), or a fresh start where nothing is saved."""
+    from ..io.tensorfiles import load_pair, paired_paths
+
+    opt = torch.optim.Adam([theta], lr=lr)
+    if not paired_paths(state_path)[1].exists():
+        return opt, [], None
+    tensors, meta, _ = load_pair(state_path, STATE_FORMAT, 1, "design state", FullwaveError)
+    if meta["settings"] != json_safe(settings):
+        raise FullwaveError(
+            f"{state_path.parent} holds a design run of other settings; give another folder"
+        )
+    with torch.no_grad():
+        theta.copy_(tensors["theta"])
+    history = meta["history"]
+    done = len(history)  # the steps the saved moments have seen
+    if done > steps:  # in the binary steps: their own optimiser
+        opt, done = torch.optim.Adam([theta], lr=rate), done - steps
+    if history and len(history) != steps:  # (at ``steps`` the binary optimiser starts fresh)
+        opt.state[theta] = {
+            "step": torch.tensor(float(done)),
+            "exp_avg": tensors["exp_avg"].clone(),
+            "exp_avg_sq": tensors["exp_avg_sq"].clone(),
+        }
+    return opt, history, tensors.get("best")
+
+
+def _save_state(
+    state_path: Any,
+    theta: torch.Tensor,
+    opt: torch.optim.Adam,
+    best: torch.Tensor | None,
+    settings: dict,
+    history: list[dict],
+) -> None:
+    """Everything a stopped run continues from: the variables, the optimiser's moments, the
+    best binary layer so far, the settings and the history."""
+    from ..io.tensorfiles import save_pair
+
+    moments = opt.state[theta]
+    tensors = {
+        "theta": theta.detach(),
+        "exp_avg": moments["exp_avg"],
+        "exp_avg_sq": moments["exp_avg_sq"],
+    }
+    if best is not None:
+        tensors["best"] = best
+    meta = {"settings": json_safe(settings), "history": history}
+    save_pair(state_path, tensors, STATE_FORMAT, 1, meta)
 
 
 def _best_binary(history: list[dict]) -> float:
