@@ -2,11 +2,11 @@
 scene illuminance, with the 90 % band over the images and each crossover with its interval.
 
     python studies/exposure/headline.py [STUDY_FOLDER] [--out docs/results/exposure/headline.png]
-        [--routers NAME,...] [--where "centre of the field"] [--stack "..."]
+        [--routers NAME[=LABEL],...] [--where "..."] [--stack "..."]
         [--pitch 1 --f-number 2 --exposure-time 0.0333 --illuminant D65]
 
 STUDY_FOLDER holds ``exposure.json`` of ``splitcam study exposure`` run with per-image scores
-(default ``docs/results/exposure/measured/rn2``). Every sensor is reconstructed by the same
+(default ``docs/results/exposure/answer/rn2``). Every sensor is reconstructed by the same
 network for any pattern (``universal-photon``): no sensor's network is fine-tuned. Exposures
 are converted to lux by :class:`splitcam.physics.radiometry.Camera`.
 """
@@ -24,11 +24,15 @@ from splitcam.viz.charts import difference_chart
 
 ROOT = Path(__file__).resolve().parents[2]
 NET = "net-universal-photon-"
+#: The answer's candidates (``study label=legend label``): both routers behind an f/2 lens at the
+#: centre of the field, Zou's also with the kernels computed from its fields, and both at the
+#: corner (chief ray 25 degrees; six wavelengths).
 ROUTERS = (
-    "router-best-fullwave",
-    "router-best-fullwave-f2",
-    "router-zou-fullwave",
-    "router-zou-fullwave-f2",
+    "router-best-fullwave-f2=leaderboard design, centre",
+    "router-zou-fullwave-f2=Zou, centre",
+    "zou-f2-computed=Zou, centre, kernels from the fields",
+    "best-f2-corner-6wl=leaderboard design, corner (25°)",
+    "zou-f2-corner-6wl=Zou, corner (25°)",
 )
 ARRAYS = ("rgbw-d5100", "bayer-d5100")
 
@@ -36,7 +40,7 @@ ARRAYS = ("rgbw-d5100", "bayer-d5100")
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument(
-        "study", nargs="?", type=Path, default=ROOT / "docs/results/exposure/measured/rn2"
+        "study", nargs="?", type=Path, default=ROOT / "docs/results/exposure/answer/rn2"
     )
     parser.add_argument("--out", type=Path, default=ROOT / "docs/results/exposure/headline.png")
     parser.add_argument("--pitch", type=float, default=1.0)
@@ -48,22 +52,27 @@ def main() -> None:
         "--routers",
         type=lambda text: [r for r in text.split(",") if r],
         default=list(ROUTERS),
-        help="the candidates drawn, as the study labels them (default: the four shipped routers)",
+        help="the candidates drawn, as the study labels them, each optionally =LEGEND LABEL "
+        "(default: the answer's)",
     )
-    parser.add_argument("--where", default="centre of the field", help="for the title")
+    parser.add_argument("--where", default="f/2 lens, centre and corner of the field")
     parser.add_argument(
-        "--stack", default="", help="the study's optical stack in words, for the title"
+        "--stack",
+        default="every pixel behind silicon (3 µm) and the D5100's IR cut, full well 6000 e-",
+        help="the study's optical stack in words, for the title",
     )
+    parser.add_argument("--legend", default="lower left", help="matplotlib's loc")
     args = parser.parse_args()
     camera = Camera(args.pitch, args.f_number, args.exposure_time, args.illuminant)
     data = json.loads((args.study / "exposure.json").read_text())
     results = {label: {float(n): v for n, v in r.items()} for label, r in data["results"].items()}
-    pairs = [(NET + r, NET + a) for a in ARRAYS for r in args.routers]
+    names = dict(spec.split("=", 1) if "=" in spec else (spec, spec) for spec in args.routers)
+    pairs = [(NET + r, NET + a) for a in ARRAYS for r in names]
     curves = difference_curves(results, pairs)
     lux = []
     for c in curves:
         c = copy.deepcopy(c)
-        c["candidate"] = c["candidate"].removeprefix(NET)
+        c["candidate"] = names[c["candidate"].removeprefix(NET)]
         c["reference"] = c["reference"].removeprefix(NET)
         c["photons"] = [camera.lux(n) for n in c["photons"]]
         cross = c["crossover"]
@@ -81,10 +90,11 @@ def main() -> None:
         args.out,
         title=f"Full-wave routers against measured filter arrays, one network for every sensor "
         f"(universal-photon), read noise {args.read_noise:g} e-, {args.where}\n"
-        f"{camera.describe()}{'; ' + args.stack if args.stack else ''}; bands and bars: 90 % "
-        "intervals over the images",
+        f"{camera.describe()}{chr(10) + args.stack if args.stack else ''}; bands and bars: "
+        "90 % intervals over the images",
         xlabel="scene illuminance (lux)",
         unit="lux",
+        legend=args.legend,
     )
     print(f"wrote {args.out}")
 

@@ -172,13 +172,15 @@ def difference_chart(
     title: str | None = None,
     xlabel: str = "exposure N: photo-electrons of a lossless full-light pixel",
     unit: str = "",
+    legend: str = "upper right",
 ) -> Path:
     """Candidate − reference against exposure (log axis), one panel per reference: the mean
     over images as a line, its bootstrap band shaded, and each crossover (the exposure below
     which the candidate wins) marked with its interval as a bar on the zero line.
 
     ``curves``: what :func:`splitcam.evaluation.exposure.difference_curves` returns (their
-    exposures may be given in another unit, e.g. lux, named by ``unit`` in the legend)."""
+    exposures may be given in another unit, e.g. lux, named by ``unit`` in the legend);
+    ``legend``: where the legend goes (matplotlib's ``loc``)."""
     import matplotlib
     from matplotlib.figure import Figure
 
@@ -215,7 +217,7 @@ def difference_chart(
         ax.set_ylabel(f"{metric}: candidate − {reference}" + (" (dB)" if metric == "PSNR" else ""))
         ax.set_title(f"against {reference}", fontsize=10)
         ax.grid(alpha=0.3, which="both")
-        ax.legend(fontsize=7, loc="upper right")
+        ax.legend(fontsize=7, loc=legend)
     if title:
         fig.suptitle(title, fontsize=10)
     fig.tight_layout()
