@@ -812,17 +812,25 @@ def band_efficiencies(
             f"{t[red, -1]:.3f}) both peak in quadrant (row, col) {divmod(blue, 2)}: the design "
             "does not send them to different pixels, so it has no band efficiencies"
         )
-    green = [q for q in range(4) if q not in (blue, red)]
     out: dict[str, Any] = {}
-    for name, quads, low, high in (
-        ("blue", [blue], 400, 500),
-        ("green", green, 500, 600),
-        ("red", [red], 600, 700),
-    ):
-        inside = (lam >= low) & (lam <= high)
+    for name, quads, inside in _bands(blue, red, lam):
         out[name] = float(t[quads][:, inside].sum(axis=0).mean()) if inside.any() else float("nan")
     out["quadrants"] = {"blue": blue, "red": red}
     return out
+
+
+def _bands(blue: int, red: int, lam: np.ndarray) -> list[tuple[str, list[int], np.ndarray]]:
+    """Each band's name, its pixels (green: the two that are neither blue nor red) and which of
+    the wavelengths ``lam`` lie in it (400-500, 500-600, 600-700 nm)."""
+    green = [q for q in range(4) if q not in (blue, red)]
+    return [
+        (name, quads, (lam >= low) & (lam <= high))
+        for name, quads, low, high in (
+            ("blue", [blue], 400, 500),
+            ("green", green, 500, 600),
+            ("red", [red], 600, 700),
+        )
+    ]
 
 
 def band_purities(transmission: Any, wavelengths: Any, quadrants: dict[str, int]) -> dict[str, Any]:
@@ -832,15 +840,8 @@ def band_purities(transmission: Any, wavelengths: Any, quadrants: dict[str, int]
     that band. 1 is a pixel that receives its own band only; a third is no sorting at all."""
     t = np.asarray(transmission).reshape(4, -1)
     lam = np.asarray(wavelengths)
-    blue, red = int(quadrants["blue"]), int(quadrants["red"])
-    green = [q for q in range(4) if q not in (blue, red)]
     out: dict[str, Any] = {}
-    for name, quads, low, high in (
-        ("blue", [blue], 400, 500),
-        ("green", green, 500, 600),
-        ("red", [red], 600, 700),
-    ):
+    for name, quads, inside in _bands(int(quadrants["blue"]), int(quadrants["red"]), lam):
         received = t[quads].sum(axis=0)
-        inside = (lam >= low) & (lam <= high)
         out[name] = float(received[inside].sum() / received.sum()) if received.sum() > 0 else 0.0
     return out
