@@ -301,7 +301,7 @@ def run_design(
         if step == steps:  # the binary steps start: a fresh optimiser
             opt = torch.optim.Adam([theta], lr=rate)
         beta = beta_at(min(step, steps - 1), steps, beta_start, beta_end)
-        before = theta.detach().clone()
+        before = theta.detach().clone() if binary else None  # the layer a binary step scores
         opt.zero_grad()
         loss, info = design.objective(theta, beta, binary=binary)
         loss.backward()
