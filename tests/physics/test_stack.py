@@ -11,11 +11,12 @@ import pytest
 
 from splitcam import patterns
 from splitcam.cli import main
-from splitcam.patterns.spectral import scene_basis
-from splitcam.physics.radiometry import SiliconQE
+from splitcam.patterns.spectral import SpectralPattern, scene_basis
+from splitcam.physics.radiometry import Camera, SiliconQE
 from splitcam.physics.stack import (
     IRCut,
     OpticalStack,
+    SceneLight,
     TabulatedCurve,
     d5100_ir_cut,
     stack_of,
@@ -116,3 +117,102 @@ def test_study_exposure_puts_every_sensor_behind_the_stack(tmp_path, capsys):
         out = tmp_path / "refused"
         assert main([*args, *extra, "--out", str(out)]) == 1
         assert message in capsys.readouterr().err and not out.exists()
+
+
+def _relit_by_hand(kernels: np.ndarray, lams: np.ndarray, name: str) -> np.ndarray:
+    """Mallett & Yuksel's basis reflectances under D65, each colour scaled to sum to 1 (the
+    model's unit), then relit: times ``S / D65``, scaled to a peak of 1 over 400-700 nm."""
+    from colour.recovery import MSDS_BASIS_FUNCTIONS_sRGB_MALLETT2019 as basis
+
+    def on(sd, nm):
+        return np.interp(nm, sd.wavelengths, sd.values)
+
+    table = {"A": "A", "LED": "LED-B3"}[name]  # CIE A; CIE LED-B3, a phosphor white LED
+    d65, light = colour.SDS_ILLUMINANTS["D65"], colour.SDS_ILLUMINANTS[table]
+    reflect = np.stack([np.interp(lams, basis.wavelengths, basis.values[:, c]) for c in range(3)])
+    units = (reflect * on(d65, lams)).sum(axis=1)  # K_c: one unit of colour c under D65
+    fine = np.arange(400.0, 700.5, 1.0)
+    peak = max(on(light, fine) / on(d65, fine))
+    spectra = reflect * on(light, lams) / units[:, None] / peak  # (3, L)
+    return np.einsum("slhw,cl->schw", kernels, spectra)
+
+
+@pytest.mark.parametrize("name", ["A", "LED"])
+def test_scenes_lit_by_another_illuminant_are_the_reduction_of_relit_spectra(name):
+    light = SceneLight(name)
+    router = patterns.get("router-best-fullwave")
+    spectral = router.metadata["spectral"]
+    lams, kernels = np.asarray(spectral["wavelengths"]), np.asarray(spectral["kernels"])
+    relit = OpticalStack((), light).apply(router)
+    np.testing.assert_allclose(relit.kernels, _relit_by_hand(kernels, lams, name), rtol=1e-9)
+    assert "scenes lit by " + name in relit.metadata["stack"]
+    # the light and the stack multiply: a curve and the light in one stack, either order
+    stack = stack_of(["silicon", "ir-cut"])
+    both = OpticalStack(stack.elements, light).apply(router)
+    np.testing.assert_allclose(
+        both.kernels, _relit_by_hand(kernels * stack(lams)[None, :, None, None], lams, name)
+    )
+
+
+def test_tungsten_light_is_red_and_a_white_scene_gives_a_bare_pixel_its_share():
+    light = SceneLight("A")
+    factors = OpticalStack((), light).band_factors()
+    assert factors[0] == pytest.approx(1.0, abs=0.4) and factors[0] > 3 * factors[2]
+    fine = np.arange(400.0, 700.5, 1.0)
+    np.testing.assert_allclose(light(fine).max(), 1.0)
+    # the bare pixel: its three colours' kernels, on a 1 nm grid, average to the white share
+    bare = SpectralPattern("bare", [[0]], fine, np.ones((1, len(fine), 1, 1))).to_pattern()
+    relit = OpticalStack((), light).apply(bare)
+    assert float(relit.kernels.sum()) / 3 == pytest.approx(light.white_share(), rel=1e-9)
+    assert SceneLight("D65").white_share() == 1.0
+    with pytest.raises(ValueError, match="unknown illuminant 'F2'; expected one of D65, A, LED"):
+        SceneLight("F2")
+
+
+def test_the_light_is_never_divided_out_of_a_measured_filter():
+    """A camera's measured curve holds its stack, not the scene's light: relit without a
+    stack, the array's spectra are its measured curves times the light."""
+    light = SceneLight("A")
+    array = patterns.get("rgbw-d5100")
+    spectral = array.metadata["spectral"]
+    lams, kernels = np.asarray(spectral["wavelengths"]), np.asarray(spectral["kernels"])
+    relit = OpticalStack((), light).apply(array)
+    np.testing.assert_allclose(
+        relit.metadata["spectral"]["kernels"], kernels * light(lams)[None, :, None, None]
+    )
+
+
+def test_the_lux_of_relit_scenes_count_the_light_a_white_scene_gives():
+    """Under a light whose white gives a bare pixel a share w of N, one lux is N / w."""
+    plain = Camera(illuminant="A")
+    relit = Camera(illuminant="A", white=0.4)
+    assert relit.lux(10.0) == pytest.approx(0.4 * plain.lux(10.0))
+    assert "lit by A" in relit.describe() and "lit by" not in plain.describe()
+    with pytest.raises(ValueError, match="white must be in"):
+        Camera(white=0.0)
+
+
+def test_study_exposure_lights_the_scenes_with_its_illuminant(tmp_path, capsys):
+    args = ["study", "exposure", "--max-images", "1", "--crop", "48", "--photons", "30", "3000"]
+    args += ["--patterns", "bayer,rgbw-d5100", "--quiet"]
+    assert main([*args, "--out", str(tmp_path / "d65")]) == 0
+    assert main([*args, "--illuminant", "A", "--out", str(tmp_path / "a")]) == 0
+    d65 = json.loads((tmp_path / "d65" / "exposure.json").read_text())
+    tungsten = json.loads((tmp_path / "a" / "exposure.json").read_text())
+    # tungsten gives the same N far less blue and green: a noisier image (the LMMSE of each)
+    for key in ("bayer", "rgbw-d5100"):
+        for n in ("30", "3000"):
+            assert tungsten["results"][key][n]["psnr"] < d65["results"][key][n]["psnr"]
+    assert "scenes lit by A" in (tmp_path / "a" / "exposure.md").read_text()
+    capsys.readouterr()
+    for extra, message in [
+        (["--illuminant", "F2"], "unknown illuminant 'F2'"),
+        (["--illuminant", "A", "--model", "A-photon"], "knows its sensor without the stack"),
+    ]:
+        out = tmp_path / "refused"
+        assert main([*args, *extra, "--out", str(out)]) == 1
+        assert message in capsys.readouterr().err and not out.exists()
+    out = tmp_path / "map"
+    assert main(["study", "breakeven", "--illuminant", "A", "--out", str(out)]) == 1
+    assert "--illuminant relights them in study exposure only" in capsys.readouterr().err
+    assert not out.exists()

@@ -133,7 +133,11 @@ def _add_camera_options(p: argparse.ArgumentParser) -> None:
     lux.add_argument("--f-number", type=float, default=2.0, help="the lens (default 2)")
     lux.add_argument("--exposure-time", type=float, default=1 / 30, help="seconds (default 1/30)")
     lux.add_argument(
-        "--illuminant", default="D65", help="D65 (default), A (tungsten) or LED (white LED)"
+        "--illuminant",
+        default="D65",
+        help="exposure: the light on the scenes, D65 (default), A (tungsten) or LED (white LED): "
+        "every sensor sees the scenes lit by it, and the lux are its lux "
+        "(splitcam.physics.stack.SceneLight)",
     )
     lux.add_argument(
         "--silicon-depth",
@@ -166,9 +170,11 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError("--stack is for study exposure; study breakeven takes none")
     if args.restart and args.study == "breakeven":
         raise ValueError("--restart is for study exposure; study breakeven keeps no scores")
-    args.optical_stack = _stack(args.stack)
+    args.optical_stack, white = _stack(args.stack, args.illuminant, args.study)
     qe = SiliconQE(args.silicon_depth) if args.silicon_depth is not None else None
-    args.camera = Camera(args.pitch, args.f_number, args.exposure_time, args.illuminant, qe=qe)
+    args.camera = Camera(
+        args.pitch, args.f_number, args.exposure_time, args.illuminant, qe=qe, white=white
+    )
     photons = args.photons or default_exposures(args.points)
     datasets = load_datasets(args.datasets, args.max_images, args.crop)
     images = [img for _, imgs in datasets for img in imgs]
@@ -182,13 +188,22 @@ def run(args: argparse.Namespace) -> int:
     return _run_exposure(args, images, names, photons)
 
 
-def _stack(text: str | None):
-    """The optical stack of ``--stack`` (checked before any image is read), or None."""
-    if not text:
-        return None
-    from ..physics.stack import stack_of
+def _stack(text: str | None, illuminant: str, study: str):
+    """The optical stack of ``--stack`` and the scene light of ``--illuminant`` (checked before
+    any image is read; None for neither), and the share of ``N`` a bare pixel collects from
+    white under that light."""
+    from ..physics.stack import OpticalStack, SceneLight, stack_of
 
-    return stack_of([t for t in text.split(",") if t.strip()])
+    stack = stack_of([t for t in text.split(",") if t.strip()]) if text else None
+    if illuminant == "D65":
+        return stack, 1.0
+    light = SceneLight(illuminant)
+    if study == "breakeven":
+        raise ValueError(
+            "study breakeven's scenes are lit by D65; --illuminant relights them in study "
+            "exposure only"
+        )
+    return OpticalStack(stack.elements if stack else (), light), light.white_share()
 
 
 def _run_breakeven(args: argparse.Namespace, images: list, names: str, photons: list) -> int:
@@ -314,7 +329,7 @@ def _check_stacked_models(models: list[str]) -> None:
     single = [m for m in models if not model_serves_any_pattern(m)]
     if single:
         raise ValueError(
-            f"--stack changes every sensor: --model {', '.join(single)} knows its sensor without "
+            f"--stack and --illuminant change every sensor: --model {', '.join(single)} knows its sensor without "
             "the stack; use a model for any pattern (universal-photon)"
         )
 

@@ -149,10 +149,14 @@ class Camera:
     """The camera that turns scene lux into ``N``: pixel pitch (µm), f-number, exposure time
     (s), illuminant, the scene's reflectance (1: white, the model's ``f = 1``), the lens's
     transmission and the pixel's quantum efficiency (default 1: the model's lossless pixel).
+    ``white`` is the share of ``N`` a bare pixel collects from a white scene in the model: 1 for
+    scenes lit by D65, below 1 for scenes lit by another illuminant
+    (:meth:`splitcam.physics.stack.SceneLight.white_share`), where ``N`` is in units of the
+    brightest wavelength's light.
 
     Raises:
-        ValueError: A pitch, f-number or time of 0 or less, a reflectance or transmission
-            outside (0, 1], an unknown illuminant or a bad QE curve.
+        ValueError: A pitch, f-number or time of 0 or less, a reflectance, transmission or
+            white share outside (0, 1], an unknown illuminant or a bad QE curve.
     """
 
     pitch_um: float = 1.0
@@ -162,12 +166,13 @@ class Camera:
     reflectance: float = 1.0
     transmission: float = 1.0
     qe: Any = field(default=None, compare=False)
+    white: float = 1.0
 
     def __post_init__(self) -> None:
         for name in ("pitch_um", "f_number", "exposure_s"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"{name} must be > 0, got {getattr(self, name)}")
-        for name in ("reflectance", "transmission"):
+        for name in ("reflectance", "transmission", "white"):
             if not 0 < getattr(self, name) <= 1:
                 raise ValueError(f"{name} must be in (0, 1], got {getattr(self, name)}")
         photons_per_lux(self.illuminant, qe=self.qe)  # checks the illuminant and the QE
@@ -177,7 +182,8 @@ class Camera:
         """``N`` for one lux on the scene."""
         image = self.reflectance * self.transmission / (4.0 * self.f_number**2)
         area = (self.pitch_um * 1e-6) ** 2
-        return image * photons_per_lux(self.illuminant, qe=self.qe) * area * self.exposure_s
+        electrons = image * photons_per_lux(self.illuminant, qe=self.qe) * area * self.exposure_s
+        return electrons / self.white
 
     def lux(self, photons: float) -> float:
         """The scene illuminance at which a lossless pixel collects ``photons``."""
@@ -197,4 +203,6 @@ class Camera:
         if self.transmission != 1:
             parts.append(f"lens transmission {self.transmission:g}")
         parts.append("lossless pixel" if self.qe is None else f"QE of {self.qe}")
+        if self.white != 1:
+            parts.append(f"the scene lit by {self.illuminant} (white gives {self.white:.3g} N)")
         return ", ".join(parts)

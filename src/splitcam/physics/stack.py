@@ -34,6 +34,17 @@ The elements (:data:`ELEMENTS`, ``splitcam study exposure --stack``):
 - a CSV file of ``wavelength_nm,transmission`` rows: a user's own curve.
 
 Bad curves are refused: a value outside [0, 1] or a curve that does not cover 400-700 nm.
+
+**The scene's light** (:class:`SceneLight`, ``splitcam study exposure --illuminant``). The
+scenes of the model are reflectances lit by D65 (:func:`~splitcam.patterns.spectral.scene_basis`).
+Lit by another illuminant ``S``, every colour's spectrum is multiplied by ``S / D65``, scaled to
+a peak of 1 over 400-700 nm so that no sensor receives more light than the model's unit (a
+splitter never sends on more than arrives): a white scene then gives a bare pixel
+:meth:`SceneLight.white_share` of what it collects under D65 at the same ``N``, and the
+conversion to lux accounts for it (:class:`~splitcam.physics.radiometry.Camera`'s ``white``).
+The light acts on every pixel of every sensor as a stack curve does, and the reconstruction
+still aims at the scene's reflectance: a white-balanced image. It is not part of what a measured
+curve holds, so it is never divided out of one.
 """
 
 from __future__ import annotations
@@ -49,14 +60,24 @@ import numpy as np
 
 from ..patterns import Pattern, check_pattern
 from ..patterns.spectral import SpectralPattern, scene_basis
-from .radiometry import SiliconQE
+from .radiometry import ILLUMINANTS, SiliconQE
 
-__all__ = ["ELEMENTS", "IRCut", "OpticalStack", "TabulatedCurve", "d5100_ir_cut", "stack_of"]
+__all__ = [
+    "ELEMENTS",
+    "IRCut",
+    "OpticalStack",
+    "SceneLight",
+    "TabulatedCurve",
+    "d5100_ir_cut",
+    "stack_of",
+]
 
 #: The band every curve must cover (nm): the band of the sensor model.
 BAND = (400.0, 700.0)
 #: The grid RGB sensors' band factors are taken on (nm).
 GRID = np.arange(400.0, 700.0 + 1e-9, 10.0)
+#: The grid a scene light is scaled on (nm).
+FINE = np.arange(400.0, 700.0 + 1e-9, 1.0)
 #: Where a measured curve is divided by the stack: the stack passes at least this share.
 DIVIDE_ABOVE = 0.3
 
@@ -171,10 +192,49 @@ ELEMENTS: dict[str, Callable[[], Callable]] = {
 
 
 @dataclass(frozen=True)
+class SceneLight:
+    """The scenes lit by ``illuminant`` (a name of
+    :data:`~splitcam.physics.radiometry.ILLUMINANTS`) in place of D65 (module docstring)."""
+
+    illuminant: str = "D65"
+
+    def __post_init__(self) -> None:
+        if self.illuminant not in ILLUMINANTS:
+            raise ValueError(
+                f"unknown illuminant {self.illuminant!r}; expected one of {', '.join(ILLUMINANTS)}"
+            )
+
+    def __call__(self, nm: Any) -> np.ndarray:
+        """``S / D65`` on ``nm``, scaled to a peak of 1 over 400-700 nm (1 nm steps)."""
+        nm = np.asarray(nm, dtype=float)
+        return self._ratio(nm) / float(self._ratio(FINE).max())
+
+    def white_share(self) -> float:
+        """The light a bare pixel collects from a white scene (one unit of each colour of the
+        scene basis), against D65's at the same ``N``; 1 for D65."""
+        return min(1.0, float(self(FINE) @ scene_basis(FINE).sum(axis=1)) / 3.0)
+
+    def _ratio(self, nm: np.ndarray) -> np.ndarray:
+        import colour
+
+        spectra = colour.SDS_ILLUMINANTS
+        return _on(spectra[ILLUMINANTS[self.illuminant]], nm) / _on(spectra["D65"], nm)
+
+    def __str__(self) -> str:
+        return f"scenes lit by {self.illuminant}"
+
+
+def _on(sd, nm: np.ndarray) -> np.ndarray:
+    return np.interp(nm, np.asarray(sd.wavelengths, float), np.asarray(sd.values, float))
+
+
+@dataclass(frozen=True)
 class OpticalStack:
-    """Curves every pixel's light passes through; its transmission is their product."""
+    """Curves every pixel's light passes through; its transmission is their product. With
+    ``light``, the scenes are lit by another illuminant than D65 (:class:`SceneLight`)."""
 
     elements: tuple[Callable, ...]
+    light: SceneLight | None = None
 
     def __call__(self, nm: Any) -> np.ndarray:
         nm = np.asarray(nm, dtype=float)
@@ -189,11 +249,19 @@ class OpticalStack:
         return out
 
     def __str__(self) -> str:
-        return " × ".join(str(e) for e in self.elements) or "no stack"
+        stack = " × ".join(str(e) for e in self.elements) or "no stack"
+        return stack if self.light is None else f"{stack}, {self.light}"
+
+    def weights(self, nm: Any) -> np.ndarray:
+        """What each wavelength's light is multiplied by: the stack's transmission, times the
+        scene light's ratio to D65 where one is set."""
+        t = self(nm)
+        return t if self.light is None else t * self.light(nm)
 
     def band_factors(self) -> np.ndarray:
-        """The stack's mean transmission over each colour's light (linear sRGB R, G, B)."""
-        return self(GRID) @ scene_basis(GRID)
+        """The stack's (and scene light's) mean weight over each colour's light (linear sRGB
+        R, G, B)."""
+        return self.weights(GRID) @ scene_basis(GRID)
 
     def apply(self, pattern: Pattern) -> Pattern:
         """``pattern`` behind this stack (module docstring), under the same name; its
@@ -205,10 +273,10 @@ class OpticalStack:
             return _renamed(pattern, kernels, self)
         lams = np.asarray(spectral["wavelengths"], float)
         kernels = np.asarray(spectral["kernels"], float)
-        t = self(lams)
-        out = kernels * t[None, :, None, None]
-        for s in _measured_filters(pattern, kernels):
-            out[s] = _measured_filter(kernels[s], t) * t[:, None, None]
+        t, w = self(lams), self.weights(lams)
+        out = kernels * w[None, :, None, None]
+        for s in _measured_filters(pattern, kernels) if self.elements else []:
+            out[s] = _measured_filter(kernels[s], t) * w[:, None, None]
         info = {k: v for k, v in pattern.metadata.items() if k not in ("spectral", "stack")}
         stacked = SpectralPattern(
             pattern.name,
