@@ -1,14 +1,18 @@
 """The answer in a designer's units across illuminants and pixel pitches: each router's crossover
-against the arrays (with its 90 % interval over images), converted to scene lux for D65
-daylight, CIE A tungsten and a white LED, at pixel pitches of 0.6, 0.8 and 1.0 µm, f/2,
+against the arrays (with its 90 % interval over images), from one study per illuminant whose
+scenes that illuminant lights (``splitcam study exposure --illuminant``: D65 daylight, CIE A
+tungsten, a white LED), converted to scene lux at pixel pitches of 0.6, 0.8 and 1.0 µm, f/2,
 1/30 s, a white scene (splitcam.physics.radiometry).
 
-    python studies/exposure/lux_sweep.py [docs/results/exposure/measured/rn2]
-        [--out docs/results/exposure/lux]
+    python studies/exposure/lux_sweep.py [--study D65=docs/results/exposure/answer/rn2
+        --study A=DIR --study LED=DIR] [--out docs/results/exposure/lux]
 
-Only the conversion changes between columns: the crossovers themselves come from one study
-whose scenes are D65-lit (a tungsten-lit scene is redder, which would move N itself; that needs
-the study run again under that light). Two significant figures, as the study's tables.
+(the default: ``answer/rn2``, ``answer/rn2-A`` and ``answer/rn2-LED``); the rows are the
+routers every study has.
+
+The routers are solved at a 1 µm pitch; the other pitches convert the same crossover in N, as
+if the router kept its kernels when scaled (it would need designing again). Two significant
+figures, as the study's tables.
 """
 
 from __future__ import annotations
@@ -22,17 +26,14 @@ from pathlib import Path
 from splitcam.evaluation.tables import markdown_table
 from splitcam.io import write_text
 from splitcam.physics.radiometry import Camera
+from splitcam.physics.stack import SceneLight
 
-ROUTERS = [
-    "router-best-fullwave",
-    "router-best-fullwave-f2",
-    "router-zou-fullwave",
-    "router-zou-fullwave-f2",
-]
 REFERENCES = ["rgbw-d5100", "bayer-d5100"]
 ILLUMINANTS = {"D65": "D65 daylight", "A": "CIE A tungsten", "LED": "white LED (LED-B3)"}
 PITCHES = (0.6, 0.8, 1.0)
 METHOD = "net-universal-photon-"
+ANSWER = "docs/results/exposure/answer/rn2"
+DEFAULT_STUDIES = [f"D65={ANSWER}", f"A={ANSWER}-A", f"LED={ANSWER}-LED"]
 
 
 def _sig(x: float) -> str:
@@ -43,7 +44,8 @@ def _sig(x: float) -> str:
     return f"{float(f'{x:.2g}'):g}"
 
 
-def crossovers(study: Path) -> dict[tuple[str, str], dict]:
+def crossovers(study: Path) -> tuple[dict[tuple[str, str], dict], float]:
+    """The pooled PSNR crossovers of the network's rows, and the study's N per lux."""
     data = json.loads((study / "exposure.json").read_text(encoding="utf-8"))
     out = {}
     for row in data["crossovers"]:
@@ -52,55 +54,90 @@ def crossovers(study: Path) -> dict[tuple[str, str], dict]:
         cand, ref = row["candidate"], row["reference"]
         if cand.startswith(METHOD) and ref.startswith(METHOD):
             out[(cand.removeprefix(METHOD), ref.removeprefix(METHOD))] = row
-    return out
+    return out, data["camera"]["electrons_per_lux"]
+
+
+def _camera(illuminant: str, pitch: float) -> Camera:
+    white = 1.0 if illuminant == "D65" else SceneLight(illuminant).white_share()
+    return Camera(pitch_um=pitch, f_number=2.0, illuminant=illuminant, white=white)
+
+
+def _cells(row: dict | None, illuminant: str) -> list[str]:
+    if row is None or row["crossover"] is None or math.isinf(row["crossover"]):
+        return ["–"] * (1 + len(PITCHES))
+    n, low, high = row["crossover"], row["low"], row["high"]
+    cells = [f"{_sig(n)} [{_sig(low)}, {_sig(high)}]"]
+    for pitch in PITCHES:
+        cam = _camera(illuminant, pitch)
+        cells.append(f"{_sig(cam.lux(n))} [{_sig(cam.lux(low))}, {_sig(cam.lux(high))}]")
+    return cells
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("study", nargs="?", default="docs/results/exposure/measured/rn2")
+    parser.add_argument("--study", action="append", help="ILLUMINANT=DIR, one per illuminant")
     parser.add_argument("--out", default="docs/results/exposure/lux")
     args = parser.parse_args()
-    found = crossovers(Path(args.study))
-    cameras = {
-        (ill, pitch): Camera(pitch_um=pitch, f_number=2.0, illuminant=ill)
-        for ill in ILLUMINANTS
-        for pitch in PITCHES
-    }
-    header = ["router", "against", "N [90 %]"] + [
-        f"{ill} {pitch:g} µm" for ill in ILLUMINANTS for pitch in PITCHES
+    studies = dict(s.split("=", 1) for s in args.study or DEFAULT_STUDIES)
+    found = {}
+    for ill, folder in studies.items():
+        if ill not in ILLUMINANTS:
+            raise SystemExit(
+                f"unknown illuminant {ill!r}; expected one of {', '.join(ILLUMINANTS)}"
+            )
+        found[ill], per_lux = crossovers(Path(folder))
+        if not math.isclose(per_lux, _camera(ill, 1.0).electrons_per_lux, rel_tol=1e-9):
+            raise SystemExit(f"{folder}: not a study at 1 µm, f/2, 1/30 s under {ill}")
+    routers = sorted(
+        set.intersection(
+            *(
+                {c for c, r in table if c not in REFERENCES and r in REFERENCES}
+                for table in found.values()
+            )
+        )
+    )
+    header = ["router", "against"] + [
+        f"{ill} {what}" for ill in studies for what in ["N", *(f"{p:g} µm" for p in PITCHES)]
     ]
     rows = []
-    for router in ROUTERS:
+    for router in routers:
         for ref in REFERENCES:
-            row = found.get((router, ref))
-            if row is None or row["crossover"] is None or math.isinf(row["crossover"]):
-                continue
-            n, low, high = row["crossover"], row["low"], row["high"]
-            cells = [router, ref, f"{_sig(n)} [{_sig(low)}, {_sig(high)}]"]
-            for key in cameras:
-                cam = cameras[key]
-                cells.append(f"{_sig(cam.lux(n))} [{_sig(cam.lux(low))}, {_sig(cam.lux(high))}]")
-            rows.append(cells)
-    link = os.path.relpath(Path(args.study) / "exposure.md", args.out)
-    per_lux = {f"{ill} {p:g} µm": cameras[(ill, p)].electrons_per_lux for ill, p in cameras}
+            cells = [c for ill in studies for c in _cells(found[ill].get((router, ref)), ill)]
+            rows.append([router, ref, *cells])
+    links = ", ".join(
+        f"[{ill}]({os.path.relpath(Path(folder) / 'exposure.md', args.out)})"
+        for ill, folder in studies.items()
+    )
+    per_lux = {
+        f"{ill} {p:g} µm": _camera(ill, p).electrons_per_lux for ill in studies for p in PITCHES
+    }
     lines = [
         "# The answer in lux: illuminants and pixel pitches",
         "",
-        "Each router beats the array below this scene illuminance (lux; 90 % interval over the "
-        f"images in brackets), at f/2, 1/30 s, a white scene, a lossless pixel; the crossovers in "
-        f"N are those of [`{args.study}`]({link}) (network "
-        "`universal-photon` for every sensor, read noise 2 e⁻, 48 images).",
+        "Each router beats the array below this exposure N and scene illuminance (lux; 90 % "
+        "interval over the images in brackets), at f/2, 1/30 s, a white scene; one study per "
+        f"illuminant, whose scenes it lights ({links}: network `universal-photon` for every "
+        "sensor, read noise 2 e⁻, every pixel behind the same stack, 48 images). "
+        "N is in the model's units: "
+        + "".join(
+            f"under {ill} a white scene gives a bare pixel {SceneLight(ill).white_share():.2f} N; "
+            for ill in studies
+            if ill != "D65"
+        )
+        + "under D65, N (model.md section 19).",
         "",
         *markdown_table(header, rows),
         "",
         "N per lux of each column: "
         + ", ".join(f"{k} {v:.3g}" for k, v in per_lux.items())
-        + ". Only the conversion differs between columns: the scenes of the study are lit by "
-        "D65 (a scene under tungsten light is redder, which would move N itself). A smaller "
-        "pixel collects fewer photons per lux, so the same N needs more light: at 0.6 µm every "
-        "figure is 2.8 times the 1 µm one.",
+        + ". The routers are solved at a 1 µm pitch: the 0.6 and 0.8 µm columns convert the "
+        "same N, as if a router kept its kernels when scaled (it would need designing again). "
+        "A smaller pixel collects fewer photons per lux, so the same N needs more light: at "
+        "0.6 µm every figure is 2.8 times the 1 µm one.",
         "",
-        f"`python studies/exposure/lux_sweep.py {args.study} --out {args.out}`",
+        "`python studies/exposure/lux_sweep.py "
+        + " ".join(f"--study {ill}={folder}" for ill, folder in studies.items())
+        + f" --out {args.out}`",
     ]
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
