@@ -103,6 +103,14 @@ def main() -> None:
         default=["zou", "best"],
         help="solve these designs (two runs, one design each, can share the folder)",
     )
+    parser.add_argument(
+        "--lenses",
+        nargs="+",
+        type=_lens,
+        help="the settings to solve, F:ANGLE each (F an f-number or none for the chief ray "
+        "alone, ANGLE the chief ray's in degrees; default every one of LENSES, in its order): "
+        "two runs of one design can share the settings out",
+    )
     args = parser.parse_args()
     import torch
 
@@ -147,7 +155,7 @@ def main() -> None:
         terms = args.terms or summary.get("chosen", {}).get("terms")
         if terms is None:
             sys.exit("run --stage convergence first, or give --terms")
-        for f_number, chief in LENSES:
+        for f_number, chief in args.lenses or LENSES:
             directions = cone_directions(f_number, math.radians(chief), AZIMUTH)
             for name, design in routers.items():
                 key = f"{name}/{terms}/f{f_number or 'none'}/cra{chief}"
@@ -165,6 +173,19 @@ def main() -> None:
                     flush=True,
                 )
                 save()
+
+
+def _lens(text: str) -> tuple[float | None, int]:
+    """``2:15`` -> (2.0, 15); ``none:25`` -> (None, 25); only the settings of LENSES."""
+    f_number, _, chief = text.partition(":")
+    try:
+        lens = (None if f_number == "none" else float(f_number), int(chief))
+    except ValueError:
+        lens = None
+    if lens not in LENSES:
+        known = " ".join(f"{f or 'none'}:{c}" for f, c in LENSES)
+        raise argparse.ArgumentTypeError(f"{text!r} is not one of {known}")
+    return lens
 
 
 def earlier_best() -> dict:
