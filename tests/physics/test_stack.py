@@ -203,7 +203,8 @@ def test_study_exposure_lights_the_scenes_with_its_illuminant(tmp_path, capsys):
     for key in ("bayer", "rgbw-d5100"):
         for n in ("30", "3000"):
             assert tungsten["results"][key][n]["psnr"] < d65["results"][key][n]["psnr"]
-    assert "scenes lit by A" in (tmp_path / "a" / "exposure.md").read_text()
+    note = (tmp_path / "a" / "exposure.md").read_text()
+    assert "Scenes lit by A (white gives a bare pixel 0.384 N)" in note
     capsys.readouterr()
     for extra, message in [
         (["--illuminant", "F2"], "unknown illuminant 'F2'"),

@@ -302,7 +302,7 @@ def _run_exposure(args: argparse.Namespace, images: list, names: str, photons: l
         + (f"dark {sensor['dark']:g} e- per exposure, " if sensor.get("dark") else "")
         + (f"full well {args.full_well:g} e-, " if args.full_well else "no saturation, ")
         + (f"ADC {sensor['bits']} bits at {args.gain:g} e-/DN. " if args.gain else "no ADC. ")
-        + (f"Every pixel behind: {stack}. " if stack is not None else "")
+        + _stack_note(stack)
         + f"Command: {_command(args)}"
     )
     networks = {m.name: m.pattern.name for m in methods}
@@ -321,6 +321,17 @@ def _run_exposure(args: argparse.Namespace, images: list, names: str, photons: l
     return 0
 
 
+def _stack_note(stack) -> str:
+    """The stack and the scene light, as the study's note states them."""
+    if stack is None:
+        return ""
+    note = f"Every pixel behind: {type(stack)(stack.elements)}. " if stack.elements else ""
+    if stack.light is not None:
+        share = stack.light.white_share()
+        note += f"Scenes lit by {stack.light.illuminant} (white gives a bare pixel {share:.3g} N). "
+    return note
+
+
 def _check_stacked_models(models: list[str]) -> None:
     """Behind a stack, a network must serve any pattern: one trained on one sensor knows that
     sensor without the stack."""
@@ -329,8 +340,9 @@ def _check_stacked_models(models: list[str]) -> None:
     single = [m for m in models if not model_serves_any_pattern(m)]
     if single:
         raise ValueError(
-            f"--stack and --illuminant change every sensor: --model {', '.join(single)} knows its sensor without "
-            "the stack; use a model for any pattern (universal-photon)"
+            "--stack and --illuminant change every sensor: "
+            f"--model {', '.join(single)} knows its sensor without the stack; use a model for "
+            "any pattern (universal-photon)"
         )
 
 

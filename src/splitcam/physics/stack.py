@@ -249,8 +249,10 @@ class OpticalStack:
         return out
 
     def __str__(self) -> str:
-        stack = " × ".join(str(e) for e in self.elements) or "no stack"
-        return stack if self.light is None else f"{stack}, {self.light}"
+        stack = " × ".join(str(e) for e in self.elements)
+        if self.light is None:
+            return stack or "no stack"
+        return f"{stack}, {self.light}" if stack else str(self.light)
 
     def weights(self, nm: Any) -> np.ndarray:
         """What each wavelength's light is multiplied by: the stack's transmission, times the
