@@ -3,12 +3,14 @@ scene illuminance, with the 90 % band over the images and each crossover with it
 
     python studies/exposure/headline.py [STUDY_FOLDER] [--out docs/results/exposure/headline.png]
         [--routers NAME[=LABEL],...] [--where "..."] [--stack "..."]
-        [--pitch 1 --f-number 2 --exposure-time 0.0333 --illuminant D65]
+        [--pitch 1 --f-number 2 --exposure-time 0.0333]
 
 STUDY_FOLDER holds ``exposure.json`` of ``splitcam study exposure`` run with per-image scores
 (default ``docs/results/exposure/answer/rn2``). Every sensor is reconstructed by the same
 network for any pattern (``universal-photon``): no sensor's network is fine-tuned. Exposures
-are converted to lux by :class:`splitcam.physics.radiometry.Camera`.
+are converted to lux by the study's own camera (its pitch, lens, time and the light its scenes
+are lit by), or by :class:`splitcam.physics.radiometry.Camera` with the pitch, f-number and
+time given here under the study's light.
 """
 
 from __future__ import annotations
@@ -43,10 +45,9 @@ def main() -> None:
         "study", nargs="?", type=Path, default=ROOT / "docs/results/exposure/answer/rn2"
     )
     parser.add_argument("--out", type=Path, default=ROOT / "docs/results/exposure/headline.png")
-    parser.add_argument("--pitch", type=float, default=1.0)
-    parser.add_argument("--f-number", type=float, default=2.0)
-    parser.add_argument("--exposure-time", type=float, default=1 / 30)
-    parser.add_argument("--illuminant", default="D65")
+    parser.add_argument("--pitch", type=float, help="µm (default: the study's camera)")
+    parser.add_argument("--f-number", type=float, help="(default: the study's camera)")
+    parser.add_argument("--exposure-time", type=float, help="s (default: the study's camera)")
     parser.add_argument("--read-noise", type=float, default=2.0, help="the study's, for the title")
     parser.add_argument(
         "--routers",
@@ -63,8 +64,8 @@ def main() -> None:
     )
     parser.add_argument("--legend", default="lower left", help="matplotlib's loc")
     args = parser.parse_args()
-    camera = Camera(args.pitch, args.f_number, args.exposure_time, args.illuminant)
     data = json.loads((args.study / "exposure.json").read_text())
+    camera = _camera(args, data["camera"])
     results = {label: {float(n): v for n, v in r.items()} for label, r in data["results"].items()}
     names = dict(spec.split("=", 1) if "=" in spec else (spec, spec) for spec in args.routers)
     pairs = [(NET + r, NET + a) for a in ARRAYS for r in names]
@@ -97,6 +98,33 @@ def main() -> None:
         legend=args.legend,
     )
     print(f"wrote {args.out}")
+
+
+class _StudyCamera:
+    """The camera a study recorded: its N per lux and its settings in words."""
+
+    def __init__(self, recorded: dict) -> None:
+        self.electrons_per_lux, self.settings = recorded["electrons_per_lux"], recorded["settings"]
+
+    def lux(self, photons: float) -> float:
+        return photons / self.electrons_per_lux
+
+    def describe(self) -> str:
+        return self.settings
+
+
+def _camera(args: argparse.Namespace, recorded: dict):
+    """The study's camera, or one with the pitch, f-number and time given (each defaulting to
+    1 µm, f/2, 1/30 s) under the study's light."""
+    if args.pitch is None and args.f_number is None and args.exposure_time is None:
+        return _StudyCamera(recorded)
+    return Camera(
+        args.pitch or 1.0,
+        args.f_number or 2.0,
+        args.exposure_time or 1 / 30,
+        recorded.get("illuminant", "D65"),
+        white=recorded.get("white", 1.0),
+    )
 
 
 if __name__ == "__main__":

@@ -203,6 +203,9 @@ def test_study_exposure_lights_the_scenes_with_its_illuminant(tmp_path, capsys):
     for key in ("bayer", "rgbw-d5100"):
         for n in ("30", "3000"):
             assert tungsten["results"][key][n]["psnr"] < d65["results"][key][n]["psnr"]
+    assert tungsten["camera"]["illuminant"] == "A" and "camera" in d65
+    assert tungsten["camera"]["white"] == pytest.approx(SceneLight("A").white_share())
+    assert "illuminant" not in d65["camera"]  # D65's record as before
     note = (tmp_path / "a" / "exposure.md").read_text()
     assert "Scenes lit by A (white gives a bare pixel 0.384 N)" in note
     capsys.readouterr()

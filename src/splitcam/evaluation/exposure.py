@@ -595,6 +595,14 @@ def raw_snr_check(
     return out
 
 
+def _camera_record(camera: Camera) -> dict:
+    """The camera in the study's JSON; the scene light where it is not D65's (relit scenes)."""
+    record = {"settings": camera.describe(), "electrons_per_lux": camera.electrons_per_lux}
+    if camera.white != 1:
+        record.update(illuminant=camera.illuminant, white=camera.white)
+    return record
+
+
 def write_study(
     results: dict[str, dict[float, dict[str, float]]],
     snr: dict[str, dict[str, float]] | None,
@@ -634,9 +642,7 @@ def write_study(
     record = {
         "results": {p: {f"{n:g}": v for n, v in r.items()} for p, r in results.items()},
         "crossovers": crossovers,
-        "camera": None
-        if camera is None
-        else {"settings": camera.describe(), "electrons_per_lux": camera.electrons_per_lux},
+        "camera": None if camera is None else _camera_record(camera),
         "raw_snr": snr,
         "domain": domain,
     }
