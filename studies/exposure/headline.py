@@ -27,12 +27,11 @@ from splitcam.viz.charts import difference_chart
 ROOT = Path(__file__).resolve().parents[2]
 NET = "net-universal-photon-"
 #: The answer's candidates (``study label=legend label``): both routers behind an f/2 lens at the
-#: centre of the field, Zou's also with the kernels computed from its fields, and both at the
-#: corner (chief ray 25 degrees; six wavelengths).
+#: centre of the field with the kernels computed from their fields, and both at the corner
+#: (chief ray 25 degrees; six wavelengths, the nearest-copy rule).
 ROUTERS = (
-    "router-best-fullwave-f2=leaderboard design, centre",
-    "router-zou-fullwave-f2=Zou, centre",
-    "zou-f2-computed=Zou, centre, kernels from the fields",
+    "best-f2-computed=leaderboard design, centre",
+    "zou-f2-computed=Zou, centre",
     "best-f2-corner-6wl=leaderboard design, corner (25°)",
     "zou-f2-corner-6wl=Zou, corner (25°)",
 )
