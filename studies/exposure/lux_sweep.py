@@ -45,7 +45,8 @@ def _sig(x: float) -> str:
 
 
 def crossovers(study: Path) -> tuple[dict[tuple[str, str], dict], float]:
-    """The pooled PSNR crossovers of the network's rows, and the study's N per lux."""
+    """The pooled PSNR crossovers of the network's rows (each with the study's exposures under
+    ``range``), and the study's N per lux."""
     data = json.loads((study / "exposure.json").read_text(encoding="utf-8"))
     out = {}
     for row in data["crossovers"]:
@@ -53,6 +54,8 @@ def crossovers(study: Path) -> tuple[dict[tuple[str, str], dict], float]:
             continue
         cand, ref = row["candidate"], row["reference"]
         if cand.startswith(METHOD) and ref.startswith(METHOD):
+            photons = [float(n) for n in data["results"][cand]]
+            row = {**row, "range": (min(photons), max(photons))}
             out[(cand.removeprefix(METHOD), ref.removeprefix(METHOD))] = row
     return out, data["camera"]["electrons_per_lux"]
 
@@ -63,13 +66,21 @@ def _camera(illuminant: str, pitch: float) -> Camera:
 
 
 def _cells(row: dict | None, illuminant: str) -> list[str]:
+    """N and lux at each pitch; an interval's end outside the exposures studied is written as
+    the study writes it (``<`` the lowest, ``>`` the highest)."""
     if row is None or row["crossover"] is None or math.isinf(row["crossover"]):
         return ["–"] * (1 + len(PITCHES))
     n, low, high = row["crossover"], row["low"], row["high"]
-    cells = [f"{_sig(n)} [{_sig(low)}, {_sig(high)}]"]
+    lowest, highest = row["range"]
+
+    def interval(convert) -> str:
+        lo = f"<{_sig(convert(lowest))}" if low == 0.0 else _sig(convert(low))
+        hi = f">{_sig(convert(highest))}" if math.isinf(high) else _sig(convert(high))
+        return f"{_sig(convert(n))} [{lo}, {hi}]"
+
+    cells = [interval(lambda x: x)]
     for pitch in PITCHES:
-        cam = _camera(illuminant, pitch)
-        cells.append(f"{_sig(cam.lux(n))} [{_sig(cam.lux(low))}, {_sig(cam.lux(high))}]")
+        cells.append(interval(_camera(illuminant, pitch).lux))
     return cells
 
 
