@@ -1,7 +1,7 @@
 """Spectral patterns of both routers at the centre and the corner of a camera's field, from the
 angles study's solves (``studies/fullwave/angles.py``): the six leaderboard wavelengths, fmmax
-Jones-direct at 793 terms, normal incidence and an f/2 lens's cone with its chief ray at 0° and
-25° (tilted along the design's diagonal).
+Jones-direct at 793 terms, normal incidence and an f/2 lens's cone with its chief ray at 0°, 15°
+and 25° (the centre, middle and corner; tilted along the design's diagonal).
 
     python studies/fullwave/field_patterns.py [--angles docs/results/fullwave/angles]
         [--out docs/results/fullwave/angles/patterns]
@@ -26,6 +26,7 @@ SETTINGS = {
     "normal": ("convergence", "{design}/797", "normal incidence"),
     "f2-centre": ("angles", "{design}/797/f2.0/cra0", "f/2 cone, chief ray 0°"),
     "f2-corner": ("angles", "{design}/797/f2.0/cra25", "f/2 cone, chief ray 25° (diagonal)"),
+    "f2-middle": ("angles", "{design}/797/f2.0/cra15", "f/2 cone, chief ray 15° (diagonal)"),
 }
 DESIGNS = {
     "zou": "zou2022-16x16.csv (Zou et al. 2022)",
