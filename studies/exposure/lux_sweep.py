@@ -23,10 +23,10 @@ import math
 import os
 from pathlib import Path
 
+from splitcam.evaluation.exposure import two_figures
 from splitcam.evaluation.tables import markdown_table
 from splitcam.io import write_text
 from splitcam.physics.radiometry import Camera
-from splitcam.physics.stack import SceneLight
 
 REFERENCES = ["rgbw-d5100", "bayer-d5100"]
 ILLUMINANTS = {"D65": "D65 daylight", "A": "CIE A tungsten", "LED": "white LED (LED-B3)"}
@@ -36,17 +36,9 @@ ANSWER = "docs/results/exposure/answer/rn2"
 DEFAULT_STUDIES = [f"D65={ANSWER}", f"A={ANSWER}-A", f"LED={ANSWER}-LED"]
 
 
-def _sig(x: float) -> str:
-    if x is None or (isinstance(x, float) and math.isnan(x)):
-        return "–"
-    if math.isinf(x):
-        return ">range" if x > 0 else "<range"
-    return f"{float(f'{x:.2g}'):g}"
-
-
-def crossovers(study: Path) -> tuple[dict[tuple[str, str], dict], float]:
+def crossovers(study: Path) -> tuple[dict[tuple[str, str], dict], dict]:
     """The pooled PSNR crossovers of the network's rows (each with the study's exposures under
-    ``range``), and the study's N per lux."""
+    ``range``), and the study's camera as it recorded it."""
     data = json.loads((study / "exposure.json").read_text(encoding="utf-8"))
     out = {}
     for row in data["crossovers"]:
@@ -57,15 +49,22 @@ def crossovers(study: Path) -> tuple[dict[tuple[str, str], dict], float]:
             photons = [float(n) for n in data["results"][cand]]
             row = {**row, "range": (min(photons), max(photons))}
             out[(cand.removeprefix(METHOD), ref.removeprefix(METHOD))] = row
-    return out, data["camera"]["electrons_per_lux"]
+    return out, data["camera"]
 
 
-def _camera(illuminant: str, pitch: float) -> Camera:
-    white = 1.0 if illuminant == "D65" else SceneLight(illuminant).white_share()
-    return Camera(pitch_um=pitch, f_number=2.0, illuminant=illuminant, white=white)
+def _cameras(illuminant: str, recorded: dict, folder: str) -> dict[float, Camera]:
+    """The camera at each pitch, with the share of N a white scene gives that the study recorded
+    for its light; the study itself must be the one at 1 µm."""
+    white = recorded.get("white", 1.0)
+    cameras = {pitch: Camera(pitch, 2.0, illuminant=illuminant, white=white) for pitch in PITCHES}
+    if not math.isclose(
+        recorded["electrons_per_lux"], cameras[1.0].electrons_per_lux, rel_tol=1e-9
+    ):
+        raise SystemExit(f"{folder}: not a study at 1 µm, f/2, 1/30 s under {illuminant}")
+    return cameras
 
 
-def _cells(row: dict | None, illuminant: str) -> list[str]:
+def _cells(row: dict | None, cameras: dict[float, Camera]) -> list[str]:
     """N and lux at each pitch; an interval's end outside the exposures studied is written as
     the study writes it (``<`` the lowest, ``>`` the highest)."""
     if row is None or row["crossover"] is None or math.isinf(row["crossover"]):
@@ -74,14 +73,11 @@ def _cells(row: dict | None, illuminant: str) -> list[str]:
     lowest, highest = row["range"]
 
     def interval(convert) -> str:
-        lo = f"<{_sig(convert(lowest))}" if low == 0.0 else _sig(convert(low))
-        hi = f">{_sig(convert(highest))}" if math.isinf(high) else _sig(convert(high))
-        return f"{_sig(convert(n))} [{lo}, {hi}]"
+        lo = f"<{two_figures(convert(lowest))}" if low == 0.0 else two_figures(convert(low))
+        hi = f">{two_figures(convert(highest))}" if math.isinf(high) else two_figures(convert(high))
+        return f"{two_figures(convert(n))} [{lo}, {hi}]"
 
-    cells = [interval(lambda x: x)]
-    for pitch in PITCHES:
-        cells.append(interval(_camera(illuminant, pitch).lux))
-    return cells
+    return [interval(lambda x: x)] + [interval(cameras[pitch].lux) for pitch in PITCHES]
 
 
 def main() -> None:
@@ -90,15 +86,15 @@ def main() -> None:
     parser.add_argument("--out", default="docs/results/exposure/lux")
     args = parser.parse_args()
     studies = dict(s.split("=", 1) for s in args.study or DEFAULT_STUDIES)
-    found = {}
+    found, cameras, whites = {}, {}, {}
     for ill, folder in studies.items():
         if ill not in ILLUMINANTS:
             raise SystemExit(
                 f"unknown illuminant {ill!r}; expected one of {', '.join(ILLUMINANTS)}"
             )
-        found[ill], per_lux = crossovers(Path(folder))
-        if not math.isclose(per_lux, _camera(ill, 1.0).electrons_per_lux, rel_tol=1e-9):
-            raise SystemExit(f"{folder}: not a study at 1 µm, f/2, 1/30 s under {ill}")
+        found[ill], recorded = crossovers(Path(folder))
+        cameras[ill] = _cameras(ill, recorded, folder)
+        whites[ill] = recorded.get("white", 1.0)
     routers = sorted(
         set.intersection(
             *(
@@ -113,14 +109,16 @@ def main() -> None:
     rows = []
     for router in routers:
         for ref in REFERENCES:
-            cells = [c for ill in studies for c in _cells(found[ill].get((router, ref)), ill)]
+            cells = [
+                c for ill in studies for c in _cells(found[ill].get((router, ref)), cameras[ill])
+            ]
             rows.append([router, ref, *cells])
     links = ", ".join(
         f"[{ill}]({os.path.relpath(Path(folder) / 'exposure.md', args.out)})"
         for ill, folder in studies.items()
     )
     per_lux = {
-        f"{ill} {p:g} µm": _camera(ill, p).electrons_per_lux for ill in studies for p in PITCHES
+        f"{ill} {p:g} µm": cameras[ill][p].electrons_per_lux for ill in studies for p in PITCHES
     }
     lines = [
         "# The answer in lux: illuminants and pixel pitches",
@@ -131,9 +129,9 @@ def main() -> None:
         "sensor, read noise 2 e⁻, every pixel behind the same stack, 48 images). "
         "N is in the model's units: "
         + "".join(
-            f"under {ill} a white scene gives a bare pixel {SceneLight(ill).white_share():.2f} N; "
+            f"under {ill} a white scene gives a bare pixel {whites[ill]:.2f} N; "
             for ill in studies
-            if ill != "D65"
+            if whites[ill] != 1
         )
         + "under D65, N (model.md section 19).",
         "",

@@ -21,15 +21,17 @@ import numpy as np
 import torch
 
 from splitcam.design.fullwave import FullwaveDesign
+from splitcam.patterns import read as read_pattern
 from splitcam.physics.fullwave import RouterDesign, band_efficiencies
 
 
 def spectra(path: Path) -> tuple[list[float], np.ndarray]:
-    if path.suffix == ".toml":  # a spectral pattern file (transmission[row][column][wavelength])
-        import tomllib
-
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
-        return [float(v) for v in data["wavelengths"]], np.clip(data["transmission"], 0.0, None)
+    if path.suffix == ".toml":  # a spectral pattern file given by its transmissions
+        info = read_pattern(str(path)).pattern.metadata
+        if "transmission" not in info:
+            raise SystemExit(f"{path}: a pattern given by its kernels, not its transmissions")
+        lams = [float(v) for v in info["spectral"]["wavelengths"]]
+        return lams, np.clip(np.asarray(info["transmission"], dtype=float), 0.0, None)
     rows = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
     lams = rows[:, 0].tolist()
     t = rows[:, 1:5].T.reshape(2, 2, -1)  # T_row0_col0, T_row0_col1, T_row1_col0, T_row1_col1
