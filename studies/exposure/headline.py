@@ -64,7 +64,7 @@ def main() -> None:
     parser.add_argument("--legend", default="lower left", help="matplotlib's loc")
     args = parser.parse_args()
     data = json.loads((args.study / "exposure.json").read_text())
-    camera = _camera(args, data["camera"])
+    per_lux, settings = _camera(args, data["camera"])
     results = {label: {float(n): v for n, v in r.items()} for label, r in data["results"].items()}
     names = dict(spec.split("=", 1) if "=" in spec else (spec, spec) for spec in args.routers)
     pairs = [(NET + r, NET + a) for a in ARRAYS for r in names]
@@ -74,12 +74,12 @@ def main() -> None:
         c = copy.deepcopy(c)
         c["candidate"] = names[c["candidate"].removeprefix(NET)]
         c["reference"] = c["reference"].removeprefix(NET)
-        c["photons"] = [camera.lux(n) for n in c["photons"]]
+        c["photons"] = [n / per_lux for n in c["photons"]]
         cross = c["crossover"]
         for key in ("crossover", "low", "high"):
             v = cross[key]
             if v is not None and v not in (0.0, float("inf")):
-                cross[key] = camera.lux(v)
+                cross[key] = v / per_lux
         lux.append(c)
         print(
             f"{c['candidate']} against {c['reference']}: crossover {cross['crossover']} lux, "
@@ -90,7 +90,7 @@ def main() -> None:
         args.out,
         title=f"Full-wave routers against measured filter arrays, one network for every sensor "
         f"(universal-photon), read noise {args.read_noise:g} e-, {args.where}\n"
-        f"{camera.describe()}{chr(10) + args.stack if args.stack else ''}; bands and bars: "
+        f"{settings}{chr(10) + args.stack if args.stack else ''}; bands and bars: "
         "90 % intervals over the images",
         xlabel="scene illuminance (lux)",
         unit="lux",
@@ -99,31 +99,19 @@ def main() -> None:
     print(f"wrote {args.out}")
 
 
-class _StudyCamera:
-    """The camera a study recorded: its N per lux and its settings in words."""
-
-    def __init__(self, recorded: dict) -> None:
-        self.electrons_per_lux, self.settings = recorded["electrons_per_lux"], recorded["settings"]
-
-    def lux(self, photons: float) -> float:
-        return photons / self.electrons_per_lux
-
-    def describe(self) -> str:
-        return self.settings
-
-
-def _camera(args: argparse.Namespace, recorded: dict):
-    """The study's camera, or one with the pitch, f-number and time given (each defaulting to
-    1 µm, f/2, 1/30 s) under the study's light."""
+def _camera(args: argparse.Namespace, recorded: dict) -> tuple[float, str]:
+    """N per lux and the camera in words: the study's own, or one with the pitch, f-number and
+    time given (each defaulting to 1 µm, f/2, 1/30 s) under the study's light."""
     if args.pitch is None and args.f_number is None and args.exposure_time is None:
-        return _StudyCamera(recorded)
-    return Camera(
+        return recorded["electrons_per_lux"], recorded["settings"]
+    camera = Camera(
         args.pitch or 1.0,
         args.f_number or 2.0,
         args.exposure_time or 1 / 30,
         recorded.get("illuminant", "D65"),
         white=recorded.get("white", 1.0),
     )
+    return camera.electrons_per_lux, camera.describe()
 
 
 if __name__ == "__main__":

@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 import re
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 from ..io.domains import DOMAINS, LINEAR
@@ -170,7 +171,8 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError("--stack is for study exposure; study breakeven takes none")
     if args.restart and args.study == "breakeven":
         raise ValueError("--restart is for study exposure; study breakeven keeps no scores")
-    args.optical_stack, white = _stack(args.stack, args.illuminant, args.study)
+    stack = args.optical_stack = _stack(args.stack, args.illuminant, args.study)
+    white = stack.light.white_share() if stack is not None and stack.light else 1.0
     qe = SiliconQE(args.silicon_depth) if args.silicon_depth is not None else None
     args.camera = Camera(
         args.pitch, args.f_number, args.exposure_time, args.illuminant, qe=qe, white=white
@@ -189,21 +191,20 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _stack(text: str | None, illuminant: str, study: str):
-    """The optical stack of ``--stack`` and the scene light of ``--illuminant`` (checked before
-    any image is read; None for neither), and the share of ``N`` a bare pixel collects from
-    white under that light."""
+    """The optical stack of ``--stack`` with the scene light of ``--illuminant`` (checked before
+    any image is read), or None for neither."""
     from ..physics.stack import OpticalStack, SceneLight, stack_of
 
     stack = stack_of([t for t in text.split(",") if t.strip()]) if text else None
     if illuminant == "D65":
-        return stack, 1.0
+        return stack
     light = SceneLight(illuminant)
     if study == "breakeven":
         raise ValueError(
             "study breakeven's scenes are lit by D65; --illuminant relights them in study "
             "exposure only"
         )
-    return OpticalStack(stack.elements if stack else (), light), light.white_share()
+    return OpticalStack(stack.elements if stack else (), light)
 
 
 def _run_breakeven(args: argparse.Namespace, images: list, names: str, photons: list) -> int:
@@ -302,7 +303,7 @@ def _run_exposure(args: argparse.Namespace, images: list, names: str, photons: l
         + (f"dark {sensor['dark']:g} e- per exposure, " if sensor.get("dark") else "")
         + (f"full well {args.full_well:g} e-, " if args.full_well else "no saturation, ")
         + (f"ADC {sensor['bits']} bits at {args.gain:g} e-/DN. " if args.gain else "no ADC. ")
-        + _stack_note(stack)
+        + _stack_note(stack, args.camera)
         + f"Command: {_command(args)}"
     )
     networks = {m.name: m.pattern.name for m in methods}
@@ -321,14 +322,16 @@ def _run_exposure(args: argparse.Namespace, images: list, names: str, photons: l
     return 0
 
 
-def _stack_note(stack) -> str:
+def _stack_note(stack, camera) -> str:
     """The stack and the scene light, as the study's note states them."""
     if stack is None:
         return ""
-    note = f"Every pixel behind: {type(stack)(stack.elements)}. " if stack.elements else ""
+    note = f"Every pixel behind: {replace(stack, light=None)}. " if stack.elements else ""
     if stack.light is not None:
-        share = stack.light.white_share()
-        note += f"Scenes lit by {stack.light.illuminant} (white gives a bare pixel {share:.3g} N). "
+        note += (
+            f"Scenes lit by {stack.light.illuminant} "
+            f"(white gives a bare pixel {camera.white:.3g} N). "
+        )
     return note
 
 

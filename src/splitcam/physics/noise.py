@@ -394,8 +394,9 @@ class Exposure(NoiseModel):
     light shows as lost signal. Noise, in order: shot noise ``Poisson(e)`` (``shot``) and
     ``Poisson(dark)`` dark electrons (whose mean a dark frame removes at the end: ``dark`` adds
     noise, not signal), saturation of the collected electrons at ``full_well`` (the well
-    fills before readout, so read noise is added after it and is never clipped at zero: a
-    sensor's black level keeps it), read noise ``N(0, read_noise^2)`` electrons,
+    fills before readout, so the read noise added after it is not clipped by the well; an ADC,
+    where given, still clips at 0 DN: no black level is modelled), read noise
+    ``N(0, read_noise^2)`` electrons,
     an ADC ``DN = round(e / gain)`` clipped to ``[0, 2^bits - 1]`` (``gain`` not None); the raw
     image handed on is ``DN * gain * 3 / N`` (or ``e * 3 / N`` without ADC), the same scale for
     every pattern. With ``shot=False``, no full well, no ADC and ``read_noise = N sigma / (3 *
