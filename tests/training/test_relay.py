@@ -126,3 +126,31 @@ def test_bad_input_gets_one_line_and_changes_nothing(relayed, photos, tmp_path, 
     assert "not gated" in skipped and "from pattern D" in skipped and skipped.endswith("| no |")
     assert any(line.startswith("| A-opt | 12 |") for line in out.splitlines())
     assert "would ship: " in out and "E" not in out.split("would ship: ")[1]
+
+
+@pytest.mark.slow
+def test_colour_relay_appends_the_colour_stage_and_its_cooldown(photos, tmp_path) -> None:
+    relay = _relay()
+    out = tmp_path / "colour"
+    argv = ["--minutes", "0.5", "--out", str(out), "--data", str(photos), "--queue", "D"]
+    argv += ["--batch", "2", "--device", "cpu", "--precision", "fp32", "--colour"]
+    assert relay.main(argv) == 0
+    candidate = json.loads((out / "candidates" / "D.json").read_text())
+    from splitcam.io.weights import MODELS_DIR
+
+    shipped = json.loads((MODELS_DIR / "D.json").read_text())
+    before = len(shipped["provenance"]["segments"])
+    stage, cooldown = candidate["provenance"]["segments"][before:]
+    # The stage shows the colour the photos lack, at the recipe's rate; the cool-down shows the
+    # photos alone at half of it, continued from the stage's run.
+    assert stage["settings"]["data"]["colour_swap"] == 0.25
+    assert stage["settings"]["data"]["colour_chroma"] == 0.25
+    assert cooldown["settings"]["data"]["colour_swap"] == 0
+    assert cooldown["settings"]["data"]["colour_chroma"] == 0
+    assert cooldown["recipe"]["lr"] == pytest.approx(stage["recipe"]["lr"] / 2)
+    assert cooldown["init_from"].endswith("D-colour")
+    assert stage["steps"] > 0 and cooldown["steps"] > 0
+    # Its table row sums both runs.
+    row = next(r for r in (out / "relay.md").read_text().splitlines() if r.startswith("| D |"))
+    assert int(row.split("|")[2]) == stage["steps"] + cooldown["steps"]
+    assert json.loads((out / "relay.json").read_text())["colour"] is True

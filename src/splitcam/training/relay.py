@@ -29,6 +29,12 @@ the model's own validation levels; a candidate ships when the cleanest level ris
 noisiest falls by no more than 0.05 dB. ``DIR/gate.md`` holds the table; ``--dry-run`` prints
 what would ship and writes nothing.
 
+**The colour stage** (``--colour``, issue 49's lever, ``docs/results/colour``): each network's slot
+becomes the stage ``bayer`` shipped with, scaled to the GPU: two thirds of it with a quarter of
+the patches taking another patch's chroma and a quarter chroma-moved (``COLOUR_STAGE``), then a
+third on the photos alone at half the rate, continued from the first (``runs/NAME-colour``, then
+``runs/NAME``); the candidate is the second, its provenance holding both segments.
+
 ``--device cpu --minutes 0.5`` runs the same path end to end (the test suite does so on tiny
 settings). How to run it on a lent GPU: ``experiments/gpu/README.md``.
 """
@@ -47,6 +53,12 @@ SHARES = {"universal": 3, "universal-photon": 2}
 FIRST_OVERHEAD_S = 30.0
 MIN_SLOT_MIN = 0.2
 MARKER = "relay.json"
+#: The colour stage of ``--colour``: the share of the patches given another patch's chroma and
+#: the share chroma-moved (the stage the shipped ``bayer`` passed its gate with)
+COLOUR_STAGE = {"data.colour_swap": 0.25, "data.colour_chroma": 0.25}
+#: Of a ``--colour`` slot: the share the cool-down on the photos alone takes, and its rate
+#: relative to the recipe's
+COOLDOWN_SHARE, COOLDOWN_LR = 1 / 3, 0.5
 
 
 class RelayError(ValueError):
@@ -75,6 +87,30 @@ def check_queue(queue: list[str]) -> None:
         )
     if len(set(queue)) != len(queue):
         raise RelayError("a model is named twice in the queue")
+
+
+def relay_configs(name: str, args: argparse.Namespace, out: Path, minutes: float) -> list:
+    """The runs of one queued network, in order, each continuing the one before: its recipe
+    alone, or (``--colour``) the colour stage and the cool-down on the photos."""
+    config = relay_config(name, args, out, minutes)
+    if not args.colour:
+        return [config]
+    colour_dir = out / "runs" / f"{name}-colour"
+    stage = config.override(
+        {
+            **COLOUR_STAGE,
+            "run.out": str(colour_dir),
+            "run.time_limit": minutes * (1 - COOLDOWN_SHARE),
+        }
+    )
+    cooldown = config.override(
+        {
+            "run.init_from": str(colour_dir),
+            "optim.lr": config.optim.lr * COOLDOWN_LR,
+            "run.time_limit": minutes * COOLDOWN_SHARE,
+        }
+    )
+    return [stage, cooldown]
 
 
 def relay_config(name: str, args: argparse.Namespace, out: Path, minutes: float):
@@ -127,6 +163,7 @@ def start_folder(out: Path, args: argparse.Namespace) -> None:
         "batch": args.batch,
         "device": args.device,
         "data": str(args.data),
+        "colour": args.colour,
     }
     marker.write_text(json.dumps(record, indent=1) + "\n")
 
@@ -154,20 +191,25 @@ def run_relay(args: argparse.Namespace) -> int:
             print(f"{name}: skipped, {minutes:.2f} min of training left in its slot")
             rows.append({"model": name, "skipped": True})
             continue
-        config = relay_config(name, args, out, minutes)
-        print(f"{name}: {minutes:.2f} min at batch {args.batch}, peak lr {config.optim.lr:.2g}")
-        began = time.monotonic()
-        result = train(config, progress=args.progress)
-        row = summarise(name, config, result)
+        configs = relay_configs(name, args, out, minutes)
+        print(f"{name}: {minutes:.2f} min at batch {args.batch}, peak lr {configs[0].optim.lr:.2g}")
+        began, parts = time.monotonic(), []
+        for config in configs:
+            result = train(config, progress=args.progress)
+            parts.append(summarise(name, config, result))
+            if result.failure is not None:
+                break
+        row = combine(parts)
         overhead = max(0.0, time.monotonic() - began - row["train_s"])
-        if result.failure is None:
+        if row["failure"] is None:
             shipped = load_model(name).meta.get("description", "").rstrip(".")
+            what = "a colour stage and a cool-down" if args.colour else "the relay"
             export_model(
                 result.run_dir,
                 out / "candidates" / name,
                 name=name,
                 description=f"{shipped}; then {row['train_s'] / 60:.1f} GPU minutes "
-                f"({row['steps']} steps of batch {row['batch']}, {row['device']}) by the GPU relay",
+                f"({row['steps']} steps of batch {row['batch']}, {row['device']}) of {what}",
             )
         rows.append(row)
         write_table(out / "relay.md", rows, args)
@@ -199,6 +241,18 @@ def summarise(name: str, config, result) -> dict:
     }
 
 
+def combine(parts: list[dict]) -> dict:
+    """One row for a network's runs in order: steps, patches and seconds summed, validation
+    from the first run's start to the last run's end, the first failure."""
+    row = dict(parts[-1])
+    for key in ("steps", "patches", "train_s"):
+        row[key] = sum(p[key] for p in parts)
+    row["patches_per_s"] = row["patches"] / max(row["train_s"], 1e-9)
+    row["start"] = parts[0]["start"]
+    row["failure"] = next((p["failure"] for p in parts if p["failure"]), None)
+    return row
+
+
 def write_table(path: Path, rows: list[dict], args: argparse.Namespace) -> None:
     from ..evaluation.tables import markdown_table
 
@@ -227,6 +281,8 @@ def write_table(path: Path, rows: list[dict], args: argparse.Namespace) -> None:
             ]
         )
     title = f"# Relay: {args.minutes:g} minutes, batch {args.batch}, on {args.device}"
+    if args.colour:
+        title += " (each a colour stage, then a cool-down on the photos)"
     lines = [title, "", *markdown_table([*header, "device"], cells)]
     path.write_text("\n".join(lines) + "\n")
 
@@ -278,6 +334,12 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
         default="none",
         help="how each recipe's peak rate carries to --batch (docs/results/batch: keeping it "
         "measured best at batch 64, the linear rule diverged)",
+    )
+    parser.add_argument(
+        "--colour",
+        action="store_true",
+        help="each slot a colour stage (a quarter of the patches chroma-swapped, a quarter "
+        "chroma-moved), then a third on the photos alone at half the rate",
     )
     parser.add_argument("--device", default="cuda", help="cuda, cuda:N or cpu")
     parser.add_argument("--precision", default="auto", help="auto, fp32 or bf16")
