@@ -61,3 +61,30 @@ def test_an_unwritable_cache_still_gives_a_choice(fresh, monkeypatch):
     blocked.write_text("x")
     monkeypatch.setenv(precision.CACHE_ENV, str(blocked / "below-a-file"))
     assert precision.choose_precision("cpu").fast and calls == ["cpu"]
+
+
+def test_a_choice_of_an_earlier_method_is_measured_again(fresh):
+    tmp, calls = fresh
+    key = precision.device_key(torch.device("cpu"))
+    # Remembered by the first method (no "method" kept): float32 timed with TensorFloat-32 on.
+    old = {"fast": False, "reason": "float32 (old)", "fp32_s": 1.0, "bf16_s": 1.1}
+    (tmp / "precision.json").write_text(json.dumps({key: old}))
+    assert precision.choose_precision("cpu").fast and calls == ["cpu"]
+    assert json.loads((tmp / "precision.json").read_text())[key]["method"] == precision.METHOD
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA device")
+def test_float32_is_timed_without_tensorfloat32_and_the_switches_come_back(monkeypatch):
+    # Each timed step reads the clock: record TensorFloat-32's switch as it is then.
+    seen, clock = [], precision.time.perf_counter
+
+    def spy() -> float:
+        seen.append(torch.backends.cudnn.allow_tf32)
+        return clock()
+
+    monkeypatch.setattr(precision.time, "perf_counter", spy)
+    monkeypatch.setattr(torch.backends.cudnn, "allow_tf32", True)
+    choice = precision.measure("cuda", steps=1, batch=2)
+    # The float32 arm ran without it, the bfloat16 arm as it was, and it is as it was after.
+    assert seen[:2] == [False, False] and seen[2:] == [True, True]
+    assert torch.backends.cudnn.allow_tf32 and choice.fp32_s is not None

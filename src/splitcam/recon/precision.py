@@ -9,6 +9,11 @@ ways (:func:`measure`) and takes the faster, once per machine: the choice is kep
 ``$SPLITCAM_CACHE/precision.json`` (default ``~/.cache/splitcam``) under the device's model and
 torch's version, with the timings that made it. A CPU without native bfloat16 (AVX2 only:
 emulated, several times slower) and Apple's MPS take float32 without measuring.
+
+On a GPU the float32 arm is timed as a float32 run then trains: with TensorFloat-32 off
+(:func:`~splitcam.recon.base.strict_float32`), at a batch of 128 (at batch 8 a GPU step is
+bound by kernel launches, and both arms took 7 ms on an H200, while a run at batch 256 in full
+float32 then took 56 ms a step). A choice made by an earlier method (``METHOD``) is measured again.
 """
 
 from __future__ import annotations
@@ -41,6 +46,11 @@ CACHE_ENV = "SPLITCAM_CACHE"
 """Environment variable naming splitcam's cache folder (default ``~/.cache/splitcam``)."""
 
 _MEMO: dict[str, PrecisionChoice] = {}
+
+METHOD = 2
+"""The measurement's version, kept with each remembered choice: 2 times float32 with
+TensorFloat-32 off and a GPU at batch 128."""
+GPU_BATCH = 128
 
 
 @dataclass(frozen=True)
@@ -91,9 +101,13 @@ def device_key(device: torch.device) -> str:
     return f"{device.type}: {name}; torch {torch.__version__}"
 
 
-def measure(device: torch.device | str, *, steps: int = 3, batch: int = 8) -> PrecisionChoice:
+def measure(
+    device: torch.device | str, *, steps: int = 3, batch: int | None = None
+) -> PrecisionChoice:
     """Time training steps (forward and backward) of a physics network of 4 blocks on ``batch``
-    64x64 raw images, float32 against bfloat16 autocast + channels-last, and choose the faster.
+    64x64 raw images (default 8 on a CPU, ``GPU_BATCH`` on a GPU), float32 (as training runs
+    it: TensorFloat-32 off on CUDA) against bfloat16 autocast + channels-last, and choose the
+    faster.
 
     bfloat16 counts only if it really runs: a convolution under the autocast must give bfloat16.
     """
@@ -102,6 +116,8 @@ def measure(device: torch.device | str, *, steps: int = 3, batch: int = 8) -> Pr
     from .networks import build_network
 
     device = torch.device(device)
+    if batch is None:
+        batch = GPU_BATCH if device.type == "cuda" else 8
     gen = torch.Generator().manual_seed(0)
     raw = torch.rand(batch, 1, 64, 64, generator=gen).to(device)
     kernels = pattern_pixel_kernels(builtin("D")).to(device)
@@ -125,12 +141,13 @@ def measure(device: torch.device | str, *, steps: int = 3, batch: int = 8) -> Pr
             if device.type == "cuda":
                 torch.cuda.synchronize(device)
 
-        step()  # warm-up: kernels chosen, memory allocated
-        taken = []
-        for _ in range(steps):
-            t0 = time.perf_counter()
-            step()
-            taken.append(time.perf_counter() - t0)
+        with _tensorfloat32(device, allowed=fast):
+            step()  # warm-up: kernels chosen, memory allocated
+            taken = []
+            for _ in range(steps):
+                t0 = time.perf_counter()
+                step()
+                taken.append(time.perf_counter() - t0)
         times[fast] = statistics.median(taken)
     if not runs:
         return PrecisionChoice(
@@ -144,6 +161,22 @@ def measure(device: torch.device | str, *, steps: int = 3, batch: int = 8) -> Pr
         f"{fp32_s * 1e3:.0f} ms in float32 (ratio {fp32_s / bf16_s:.2f})"
     )
     return PrecisionChoice(fast, reason, fp32_s, bf16_s)
+
+
+@contextlib.contextmanager
+def _tensorfloat32(device: torch.device, *, allowed: bool):
+    """Inside: TensorFloat-32 on CUDA as ``allowed`` says (float32 is timed without it, as
+    ``strict_float32`` trains it); the backends' switches restored after."""
+    if device.type != "cuda":
+        yield
+        return
+    saved = torch.backends.cudnn.allow_tf32, torch.backends.cuda.matmul.allow_tf32
+    if not allowed:
+        torch.backends.cudnn.allow_tf32 = torch.backends.cuda.matmul.allow_tf32 = False
+    try:
+        yield
+    finally:
+        torch.backends.cudnn.allow_tf32, torch.backends.cuda.matmul.allow_tf32 = saved
 
 
 def _read_cache(path: Path) -> dict:
@@ -161,7 +194,11 @@ def _remember(path: Path, key: str, choice: PrecisionChoice) -> None:
 
         path.parent.mkdir(parents=True, exist_ok=True)
         data = _read_cache(path)
-        data[key] = {**asdict(choice), "measured": time.strftime("%Y-%m-%dT%H:%M:%S")}
+        data[key] = {
+            **asdict(choice),
+            "method": METHOD,
+            "measured": time.strftime("%Y-%m-%dT%H:%M:%S"),
+        }
         write_text(path, json.dumps(data, indent=1) + "\n")
 
 
@@ -180,7 +217,11 @@ def choose_precision(device: torch.device | str) -> PrecisionChoice:
         return _MEMO[key]
     path = cache_path()
     saved = _read_cache(path).get(key)
-    if isinstance(saved, dict) and isinstance(saved.get("fast"), bool):
+    if (
+        isinstance(saved, dict)
+        and isinstance(saved.get("fast"), bool)
+        and saved.get("method") == METHOD
+    ):
         fields = ("fast", "reason", "fp32_s", "bf16_s")
         choice = PrecisionChoice(**{k: saved.get(k) for k in fields})
     else:
