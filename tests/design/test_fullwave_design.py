@@ -346,3 +346,45 @@ def test_bad_design_settings_are_one_line_and_write_nothing(tmp_path, capsys, ex
     out = tmp_path / "o"
     assert main(["optics", "rcwa-design", *extra, "--out", str(out), "--quiet"]) == 1
     assert message in capsys.readouterr().err and not out.exists()
+
+
+def test_a_gradient_holds_one_solve_at_a_time_and_equals_the_solves_held_together(monkeypatch):
+    """Behind a cone (several directions) the design's gradient is taken solve by solve: the
+    forward pass keeps no solve's intermediates (each solve is run again in the backward), and
+    the gradient is the one of the same solves held together, built by hand."""
+    pytest.importorskip("fmmax")
+    from splitcam.physics import fullwave as physics
+    from splitcam.physics.fullwave import cone_directions
+
+    rng = np.random.default_rng(7)
+    geometry = RouterDesign(rng.random((6, 6)), thickness=0.5, depth=1.0)
+    directions = cone_directions(2.0)[:3]
+    design = FullwaveDesign(
+        geometry, wavelengths=[470.0, 610.0], photons=50.0, samples=8, radius=1.0,
+        directions=directions, solver="fmmax-jones", terms=21,
+    )  # fmt: skip
+    theta = design.start().clone().requires_grad_(True)
+    import jax
+
+    calls, vjp = [], jax.vjp
+    monkeypatch.setattr(jax, "vjp", lambda *a, **k: (calls.append(1), vjp(*a, **k))[1])
+    loss, _ = design.objective(theta, beta=2.0)
+    assert calls == []  # nothing kept for the backward
+    loss.backward()
+    assert len(calls) == 2 * len(directions)  # each solve once more, with its pullback
+    # The same loss with every solve's pullback held at once.
+    theta_ref = design.start().clone().requires_grad_(True)
+    layer = design.densities(theta_ref, 2.0)
+    w = torch.tensor([d[2] for d in directions], dtype=torch.float64)
+    w = w / w.sum()
+    spectra = []
+    for lam in design.wavelengths:
+        t = sum(
+            wk * physics.fmmax_quadrants(geometry, layer, lam, th, ph, 21, 8)[0].mean(0)
+            for (th, ph, _), wk in zip(directions, w, strict=True)
+        )
+        spectra.append(t)
+    ref = 10 * torch.log10(design.image_error(torch.stack(spectra, dim=-1)))
+    ref.backward()
+    assert float(loss.detach()) == pytest.approx(float(ref.detach()), rel=1e-12)
+    assert torch.allclose(theta.grad, theta_ref.grad, rtol=1e-9, atol=1e-14)

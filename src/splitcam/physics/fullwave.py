@@ -730,7 +730,7 @@ def fmmax_quadrants(
             (grad,) = ctx.pullback(cotangent)
             return torch_of(grad)
 
-    if not density.requires_grad:
+    if not (density.requires_grad and torch.is_grad_enabled()):
         quads, reflected = run(jnp.asarray(density.detach().numpy()))
         return torch_of(quads), torch_of(reflected)
     return _Pullback.apply(density)
