@@ -4,6 +4,7 @@ reproducible numbers, result files, resuming, photon levels and the linear light
 from __future__ import annotations
 
 import csv
+import io
 import json
 
 import numpy as np
@@ -156,6 +157,17 @@ def test_interrupted_evaluation_keeps_its_rows_and_resumes(tmp_path):
     with pytest.raises(ValueError, match="under another name"):
         evaluate([c], [("set", images)], [0], out, progress=False)
     assert c.seen == [] and (out / "per_image.csv").read_text() == before
+    # Unless its changed results are to be scored again (reproduce --update): only its rows are
+    # recomputed, with the new pattern, and the other method's rows stay as they were.
+    e = Spy("a", pattern="A")
+    rows = evaluate([e], [("set", images)], [0, 10], out, progress=False, rescore_changed=True)
+    assert len(e.seen) == 6 and {r.pattern for r in rows} == {"A"}
+    with open(out / "per_image.csv") as fh:
+        now = list(csv.DictReader(fh))
+    was = list(csv.DictReader(io.StringIO(before)))
+    b_rows = [r for r in now if r["method"] == "b"]
+    assert len(b_rows) == 6 and b_rows == [r for r in was if r["method"] == "b"]
+    assert {r["pattern"] for r in now if r["method"] == "a"} == {"A"}
     # --restart recomputes everything.
     d = Spy("a", pattern="A")
     evaluate([d], [("set", images)], [0], out, progress=False, resume=False)

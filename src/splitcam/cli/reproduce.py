@@ -24,6 +24,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", default="reproduce")
     p.add_argument("--max-images", type=int, help="at most this many images per dataset")
     p.add_argument("--no-baselines", action="store_true")
+    p.add_argument(
+        "--update",
+        action="store_true",
+        help="score again the models whose shipped weights changed since the folder's results "
+        "(a model shipped since), keeping every other row",
+    )
     p.add_argument("--tile", type=int, default=512)
     # float32 by default: the committed tables are float32, and a resumed run adds rows to them.
     add_precision(p, "fp32")
@@ -66,6 +72,7 @@ def run(args: argparse.Namespace) -> int:
         zoom_images=zoom_spec,
         zoom_only=True,
         progress=not args.quiet,
+        rescore_changed=args.update,
     )
     summary = summarise(result)
     from ..recon.base import fast_precision

@@ -250,6 +250,7 @@ def evaluate(
     zoom_only: bool = False,
     zoom_sigmas: Sequence[float] | None = None,
     domain: str = SRGB,
+    rescore_changed: bool = False,
 ) -> list[EvalRow]:
     """Score every method on every image at every noise level, writing results to ``out`` as it
     goes. A noise level is the paper's Gaussian sigma (8-bit units) or a photon-model
@@ -277,13 +278,16 @@ def evaluate(
     domain are kept and not recomputed: an interrupted evaluation continues where it stopped,
     and a second evaluation into the same folder replaces only the rows it recomputes (a row is
     keyed by method, dataset, which names its crop, ``NAME-256px``, image, level and domain).
+    A method of a name whose results there were made with other weights, pattern or
+    precision is refused, unless ``rescore_changed``: then its old rows are dropped and it is
+    scored again (a model shipped since), the other methods' rows kept.
 
     Raises:
         ValueError: No method, duplicate method names, a method of another light domain, a bad
             sigma, crop or domain, exposures with different sensor settings, a zoom that
             names an unknown image or a region outside it, or a method whose weights or pattern
-            differ from those of the folder's results under its name; all checked before any
-            work.
+            differ from those of the folder's results under its name (without
+            ``rescore_changed``); all checked before any work.
     """
     domain, sigmas, sensor_settings = _check_settings(methods, sigmas, crop, domain)
     zoom = _zoom_plan(zoom_images, datasets)
@@ -297,7 +301,13 @@ def evaluate(
         others: list[EvalRow] = []
         if out_dir is not None:
             done, others = _start_folder(
-                out_dir, methods, fingerprints, sensor_settings, crop, resume=resume
+                out_dir,
+                methods,
+                fingerprints,
+                sensor_settings,
+                crop,
+                resume=resume,
+                rescore_changed=rescore_changed,
             )
         run = _Run(
             methods=methods,
@@ -415,13 +425,16 @@ def _start_folder(
     crop: int,
     *,
     resume: bool,
+    rescore_changed: bool = False,
 ) -> tuple[dict[tuple, EvalRow], list[EvalRow]]:
     """Prepare ``out_dir`` for an evaluation: the results kept from an earlier one (with
     ``resume``, :func:`_previous_rows`) rewritten as the CSV and summary, ``evaluation.json``
     and the methods' patterns written. Returns the rows reused and those of other methods."""
     out_dir.mkdir(parents=True, exist_ok=True)
     done, others, other_prints = (
-        _previous_rows(out_dir, fingerprints, sensor_settings, crop) if resume else ({}, [], {})
+        _previous_rows(out_dir, fingerprints, sensor_settings, crop, rescore_changed)
+        if resume
+        else ({}, [], {})
     )
     # Rewrite the CSV with the rows kept (this evaluation's so far, and those of other
     # methods, which stay), then append: the file holds every result that still applies.
@@ -559,11 +572,13 @@ def _previous_rows(
     fingerprints: dict[str, str],
     sensor_settings: dict | None = None,
     crop: int = 0,
+    rescore_changed: bool = False,
 ) -> tuple[dict[tuple, EvalRow], list[EvalRow], dict[str, str]]:
     """What an earlier evaluation left in ``out_dir``: its rows that this one reuses (same
     method fingerprint, and for photon-model rows the same sensor settings), the rows of
     methods this one does not evaluate (kept, with their fingerprints), and those fingerprints.
-    A method evaluated again with other weights, pattern or precision is refused. Methods are
+    A method evaluated again with other weights, pattern or precision is refused (with
+    ``rescore_changed``, its rows are dropped: neither reused nor kept). Methods are
     told apart by their result labels (``fingerprints``' keys, :func:`result_label`): a method's
     results of the other light domain are another method's here, and stay.
 
@@ -593,7 +608,7 @@ def _previous_rows(
         for label, now in fingerprints.items()
         if before.get(label) not in (None, now) and any(row.label == label for row in rows)
     )
-    if changed:
+    if changed and not rescore_changed:
         raise ValueError(
             f"{out_dir} holds results of {', '.join(changed)} made with other weights, another "
             f"pattern or another precision: evaluate this one under another name (a model file "
