@@ -29,7 +29,7 @@ the model's own validation levels; a candidate ships when the cleanest level ris
 noisiest falls by no more than 0.05 dB. ``DIR/gate.md`` holds the table; ``--dry-run`` prints
 what would ship and writes nothing.
 
-**The colour stage** (``--colour``, issue 49's lever, ``docs/results/colour``): each network's slot
+**The colour stage** (``--colour``, ``docs/results/colour``): each network's slot
 becomes the stage ``bayer`` shipped with, scaled to the GPU: two thirds of it with a quarter of
 the patches taking another patch's chroma and a quarter chroma-moved (``COLOUR_STAGE``), then a
 third on the photos alone at half the rate, continued from the first (``runs/NAME-colour``, then
