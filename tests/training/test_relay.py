@@ -154,3 +154,22 @@ def test_colour_relay_appends_the_colour_stage_and_its_cooldown(photos, tmp_path
     row = next(r for r in (out / "relay.md").read_text().splitlines() if r.startswith("| D |"))
     assert int(row.split("|")[2]) == stage["steps"] + cooldown["steps"]
     assert json.loads((out / "relay.json").read_text())["colour"] is True
+    # Shipped, it stays its own recipe: each run's stage file is written from what it recorded.
+    from splitcam.training import TrainConfig
+    from splitcam.training.recipe import shipped_recipe
+
+    root = tmp_path / "repo"
+    written = relay.write_stage_files(out / "candidates" / "D.json", root)
+    started = json.loads((out / "relay.json").read_text())["started"][:10]
+    # (an empty root: the stage of the relay D shipped from is written there too)
+    written = [p for p in written if started in p.as_posix()]
+    assert [p.relative_to(root).as_posix() for p in written] == [
+        f"experiments/gpu/relay/{started}/D-colour.toml",
+        f"experiments/gpu/relay/{started}/D.toml",
+    ]
+    files = [stage.file for stage in shipped_recipe(candidate, "D").stages[-2:]]
+    assert files == [p.relative_to(root).as_posix() for p in written]
+    colour, cool = (TrainConfig.from_file(p) for p in written)
+    assert colour.data.colour_swap == 0.25 and cool.data.colour_swap == 0
+    assert cool.optim.lr == pytest.approx(colour.optim.lr / 2)
+    assert relay.write_stage_files(out / "candidates" / "D.json", root) == []  # there already

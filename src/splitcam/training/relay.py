@@ -35,6 +35,12 @@ the patches taking another patch's chroma and a quarter chroma-moved (``COLOUR_S
 third on the photos alone at half the rate, continued from the first (``runs/NAME-colour``, then
 ``runs/NAME``); the candidate is the second, its provenance holding both segments.
 
+**Recipes**: every run records its stage file, ``experiments/gpu/relay/DATE/RUN.toml`` (the
+relay's start date, the run's folder name), as ``run.config_file``; shipping a candidate writes
+those files, under the current folder, from the settings its provenance records
+(:func:`write_stage_files`), so a shipped model stays its own recipe
+(:mod:`splitcam.training.recipe`).
+
 ``--device cpu --minutes 0.5`` runs the same path end to end (the test suite does so on tiny
 settings). How to run it on a lent GPU: ``experiments/gpu/README.md``.
 """
@@ -53,6 +59,8 @@ SHARES = {"universal": 3, "universal-photon": 2}
 FIRST_OVERHEAD_S = 30.0
 MIN_SLOT_MIN = 0.2
 MARKER = "relay.json"
+#: Where the stage files of the relay's runs are named (repository-relative)
+STAGE_DIR = "experiments/gpu/relay"
 #: The colour stage of ``--colour``: the share of the patches given another patch's chroma and
 #: the share chroma-moved (the stage the shipped ``bayer`` passed its gate with)
 COLOUR_STAGE = {"data.colour_swap": 0.25, "data.colour_chroma": 0.25}
@@ -100,6 +108,7 @@ def relay_configs(name: str, args: argparse.Namespace, out: Path, minutes: float
         {
             **COLOUR_STAGE,
             "run.out": str(colour_dir),
+            "run.config_file": stage_file(out, colour_dir.name),
             "run.time_limit": minutes * (1 - COOLDOWN_SHARE),
         }
     )
@@ -111,6 +120,49 @@ def relay_configs(name: str, args: argparse.Namespace, out: Path, minutes: float
         }
     )
     return [stage, cooldown]
+
+
+def stage_file(out: Path, run: str) -> str:
+    """The stage file a run of the relay in ``out`` records: under :data:`STAGE_DIR`, by the
+    relay's start date."""
+    started = json.loads((out / MARKER).read_text())["started"][:10]
+    return f"{STAGE_DIR}/{started}/{run}.toml"
+
+
+def write_stage_files(candidate: Path, root: Path) -> list[Path]:
+    """Write, under ``root``, the stage file of every segment of the model ``candidate`` (its
+    JSON) that names one under :data:`STAGE_DIR` not yet there: the settings the segment
+    recorded, as TOML (unset values left to their defaults), checked to read back as those
+    settings. Returns the files written."""
+    import tomli_w
+
+    from .config import TrainConfig
+    from .recipe import replayable
+
+    meta = json.loads(candidate.read_text())
+    written = []
+    for segment in meta["provenance"]["segments"]:
+        file = segment.get("config_file") or ""
+        path = root / file
+        if not file.startswith(STAGE_DIR + "/") or path.exists():
+            continue
+        settings = segment["settings"]
+        body = {
+            sec: {k: v for k, v in vals.items() if v is not None} for sec, vals in settings.items()
+        }
+        head = (
+            f"# A segment of {meta['name']} trained by the relay (splitcam.training.relay):\n"
+            f"# {segment['steps']} steps of batch {segment['batch_size']} in "
+            f"{segment['train_seconds'] / 60:.2f} minutes on {segment['device']}.\n"
+            f"# The settings it recorded; splitcam train --recipe {meta['name']} replays it.\n"
+        )
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(head + tomli_w.dumps(body))
+        if replayable(TrainConfig.from_file(path).to_dict()) != settings:
+            path.unlink()
+            raise RelayError(f"{file} does not read back as the settings {meta['name']} recorded")
+        written.append(path)
+    return written
 
 
 def relay_config(name: str, args: argparse.Namespace, out: Path, minutes: float):
@@ -135,6 +187,7 @@ def relay_config(name: str, args: argparse.Namespace, out: Path, minutes: float)
             "run.init_from": name,
             "run.continue_schedule": False,
             "run.out": str(out / "runs" / name),
+            "run.config_file": stage_file(out, name),
             "run.device": args.device,
             "run.time_limit": minutes,
             "run.checkpoint_minutes": 1.0,
@@ -309,8 +362,11 @@ def run_gate(args: argparse.Namespace) -> int:
         print("would ship: " + (", ".join(names) or "nothing"))
         return 0
     (folder / "gate.md").write_text(table)
-    for name in ship(verdicts, Path(args.ship_to) if args.ship_to else MODELS_DIR):
+    ship_to = Path(args.ship_to) if args.ship_to else MODELS_DIR
+    for name in ship(verdicts, ship_to):
         print(f"shipped {name}")
+        for path in write_stage_files(ship_to / f"{name}.json", Path(args.stages_root)):
+            print(f"  its stage {path}")
     print(table)
     return 0
 
@@ -350,6 +406,12 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--threads", type=int, default=2, help="with --gate: CPU threads")
     parser.add_argument(
         "--ship-to", help="with --gate: ship into this folder (default: the package's)"
+    )
+    parser.add_argument(
+        "--stages-root",
+        default=".",
+        help="with --gate: the repository the shipped models' stage files are written into "
+        "(default: the current folder)",
     )
     args = parser.parse_args(argv)
     if args.gate is None and (args.minutes is None or args.out is None):
