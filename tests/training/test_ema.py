@@ -108,7 +108,9 @@ def test_validation_scores_the_average(image_folder, tmp_path):
     config = tiny_config(
         image_folder,
         tmp_path / "r",
-        **{**BASE, "optim.ema": 0.5, "optim.steps": 6, "run.val_every": 6},
+        # float32: a CPU with native bfloat16 would validate the run in it (precision auto)
+        # and the copies below in float32
+        **{**BASE, "optim.ema": 0.5, "optim.steps": 6, "run.val_every": 6, "run.precision": "fp32"},
     )
     train(config, progress=False)
     rows = [json.loads(x) for x in (tmp_path / "r/metrics.jsonl").read_text().splitlines()]
