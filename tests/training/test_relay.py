@@ -87,6 +87,10 @@ def test_gate_ships_exactly_what_its_table_says(relayed, photos, tmp_path) -> No
         ships = after[0] > before[0] and after[-1] >= before[-1] - 0.05
         assert cells[-1] == ("yes" if ships else "no")
         assert (ship_to / f"{name}.json").exists() == ships
+        # A shipped model's relay stage lands beside it, never in the current folder.
+        started = json.loads((relayed / "relay.json").read_text())["started"][:10]
+        stage = Path(relay.STAGE_DIR, started, f"{name}.toml")
+        assert (ship_to / stage).exists() == ships and not stage.exists()
         # The run's validation photo (1 of 14 held out: the last) and the last 12, whole.
         assert cells[1] == "12"
 

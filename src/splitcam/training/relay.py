@@ -37,7 +37,8 @@ third on the photos alone at half the rate, continued from the first (``runs/NAM
 
 **Recipes**: every run records its stage file, ``experiments/gpu/relay/DATE/RUN.toml`` (the
 relay's start date, the run's folder name), as ``run.config_file``; shipping a candidate writes
-those files, under the current folder, from the settings its provenance records
+those files, from the settings its provenance records, into the source checkout the package is
+shipped into (into the ``--ship-to`` folder when one is given; :func:`stages_root`)
 (:func:`write_stage_files`), so a shipped model stays its own recipe
 (:mod:`splitcam.training.recipe`).
 
@@ -163,6 +164,18 @@ def write_stage_files(candidate: Path, root: Path) -> list[Path]:
             raise RelayError(f"{file} does not read back as the settings {meta['name']} recorded")
         written.append(path)
     return written
+
+
+def stages_root(ship_to: Path) -> Path | None:
+    """Where shipping into ``ship_to`` writes the stage files: the source checkout whose
+    package folder it is (None for an installed package), or ``ship_to`` itself for a folder
+    of one's own; never the current folder."""
+    from ..io.weights import MODELS_DIR
+
+    if ship_to.resolve() != MODELS_DIR.resolve():
+        return ship_to
+    root = MODELS_DIR.parents[3]  # src/splitcam/weights/models
+    return root if (root / STAGE_DIR).is_dir() else None
 
 
 def relay_config(name: str, args: argparse.Namespace, out: Path, minutes: float):
@@ -363,9 +376,13 @@ def run_gate(args: argparse.Namespace) -> int:
         return 0
     (folder / "gate.md").write_text(table)
     ship_to = Path(args.ship_to) if args.ship_to else MODELS_DIR
+    root = stages_root(ship_to)
     for name in ship(verdicts, ship_to):
         print(f"shipped {name}")
-        for path in write_stage_files(ship_to / f"{name}.json", Path(args.stages_root)):
+        if root is None:
+            print("  its stage files not written: the package is not a source checkout")
+            continue
+        for path in write_stage_files(ship_to / f"{name}.json", root):
             print(f"  its stage {path}")
     print(table)
     return 0
@@ -406,12 +423,6 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--threads", type=int, default=2, help="with --gate: CPU threads")
     parser.add_argument(
         "--ship-to", help="with --gate: ship into this folder (default: the package's)"
-    )
-    parser.add_argument(
-        "--stages-root",
-        default=".",
-        help="with --gate: the repository the shipped models' stage files are written into "
-        "(default: the current folder)",
     )
     args = parser.parse_args(argv)
     if args.gate is None and (args.minutes is None or args.out is None):
