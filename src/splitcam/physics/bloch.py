@@ -139,8 +139,8 @@ def _compiled_bloch(shape, stack, materials, setting_items) -> tuple[Callable, A
         out = []
         for f, b, result in (
             (sol["forward"], sol["zero"], sol["ambient"]),  # incident
-            (sol["zero"], sol["amplitudes"][0][1], sol["ambient"]),  # reflected
-            (sol["arriving"], sol["amplitudes"][2][1], sol["substrate"]),  # arriving
+            (sol["zero"], sol["reflected"], sol["ambient"]),  # reflected
+            (sol["arriving"], sol["zero"], sol["substrate"]),  # arriving
         ):
             e, h = fields.fields_from_wave_amplitudes(f, b, result)
             (ex, ey, _), (hx, hy, _), _ = fields.fields_on_grid(

@@ -596,8 +596,14 @@ def _periodic_solve(
     """The layer of ``density`` between ambient and substrate solved at one wavelength (``um``)
     and in-plane wavevector (JAX, traceable); ``incident(ambient)``: the forward amplitudes of
     the light arriving from the ambient. Returns the outer media's modes (``ambient``,
-    ``substrate``), the amplitudes ``forward`` and ``zero``, the interior amplitudes
-    (``amplitudes``) and the forward amplitude at the monitor (``arriving``)."""
+    ``substrate``), the amplitudes ``forward`` and ``zero``, the backward amplitude in the
+    ambient (``reflected``) and the forward amplitude at the monitor (``arriving``).
+
+    Nothing comes back from below the monitor, so the stack's one scattering matrix gives both
+    outer amplitudes (``b_0 = s21 a_0`` in the ambient, ``a_2 = s11 a_0`` entering the
+    substrate; fmmax's convention, forward amplitudes at a layer's start, backward at its end):
+    the interior matrices of every layer, which cost about twice as much, are not needed, and
+    the backward amplitude in the substrate is ``zero``."""
     _, fields, fmm, scattering = _fmmax()
     import jax.numpy as jnp
 
@@ -617,19 +623,18 @@ def _periodic_solve(
     ambient = modes(jnp.full((1, 1), eps_b))
     substrate = modes(jnp.full((1, 1), eps_s))
     forward = incident(ambient)
-    zero = jnp.zeros_like(forward)
-    inner = scattering.stack_s_matrices_interior(
+    s = scattering.stack_s_matrix(
         [ambient, modes(eps_b + (eps_p - eps_b) * fine), substrate],
         [jnp.zeros(()), jnp.asarray(stack.thickness), jnp.asarray(stack.depth)],
     )
-    amplitudes = fields.stack_amplitudes_interior(inner, forward, zero)
-    arriving = fields.propagate_amplitude(amplitudes[2][0], jnp.asarray(stack.depth), substrate)
+    entering = s.s11 @ forward  # at the substrate's top
+    arriving = fields.propagate_amplitude(entering, jnp.asarray(stack.depth), substrate)
     return {
         "ambient": ambient,
         "substrate": substrate,
         "forward": forward,
-        "zero": zero,
-        "amplitudes": amplitudes,
+        "zero": jnp.zeros_like(forward),
+        "reflected": s.s21 @ forward,
         "arriving": arriving,
     }
 
@@ -671,10 +676,10 @@ def _compiled_core(
             return 0.5 * jnp.real(ex * jnp.conj(hy) - ey * jnp.conj(hx))
 
         incident = jnp.mean(flux(forward, zero, ambient), axis=(0, 1))
-        arriving = flux(sol["arriving"], sol["amplitudes"][2][1], sol["substrate"])
+        arriving = flux(sol["arriving"], zero, sol["substrate"])
         sz = (arriving / incident).transpose(2, 1, 0)
         quads = sz.reshape(2, 2, samples, 2, samples).mean(axis=(2, 4)) / 4.0  # [p, y, x]
-        top = jnp.mean(flux(zero, sol["amplitudes"][0][1], ambient), axis=(0, 1)) / incident
+        top = jnp.mean(flux(zero, sol["reflected"], ambient), axis=(0, 1)) / incident
         return quads, -top.mean()
 
     def solve(density: Any, lam: float, theta: float, phi: float) -> tuple[Any, Any]:
