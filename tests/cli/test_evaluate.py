@@ -244,6 +244,12 @@ def test_evaluate_photons_cli(tmp_path, capsys) -> None:
     assert (pixels < 250).mean() > 0.02  # lines and labels drawn, not a blank frame
     assert main([*args, "--photons", "-3"]) == 1
     assert "photons" in capsys.readouterr().err
+    # A black level is the ADC's: refused in one line without --gain, recorded with it.
+    assert main([*args, "--photons", "20", "--black-level", "64"]) == 1
+    assert "give the gain too" in capsys.readouterr().err
+    assert main([*args, "--photons", "20", "--gain", "0.5", "--black-level", "64"]) == 0
+    sensor = json_load(tmp_path / "evaluation.json")["photon_sensor"]
+    assert sensor["black"] == 64 and sensor["gain"] == 0.5
 
 
 def test_main_job_uses_the_universal_network_for_patterns_without_one(

@@ -124,6 +124,39 @@ def test_full_well_and_adc_range_saturate() -> None:
     assert float(dark.min()) == 0.0  # the ADC clips at 0
 
 
+def test_a_black_level_keeps_read_noise_below_zero() -> None:
+    """Without a black level the ADC clips a dark pixel's read noise at 0 DN: its mean is that
+    of ``max(0, round(X))`` for X ~ N(0, 2^2) e⁻ at 1 e⁻/DN, summed here from the normal
+    distribution. A pedestal of 64 DN keeps the noise whole: mean 0, variance read^2 + 1/12.
+    The top of the range moves down by the pedestal."""
+    gen = torch.Generator().manual_seed(11)
+
+    def phi(x: float) -> float:
+        return 0.5 * (1.0 + math.erf(x / math.sqrt(2.0)))
+
+    clipped_mean = sum(k * (phi((k + 0.5) / 2.0) - phi((k - 0.5) / 2.0)) for k in range(1, 40))
+    dark = _flat(0.0, 500)
+    clipped = Exposure(300.0, read_noise=2.0, gain=1.0).apply(dark, gen) * 100.0  # e-
+    assert float(clipped.mean()) == pytest.approx(clipped_mean, abs=0.01)  # about 0.80 e-
+    kept = Exposure(300.0, read_noise=2.0, gain=1.0, black=64)
+    electrons = kept.apply(dark, gen) * 100.0
+    assert float(electrons.mean()) == pytest.approx(0.0, abs=0.01)
+    assert float(electrons.min()) < -4.0  # below zero, in whole DN
+    assert torch.allclose(electrons, electrons.round(), atol=1e-9)
+    a, b = kept.variance_coefficients()
+    assert float(electrons.var()) == pytest.approx(b * 100.0**2, rel=0.02)  # 4 + 1/12 e-^2
+    bright = Exposure(300.0, read_noise=0.0, gain=1.0, bits=8, black=64).apply(_flat(3.0, 20), gen)
+    assert float(bright.max()) * 100.0 == pytest.approx(255 - 64)  # 300 e-: 364 DN, clipped at 255
+    plain = Exposure(300.0, read_noise=2.0, gain=1.0)
+    assert plain.key() == "N300|r2|fwNone|g1.0|b12|s1" and kept.key() == plain.key() + "|k64"
+    assert "black" not in plain.sensor_settings() and kept.sensor_settings()["black"] == 64
+    for bad in ({"black": 8}, {"black": -1, "gain": 1.0}, {"black": 4095, "gain": 1.0}):
+        with pytest.raises(ValueError, match="black"):
+            Exposure(300.0, **bad)
+    with pytest.raises(ValueError, match="black"):
+        Exposure(300.0, gain=1.0, black=2.5)
+
+
 def test_a_full_well_leaves_dim_pixels_unbiased() -> None:
     """The well saturates collected electrons, not the readout: at 1 e- a pixel with a full
     well reads the same mean and spread as one without (read noise below zero kept, as a

@@ -167,6 +167,13 @@ def add_sensor_options(p: argparse.ArgumentParser) -> None:
         help="photon model: dark electrons per exposure (dark current x time; its mean is "
         "subtracted, its noise stays; default 0)",
     )
+    p.add_argument(
+        "--black-level",
+        type=int,
+        dest="black",
+        help="photon model: the ADC's black level in DN, a pedestal that keeps read noise below "
+        "0 e- (default 0: dark pixels clip at 0 DN); needs --gain",
+    )
 
 
 def sensor_settings(args: argparse.Namespace) -> dict:
@@ -178,8 +185,9 @@ def sensor_settings(args: argparse.Namespace) -> dict:
         "gain": args.gain,
         "bits": 12 if args.bits is None else args.bits,
     }
-    if getattr(args, "dark", None):
-        settings["dark"] = args.dark  # absent otherwise: the settings recorded before it
+    for name in ("dark", "black"):  # absent otherwise: the settings recorded before them
+        if getattr(args, name, None):
+            settings[name] = getattr(args, name)
     return settings
 
 
@@ -188,6 +196,7 @@ def sensor_flags_given(args: argparse.Namespace) -> list[str]:
     names = {"read_noise": "--read-noise", "full_well": "--full-well", "gain": "--gain"}
     names["bits"] = "--bits"
     names["dark"] = "--dark"
+    names["black"] = "--black-level"
     return [flag for name, flag in names.items() if getattr(args, name, None) is not None]
 
 

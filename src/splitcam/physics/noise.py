@@ -32,7 +32,7 @@ import math
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from numbers import Real
+from numbers import Integral, Real
 from typing import Any
 
 import torch
@@ -394,17 +394,19 @@ class Exposure(NoiseModel):
     light shows as lost signal. Noise, in order: shot noise ``Poisson(e)`` (``shot``) and
     ``Poisson(dark)`` dark electrons (whose mean a dark frame removes at the end: ``dark`` adds
     noise, not signal), saturation of the collected electrons at ``full_well`` (the well
-    fills before readout, so the read noise added after it is not clipped by the well; an ADC,
-    where given, still clips at 0 DN: no black level is modelled), read noise
-    ``N(0, read_noise^2)`` electrons,
-    an ADC ``DN = round(e / gain)`` clipped to ``[0, 2^bits - 1]`` (``gain`` not None); the raw
-    image handed on is ``DN * gain * 3 / N`` (or ``e * 3 / N`` without ADC), the same scale for
-    every pattern. With ``shot=False``, no full well, no ADC and ``read_noise = N sigma / (3 *
-    255)`` this is the Gaussian model of model.md §3.
+    fills before readout, so the read noise added after it is not clipped by the well), read
+    noise ``N(0, read_noise^2)`` electrons, an ADC ``DN = round(e / gain) + black`` clipped to
+    ``[0, 2^bits - 1]`` (``gain`` not None; ``black``: the black level, a pedestal of DN that
+    a camera adds so that read noise below 0 e⁻ is not clipped, subtracted again after the
+    ADC; with 0, the default, the ADC clips dark pixels at 0 DN and raises their mean); the
+    raw image handed on is ``(DN - black) * gain * 3 / N`` (or ``e * 3 / N`` without ADC), the
+    same scale for every pattern. With ``shot=False``, no full well, no ADC and
+    ``read_noise = N sigma / (3 * 255)`` this is the Gaussian model of model.md §3.
 
     Raises:
         ValueError: Non-positive or non-finite ``photons``; negative ``read_noise``;
-            non-positive ``full_well`` or ``gain``; ``bits < 1``.
+            non-positive ``full_well`` or ``gain``; ``bits < 1``; a ``black`` level that is
+            not a whole number of DN in ``[0, 2^bits - 1)`` or is given without an ADC.
     """
 
     photons: float
@@ -414,6 +416,7 @@ class Exposure(NoiseModel):
     bits: int = 12
     shot: bool = True
     dark: float = 0.0
+    black: int = 0
 
     def __post_init__(self) -> None:
         def positive(name: str, value: Any) -> None:
@@ -442,6 +445,17 @@ class Exposure(NoiseModel):
             or not (math.isfinite(self.dark) and self.dark >= 0)
         ):
             raise ValueError(f"expected dark (electrons per exposure) >= 0, got {self.dark!r}")
+        if (
+            isinstance(self.black, bool)
+            or not isinstance(self.black, Integral)
+            or not 0 <= self.black < 2**self.bits - 1
+        ):
+            raise ValueError(
+                f"expected black (level, DN) a whole number in [0, {2**self.bits - 1}), "
+                f"got {self.black!r}"
+            )
+        if self.black and self.gain is None:
+            raise ValueError("a black level is a pedestal of the ADC: give the gain too")
 
     @property
     def electrons_per_unit(self) -> float:
@@ -506,7 +520,8 @@ class Exposure(NoiseModel):
             noise = torch.randn(e.shape, generator=generator, dtype=torch.float64, device=e.device)
             e = e + self.read_noise * noise
         if self.gain is not None:
-            e = torch.round(e / self.gain).clamp(0, 2**self.bits - 1) * self.gain
+            dn = (torch.round(e / self.gain) + self.black).clamp(0, 2**self.bits - 1)
+            e = (dn - self.black) * self.gain
         e = e - self.dark  # the dark frame's mean subtracted; its noise stays
         return e / per_unit
 
@@ -515,8 +530,13 @@ class Exposure(NoiseModel):
             f"N{self.photons:g}|r{self.read_noise:g}|{self._well_key()}|g{self.gain}"
             f"|b{self.bits}|s{int(self.shot)}"
         )
-        # Without dark current the key (and so every seed and stored result) is as before.
-        return key + (f"|d{self.dark:g}" if self.dark else "")
+        # Without dark current or black level the key (and so every seed and stored result) is
+        # as before.
+        return (
+            key
+            + (f"|d{self.dark:g}" if self.dark else "")
+            + (f"|k{self.black}" if self.black else "")
+        )
 
     def _well_key(self) -> str:
         """``fwNone`` without a full well, as before; with one, a new spelling: results stored
@@ -538,8 +558,9 @@ class Exposure(NoiseModel):
 
     def sensor_settings(self) -> dict[str, Any]:
         settings = {k: v for k, v in dataclasses.asdict(self).items() if k != "photons"}
-        if not self.dark:
-            del settings["dark"]  # as recorded before dark current was modelled
+        for name in ("dark", "black"):
+            if not settings[name]:
+                del settings[name]  # as recorded before they were modelled
         return settings
 
 
