@@ -4,6 +4,9 @@ nearest-copy rule applied to the same totals: what the rule assumes, measured.
     OMP_NUM_THREADS=1 python studies/fullwave/kernels.py [--designs zou,best] [--terms 97]
         [--out docs/results/fullwave/kernels]
 
+``--designs`` names the published routers (``zou``, ``best``) or, as ``NAME=DESIGN.csv``, a design
+of ``splitcam optics rcwa-design``, whose stack is read from the run's ``state.json`` beside it.
+
 For each design, behind an f/2 lens at the centre of the field, over 410-690 nm every 20 nm:
 fmmax Jones-direct at ``--terms``, a 3 x 3 Bloch grid (a 6 x 6-pixel supercell), 2 x 2 spot
 positions per pixel. Writes, per design, the pattern with the computed kernels
@@ -43,6 +46,26 @@ def _rings(kernel: np.ndarray) -> tuple[float, float, float]:
     return float(kept), float(near), float(kernel.sum() - kept - near)
 
 
+def _router(spec: str) -> tuple[str, str, RouterDesign, str]:
+    """``(key, file name, design, words)`` of a published router's key or ``NAME=DESIGN.csv``
+    (a design run's CSV, its stack from the run's ``state.json``)."""
+    import json
+
+    if "=" not in spec:
+        csv, stack, words = ROUTERS[spec]
+        return spec, csv, RouterDesign(read_design(DESIGNS / csv), **stack), words
+    key, path = spec.split("=", 1)
+    path = Path(path)
+    state = path.parent / "state.json"
+    if not state.exists():
+        raise SystemExit(f"{path}: no state.json beside it to read the design's stack from")
+    pitch, thickness, depth, pillar, background, substrate = json.loads(state.read_text())[
+        "settings"
+    ]["stack"]
+    design = RouterDesign(read_design(path), pitch, thickness, depth, pillar, background, substrate)
+    return key, path.name, design, f"designed by splitcam optics rcwa-design, {path.parent.name}"
+
+
 def _nearest_kernels(transmission: np.ndarray) -> np.ndarray:
     from splitcam.patterns.spectral import SpectralPattern
 
@@ -69,9 +92,8 @@ def main() -> None:
         "|---|---|---|---|---|",
     ]
     misfits = []
-    for key in args.designs.split(","):
-        csv, stack, words = ROUTERS[key]
-        design = RouterDesign(read_design(DESIGNS / csv), **stack)
+    for spec in args.designs.split(","):
+        key, csv, design, words = _router(spec)
         result = pixel_kernels(
             design,
             WAVELENGTHS,
