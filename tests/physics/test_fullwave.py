@@ -446,6 +446,51 @@ def test_fmmax_conserves_light_at_an_angle_and_agrees_with_torcwa():
     assert out["transmission"].std() > 0.01  # the layer sorts light
 
 
+def test_fmmax_outer_amplitudes_are_those_of_the_interior_solution():
+    """The periodic solve takes the reflected and the arriving amplitudes from the stack's one
+    scattering matrix; fmmax's own interior solution (every layer's matrices, then the
+    amplitudes inside each layer) gives the same, and nothing travels back up the substrate."""
+    _fmmax()
+    import jax.numpy as jnp
+    from fmmax import fields, fmm, scattering
+
+    from splitcam.physics.fullwave import _FmmaxStack, _periodic_solve, _permittivities
+
+    rng = np.random.default_rng(4)
+    design = RouterDesign(rng.random((6, 6)) > 0.5, thickness=0.5, depth=1.2)
+    stack = _FmmaxStack.of(design, 45, "JONES_DIRECT")
+    n = stack.expansion.num_terms
+
+    def plane_wave(ambient):
+        return jnp.zeros((2 * n, 2), complex).at[0, 0].set(1.0).at[n, 1].set(1.0)
+
+    um, eps = jnp.asarray(0.58), jnp.asarray(_permittivities(design, 580.0))
+    sol = _periodic_solve(
+        stack, jnp.asarray(design.grid), um, eps, jnp.asarray([0.4, -0.2]), plane_wave
+    )
+    fine = jnp.kron(jnp.asarray(design.grid, float), stack.up).T  # fmmax: [x, y]
+    patterned = fmm.eigensolve_isotropic_media(
+        wavelength=um,
+        in_plane_wavevector=jnp.asarray([0.4, -0.2]),
+        primitive_lattice_vectors=stack.lattice,
+        permittivity=(eps[1] + (eps[0] - eps[1]) * fine).astype(complex),
+        expansion=stack.expansion,
+        formulation=fmm.Formulation.JONES_DIRECT,
+    )
+    inner = scattering.stack_s_matrices_interior(
+        [sol["ambient"], patterned, sol["substrate"]],
+        [jnp.zeros(()), jnp.asarray(design.thickness), jnp.asarray(design.depth)],
+    )
+    amplitudes = fields.stack_amplitudes_interior(inner, sol["forward"], sol["zero"])
+    arriving = fields.propagate_amplitude(
+        amplitudes[2][0], jnp.asarray(design.depth), sol["substrate"]
+    )
+    np.testing.assert_allclose(sol["reflected"], amplitudes[0][1], atol=1e-12)
+    np.testing.assert_allclose(sol["arriving"], arriving, atol=1e-12)
+    np.testing.assert_allclose(amplitudes[2][1], 0.0, atol=1e-12)
+    assert float(jnp.abs(sol["reflected"]).max()) > 0.01  # the layer reflects: not a 0 = 0
+
+
 def _finite_difference(f, grid: np.ndarray, cells, h: float = 1e-6) -> np.ndarray:
     out = []
     for i, j in cells:
