@@ -88,6 +88,31 @@ def test_the_image_error_is_the_closed_form_lmmse_of_the_pattern():
     assert float(brighter.image_error(torch.from_numpy(t))) < ours
 
 
+def test_the_image_error_behind_a_stack_is_that_of_the_stacked_pattern():
+    """With ``optics``, the loss is the closed-form LMMSE of the spectral pattern behind the
+    stack, as the exposure study applies it (OpticalStack.apply): lower transmission in the
+    blue (silicon) and none past the IR cut cost image quality."""
+    from splitcam.physics.noise import Exposure
+    from splitcam.physics.stack import stack_of
+    from splitcam.recon.closed_form import closed_form_mse, shipped_image_statistics
+
+    rng = np.random.default_rng(5)
+    lams = [433.0, 500.0, 567.0, 633.0, 667.0]
+    t = rng.random((2, 2, len(lams))) / 4.2
+    optics = stack_of(["silicon", "ir-cut"])
+    design = FullwaveDesign(RouterDesign(np.eye(4)), wavelengths=lams, photons=30.0, optics=optics)
+    ours = float(design.image_error(torch.from_numpy(t)))
+    stacked = optics.apply(SpectralPattern.from_transmission("x", lams, t).to_pattern())
+    theirs = float(
+        closed_form_mse(
+            stacked, Exposure(30.0, read_noise=2.0), statistics=shipped_image_statistics("linear")
+        )
+    )
+    assert ours == pytest.approx(theirs, rel=1e-9)
+    bare = FullwaveDesign(RouterDesign(np.eye(4)), wavelengths=lams, photons=30.0)
+    assert float(bare.image_error(torch.from_numpy(t))) < ours
+
+
 def test_the_solve_is_the_spectra_solve_and_its_gradient_is_the_finite_difference():
     """torcwa_quadrants is what quadrant_spectra solves; its gradient with respect to the
     cell densities matches central differences."""
@@ -338,6 +363,7 @@ def test_the_binary_steps_start_a_fresh_optimiser_at_their_own_rate(tmp_path):
         (["noise:6x6", "--feature", "0.4", "--photons", "0"], "exposure must be > 0"),
         (["noise:1x1"], "at least 2x2"),
         (["nowhere.csv"], "cannot read design"),
+        (["noise:6x6", "--feature", "0.4", "--stack", "silicon,glass"], "unknown"),
     ],
 )
 def test_bad_design_settings_are_one_line_and_write_nothing(tmp_path, capsys, extra, message):

@@ -68,6 +68,12 @@ def register(optics_sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--f-number", type=float, help="design behind a lens's cone (7 directions per solve)"
     )
+    p.add_argument(
+        "--stack",
+        help="design for a sensor behind this optical stack in front of every pixel, "
+        "comma-separated as `splitcam study exposure --stack` takes it (silicon, ir-cut, lens, "
+        "CSV files); the spectra written stay the router's own (default: a bare pixel)",
+    )
     p.add_argument("--samples", type=int, default=16, help="flux grid points per pixel")
     p.add_argument("--seed", type=int, default=0, help="of a noise: start (default 0)")
     p.add_argument("--threads", type=int, help="CPU threads (default: torch's)")
@@ -158,6 +164,11 @@ def _design_of(args: argparse.Namespace, grid, lams: list[float]):
             f"--feature {args.feature:g} µm is below the grid step ({cell:.4g} µm per cell)"
         )
     directions = cone_directions(args.f_number) if args.f_number else [(0.0, 0.0, 1.0)]
+    optics = None
+    if args.stack:
+        from ..physics.stack import stack_of as optical_stack
+
+        optics = optical_stack([t for t in args.stack.split(",") if t.strip()])
     return FullwaveDesign(
         geometry,
         wavelengths=lams,
@@ -169,12 +180,14 @@ def _design_of(args: argparse.Namespace, grid, lams: list[float]):
         radius=args.feature / cell,
         solver=args.solver,
         terms=args.terms,
+        optics=optics,
     )
 
 
 def _settings_of(args: argparse.Namespace, grid, lams: list[float]) -> dict:
-    """What the run was started with: a continued run must have the same."""
-    return {
+    """What the run was started with: a continued run must have the same (``optics`` only
+    where a stack is given, so that runs saved before it continue)."""
+    settings = {
         "start": args.start,
         "seed": args.seed,
         "grid": list(grid.shape),
@@ -196,6 +209,9 @@ def _settings_of(args: argparse.Namespace, grid, lams: list[float]) -> dict:
         "samples": args.samples,
         "feature": args.feature,
     }
+    if args.stack:
+        settings["optics"] = args.stack
+    return settings
 
 
 def _finish(
@@ -229,7 +245,9 @@ def _finish(
     info = {
         "provenance": f"designed through RCWA ({_solved_by(args, solved['terms'])}, {where}) "
         "for the "
-        f"closed-form LMMSE at N = {args.photons:g}, read noise {args.read_noise:g} e-; "
+        f"closed-form LMMSE at N = {args.photons:g}, read noise {args.read_noise:g} e-"
+        + (f", every pixel behind {design.optics}" if design.optics is not None else "")
+        + "; "
         f"{len(history)} steps; binary, minimum feature {args.feature:g} µm",
         "description": f"metasurface router {stem}.csv: pitch {g.pitch:g} µm, "
         f"{g.thickness:g} µm of {args.pillar} in {args.background} on {args.substrate}, "

@@ -122,6 +122,11 @@ class FullwaveDesign:
             formulation converges in fewer terms; its gradient holds the formulation's vector
             field fixed (fmmax's own choice), so it is close to, not equal to, the derivative.
         terms: fmmax's Fourier terms (circular truncation).
+        optics: An :class:`~splitcam.physics.stack.OpticalStack` in front of every pixel (the
+            silicon's quantum efficiency, an IR cut): the loss is the image error of the sensor
+            behind it, each wavelength's transmission weighted by the stack's, as
+            :meth:`~splitcam.physics.stack.OpticalStack.apply` weights a spectral pattern; the
+            spectra reported stay the router's own. None: a bare, lossless pixel.
     """
 
     geometry: RouterDesign
@@ -134,6 +139,7 @@ class FullwaveDesign:
     radius: float = 2.0
     solver: str = "torcwa"
     terms: int | None = None
+    optics: Any = None
     _stats: Any = field(default=None, init=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -219,7 +225,10 @@ class FullwaveDesign:
 
     def image_error(self, transmission: torch.Tensor) -> torch.Tensor:
         """The closed-form LMMSE error (per colour, linear light in [0, 1]) of the router with
-        these spectra at the design exposure."""
+        these spectra at the design exposure (behind :attr:`optics`, where given)."""
+        if self.optics is not None:
+            weights = self.optics.weights(np.asarray(self.wavelengths, dtype=float))
+            transmission = transmission * torch.from_numpy(weights).to(transmission)
         kernels = pixel_kernels(
             rgb_kernels(transmission, self.wavelengths), np.arange(4).reshape(2, 2)
         )
