@@ -67,22 +67,24 @@ def test_rgb_kernels_are_the_spectral_patterns_reduction():
         rgb_kernels(torch.zeros(2, 2, 3), lams)
 
 
-def test_the_image_error_is_the_closed_form_lmmse_of_the_pattern():
+def _lmmse(pattern, photons: float) -> float:
+    """The closed-form LMMSE error of a pattern at an exposure (read noise 2 e-, linear light),
+    by the path every pattern takes."""
     from splitcam.physics.noise import Exposure
     from splitcam.recon.closed_form import closed_form_mse, shipped_image_statistics
 
+    stats = shipped_image_statistics("linear")
+    return float(closed_form_mse(pattern, Exposure(photons, read_noise=2.0), statistics=stats))
+
+
+def test_the_image_error_is_the_closed_form_lmmse_of_the_pattern():
     rng = np.random.default_rng(3)
     lams = [450.0, 550.0, 650.0]
     t = rng.random((2, 2, 3)) / 4.2
     design = FullwaveDesign(RouterDesign(np.eye(4)), wavelengths=lams, photons=50.0)
     ours = float(design.image_error(torch.from_numpy(t)))
     pattern = SpectralPattern.from_transmission("x", lams, t).to_pattern()
-    theirs = float(
-        closed_form_mse(
-            pattern, Exposure(50.0, read_noise=2.0), statistics=shipped_image_statistics("linear")
-        )
-    )
-    assert ours == pytest.approx(theirs, rel=1e-9)
+    assert ours == pytest.approx(_lmmse(pattern, 50.0), rel=1e-9)
     # more light, less error
     brighter = FullwaveDesign(RouterDesign(np.eye(4)), wavelengths=lams, photons=500.0)
     assert float(brighter.image_error(torch.from_numpy(t))) < ours
@@ -92,9 +94,7 @@ def test_the_image_error_behind_a_stack_is_that_of_the_stacked_pattern():
     """With ``optics``, the loss is the closed-form LMMSE of the spectral pattern behind the
     stack, as the exposure study applies it (OpticalStack.apply): lower transmission in the
     blue (silicon) and none past the IR cut cost image quality."""
-    from splitcam.physics.noise import Exposure
     from splitcam.physics.stack import stack_of
-    from splitcam.recon.closed_form import closed_form_mse, shipped_image_statistics
 
     rng = np.random.default_rng(5)
     lams = [433.0, 500.0, 567.0, 633.0, 667.0]
@@ -103,12 +103,7 @@ def test_the_image_error_behind_a_stack_is_that_of_the_stacked_pattern():
     design = FullwaveDesign(RouterDesign(np.eye(4)), wavelengths=lams, photons=30.0, optics=optics)
     ours = float(design.image_error(torch.from_numpy(t)))
     stacked = optics.apply(SpectralPattern.from_transmission("x", lams, t).to_pattern())
-    theirs = float(
-        closed_form_mse(
-            stacked, Exposure(30.0, read_noise=2.0), statistics=shipped_image_statistics("linear")
-        )
-    )
-    assert ours == pytest.approx(theirs, rel=1e-9)
+    assert ours == pytest.approx(_lmmse(stacked, 30.0), rel=1e-9)
     bare = FullwaveDesign(RouterDesign(np.eye(4)), wavelengths=lams, photons=30.0)
     assert float(bare.image_error(torch.from_numpy(t))) < ours
 
