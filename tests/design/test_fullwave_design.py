@@ -343,6 +343,22 @@ def test_the_binary_steps_start_a_fresh_optimiser_at_their_own_rate(tmp_path):
     )
     after = load_pair(tmp_path / "b" / "state", "splitcam-fullwave-design", 1, "", ValueError)[0]
     continued = run_design(design, tmp_path / "c", steps=2, lr=0.5, beta_end=8.0)["theta"]
+    # The binary phase's length may change when a run is continued: three more steps extend
+    # it from where it stopped; asking for fewer than were done ends it with the best so far.
+    longer = run_design(
+        design, tmp_path / "b", steps=2, lr=0.5, binary_steps=3, binary_lr=0.01, beta_end=8.0
+    )
+    assert [r["step"] for r in longer["history"]] == [1, 2, 3, 4, 5]
+    assert all(r["binary"] for r in longer["history"][2:])
+    best = max(longer["history"][2:], key=lambda r: r["psnr"])
+    shorter = run_design(
+        design, tmp_path / "b", steps=2, lr=0.5, binary_steps=1, binary_lr=0.01, beta_end=8.0
+    )
+    assert len(shorter["history"]) == 5  # nothing more solved
+    torch.testing.assert_close(shorter["theta"], longer["theta"])
+    assert max(r["psnr"] for r in shorter["history"][2:]) == best["psnr"]
+    with pytest.raises(FullwaveError, match="other settings"):
+        run_design(design, tmp_path / "b", steps=2, lr=0.5, binary_steps=3, beta_end=8.0)
     torch.testing.assert_close(result["theta"], continued)  # the layer the binary step scored
     moved = (after["theta"] - continued).abs()  # carried moments would not move by 0.01 exactly
     assert float(moved.max()) == pytest.approx(0.01, rel=1e-6)

@@ -50,7 +50,8 @@ def register(optics_sub: argparse._SubParsersAction) -> None:
         type=int,
         default=0,
         help="steps after the continuation on the binary layer itself (straight-through "
-        "gradient at the last sharpness); the best binary layer is the design (default 0)",
+        "gradient at the last sharpness); the best binary layer is the design (default 0). "
+        "The one setting a continued run may change: fewer ends the binary phase early",
     )
     p.add_argument(
         "--binary-lr",

@@ -290,7 +290,9 @@ def run_design(
     ``lr``; the continuation's moments describe another loss). A cell flips when its variable
     crosses 0, and Adam moves every variable by about the learning rate, so a smaller rate flips
     fewer cells a step. With binary steps, the design returned is the best binary layer any of
-    them scored (Adam on a thresholded layer does not descend monotonically).
+    them scored (Adam on a thresholded layer does not descend monotonically). The number of
+    binary steps is the one setting a continued run may change: more extends the binary phase,
+    fewer ends it early, with the best binary layer of the steps done.
 
     Returns ``{"theta", "history", "beta"}``; ``history``: one row per step (``step``, ``beta``,
     ``binary``, ``psnr``, ``mse``, ``reflection``, ``seconds``).
@@ -362,7 +364,7 @@ def _restored(
     if not paired_paths(state_path)[1].exists():
         return opt, [], None
     tensors, meta, _ = load_pair(state_path, STATE_FORMAT, 1, "design state", FullwaveError)
-    if meta["settings"] != json_safe(settings):
+    if _fixed(meta["settings"]) != _fixed(json_safe(settings)):
         raise FullwaveError(
             f"{state_path.parent} holds a design run of other settings; give another folder"
         )
@@ -379,6 +381,11 @@ def _restored(
             "exp_avg_sq": tensors["exp_avg_sq"].clone(),
         }
     return opt, history, tensors.get("best")
+
+
+def _fixed(settings: dict) -> dict:
+    """The settings a continued run must share: all but the number of binary steps."""
+    return {k: v for k, v in settings.items() if k != "binary_steps"}
 
 
 def _save_state(
