@@ -345,10 +345,19 @@ def test_the_binary_steps_start_a_fresh_optimiser_at_their_own_rate(tmp_path):
     continued = run_design(design, tmp_path / "c", steps=2, lr=0.5, beta_end=8.0)["theta"]
     # The binary phase's length may change when a run is continued: three more steps extend
     # it from where it stopped; asking for fewer than were done ends it with the best so far.
+    shown = []
     longer = run_design(
-        design, tmp_path / "b", steps=2, lr=0.5, binary_steps=3, binary_lr=0.01, beta_end=8.0
+        design,
+        tmp_path / "b",
+        steps=2,
+        lr=0.5,
+        binary_steps=3,
+        binary_lr=0.01,
+        beta_end=8.0,
+        progress=shown.append,
     )
     assert [r["step"] for r in longer["history"]] == [1, 2, 3, 4, 5]
+    assert [r["step"] for r in shown] == [3, 4, 5]  # where it stood, then each new step
     assert all(r["binary"] for r in longer["history"][2:])
     best = max(longer["history"][2:], key=lambda r: r["psnr"])
     shorter = run_design(

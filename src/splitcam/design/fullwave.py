@@ -319,6 +319,8 @@ def run_design(
     state_path = out / "state"
     theta = design.start().clone().requires_grad_(True)
     opt, history, best = _restored(state_path, settings, theta, steps, lr, rate)
+    if history and progress is not None:  # a continued run shows where it stands at once
+        progress(history[-1])
     for step in range(len(history), steps + binary_steps):
         start = time.perf_counter()
         binary = step >= steps
