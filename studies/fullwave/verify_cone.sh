@@ -1,0 +1,57 @@
+#!/usr/bin/env bash
+# The cone designs (docs/results/fullwave/README.md, "The cone in the loss") verified once their
+# runs end, in three resumable stages (each keeps its solves; run the same line again after a
+# stop). One thread each; run two designs' stages side by side on the two cores.
+#
+#   bash studies/fullwave/verify_cone.sh solve best-n30-f2     # the binary design at 797 terms,
+#       # f/2 cone, six wavelengths, against the leaderboard design at the same setting
+#   bash studies/fullwave/verify_cone.sh kernels best-n30-f2   # its kernels from the fields
+#       # (793 terms, 410-690 nm, f/2; about two hours of one thread), in the design's folder
+#   SPLITCAM_DATA=DIR bash studies/fullwave/verify_cone.sh answer best-n30-f2 best-n300-f2
+#       # the exposure answer with the designs added (only the new patterns are scored)
+set -euo pipefail
+export OMP_NUM_THREADS=1
+D=docs/results/fullwave/design
+K=docs/results/fullwave/kernels-793
+A=docs/results/fullwave/angles/patterns
+LAMS=433,467,533,567,633,667
+stage=$1
+shift
+case "$stage" in
+solve)
+    for name in "$@"; do
+        [ -f "$D/$name/$name.csv" ] || { echo "$D/$name/$name.csv: the run has not ended" >&2; exit 1; }
+        splitcam optics rcwa "$D/$name/$name.csv" --thickness 0.699 --depth 2.8 \
+            --solver fmmax-jones --terms 797 --wavelengths $LAMS --f-number 2 --threads 1 \
+            --name "$name-f2-fmmax797" --out "$D/$name/verify" --quiet
+        python studies/fullwave/verify_design.py "$D/$name/verify/$name-f2-fmmax797-spectra.csv" \
+            "$A/best-f2-centre-6wl.toml" | tee "$D/$name/verify/verify.md"
+    done
+    ;;
+kernels)
+    for name in "$@"; do
+        # files named as the published routers' (KEY-f2-computed.json): the key without -f2
+        python studies/fullwave/kernels.py --designs "${name%-f2}=$D/$name/$name.csv" --terms 793 \
+            --out "$D/$name/kernels-793"
+    done
+    ;;
+answer)
+    : "${SPLITCAM_DATA:?set SPLITCAM_DATA to the data folder}"
+    added=""
+    for name in "$@"; do
+        added="$added,$D/$name/kernels-793/${name%-f2}-f2-computed.json"
+        added="$added,$D/$name/kernels-793/${name%-f2}-f2-nearest.toml"
+        added="$added,$D/$name/verify/$name-f2-fmmax797.toml"
+    done
+    V=$D/zou-n30-binary-lr0.03/verify
+    P="1 2.15 4.64 10 21.5 46.4 100 215 464 1000 2150 4640 10000"
+    splitcam study exposure --datasets kodak24,mcmaster,/tmp/splitcam-heldout6 --crop 192 \
+        --patterns rgbw-d5100,bayer-d5100,router-zou-fullwave-f2,router-best-fullwave-f2,$K/zou-f2-computed.json,$K/zou-f2-nearest.toml,$K/best-f2-computed.json,$K/best-f2-nearest.toml,$A/zou-f2-centre-6wl.toml,$A/zou-f2-corner-6wl.toml,$A/best-f2-centre-6wl.toml,$A/best-f2-corner-6wl.toml,$A/zou-f2-middle-6wl.toml,$A/best-f2-middle-6wl.toml,$V/zou-n30-binary-f2-fmmax797.toml$added \
+        --photons $P --read-noise 2 --model universal-photon --reference rgbw-d5100,bayer-d5100 \
+        --stack silicon,ir-cut --full-well 6000 --quiet --out docs/results/exposure/answer/rn2
+    ;;
+*)
+    echo "usage: verify_cone.sh solve|kernels|answer NAME..." >&2
+    exit 2
+    ;;
+esac
