@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import tomllib
 import torch
 
 from splitcam import patterns
@@ -141,7 +142,9 @@ def test_bad_spectral_patterns_are_refused(change, message):
 
 def test_a_router_s_spectra_written_as_a_file_read_back_as_the_same_pattern(tmp_path):
     """save_transmission: the file reads back as from_transmission's pattern (to the file's 6
-    significant digits); spectra that create light are refused and nothing is written."""
+    decimals); spectra that create light are refused and nothing is written; spectra that
+    carry all the light but for a millionth are written so that rounding creates none (to six
+    significant digits, 0.33333351 + 0.33333351 + 0.2 + 0.13333297 read back as 1.000001)."""
     from splitcam.patterns.files import save_transmission
 
     lams = np.arange(400.0, 701.0, 20.0)
@@ -156,6 +159,11 @@ def test_a_router_s_spectra_written_as_a_file_read_back_as_the_same_pattern(tmp_
     with pytest.raises(PatternError):
         save_transmission(tmp_path / "bright.toml", "bright", lams, t * 1.1)
     assert not (tmp_path / "bright.toml").exists()
+    full = np.zeros((2, 2, 1))
+    full[:, :, 0] = [[0.33333351, 0.33333351], [0.2, 0.13333297]]  # 0.99999999 in all
+    path = save_transmission(tmp_path / "full.toml", "full", [550.0], full)
+    written = np.asarray(tomllib.loads(path.read_text())["transmission"])
+    assert written.sum() <= 1.0 and written.sum() == pytest.approx(1.0, abs=4e-6)
 
 
 def test_a_sensor_s_kernels_written_as_a_file_read_back_as_the_same_pattern(tmp_path):

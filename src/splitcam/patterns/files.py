@@ -125,6 +125,8 @@ def save_transmission(
     from .spectral import SpectralPattern
 
     SpectralPattern.from_transmission(name, wavelengths, transmission, **info)
+    transmission = np.asarray(transmission, dtype=np.float64)
+    transmission = _six_decimals(transmission, transmission.sum(axis=(0, 1), keepdims=True))
     lines = [f"name = {json.dumps(name, ensure_ascii=False)}"]
     lines += [f"{k} = {json.dumps(v, ensure_ascii=False)}" for k, v in info.items()]
     lines.append("wavelengths = [" + ", ".join(f"{v:g}" for v in wavelengths) + "]")
@@ -133,12 +135,19 @@ def save_transmission(
     lines.append("transmission = [")
     for row in transmission:
         lines.append("  [")
-        lines += ["    [" + ", ".join(f"{v:.6g}" for v in px) + "]," for px in row]
+        lines += ["    [" + ", ".join(f"{v:.6f}" for v in px) + "]," for px in row]
         lines.append("  ],")
     lines.append("]")
     written = write_text(path, "\n".join(lines) + "\n")
     load(written)
     return written
+
+
+def _six_decimals(values: np.ndarray, sums: np.ndarray) -> np.ndarray:
+    """``values`` at the six decimals the pattern files keep, rounded down where the light they
+    share (``sums``, broadcast against them) is within 1e-5 of all of it, so that rounding a
+    lossless splitter's shares never creates light the file's reader would refuse."""
+    return np.where(sums > 1 - 1e-5, np.floor(values * 1e6), np.round(values * 1e6)) / 1e6
 
 
 def save_spectral_kernels(
@@ -155,9 +164,7 @@ def save_spectral_kernels(
     from .spectral import SpectralPattern
 
     kernels = np.asarray(kernels, dtype=np.float64)
-    sums = kernels.sum(axis=(-2, -1), keepdims=True)
-    # Six decimals, rounded down where a kernel sums to 1 so that rounding creates no light.
-    kernels = np.where(sums > 1 - 1e-5, np.floor(kernels * 1e6), np.round(kernels * 1e6)) / 1e6
+    kernels = _six_decimals(kernels, kernels.sum(axis=(-2, -1), keepdims=True))
     pattern = SpectralPattern(name, layout, wavelengths, kernels, **info)
     data = {
         "name": pattern.name,
