@@ -257,8 +257,11 @@ class OpticalStack:
     def weights(self, nm: Any) -> np.ndarray:
         """What each wavelength's light is multiplied by: the stack's transmission, times the
         scene light's ratio to D65 where one is set."""
-        t = self(nm)
-        return t if self.light is None else t * self.light(nm)
+        return self._lit(self(nm), nm)
+
+    def _lit(self, transmission: np.ndarray, nm: Any) -> np.ndarray:
+        """The stack's ``transmission`` on ``nm`` times the scene light's ratio, where set."""
+        return transmission if self.light is None else transmission * self.light(nm)
 
     def band_factors(self) -> np.ndarray:
         """The stack's (and scene light's) mean weight over each colour's light (linear sRGB
@@ -275,7 +278,8 @@ class OpticalStack:
             return _renamed(pattern, kernels, self)
         lams = np.asarray(spectral["wavelengths"], float)
         kernels = np.asarray(spectral["kernels"], float)
-        t, w = self(lams), self.weights(lams)
+        t = self(lams)
+        w = self._lit(t, lams)
         out = kernels * w[None, :, None, None]
         for s in _measured_filters(pattern, kernels) if self.elements else []:
             out[s] = _measured_filter(kernels[s], t) * w[:, None, None]
