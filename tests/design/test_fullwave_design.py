@@ -100,6 +100,7 @@ def test_the_image_error_behind_a_stack_is_that_of_the_stacked_pattern():
     lams = [433.0, 500.0, 567.0, 633.0, 667.0]
     t = rng.random((2, 2, len(lams))) / 4.2
     optics = stack_of(["silicon", "ir-cut"])
+    assert str(stack_of("silicon, ir-cut")) == str(optics)  # the option's text, the same stack
     design = FullwaveDesign(RouterDesign(np.eye(4)), wavelengths=lams, photons=30.0, optics=optics)
     ours = float(design.image_error(torch.from_numpy(t)))
     stacked = optics.apply(SpectralPattern.from_transmission("x", lams, t).to_pattern())

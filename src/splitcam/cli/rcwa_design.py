@@ -169,7 +169,7 @@ def _design_of(args: argparse.Namespace, grid, lams: list[float]):
     if args.stack:
         from ..physics.stack import stack_of as optical_stack
 
-        optics = optical_stack([t for t in args.stack.split(",") if t.strip()])
+        optics = optical_stack(args.stack)
     return FullwaveDesign(
         geometry,
         wavelengths=lams,

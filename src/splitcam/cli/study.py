@@ -195,7 +195,7 @@ def _stack(text: str | None, illuminant: str, study: str):
     any image is read), or None for neither."""
     from ..physics.stack import OpticalStack, SceneLight, stack_of
 
-    stack = stack_of([t for t in text.split(",") if t.strip()]) if text else None
+    stack = stack_of(text) if text else None
     if illuminant == "D65":
         return stack
     light = SceneLight(illuminant)

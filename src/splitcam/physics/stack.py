@@ -322,12 +322,15 @@ def _renamed(pattern: Pattern, kernels: np.ndarray, stack: OpticalStack) -> Patt
     return replace(pattern, kernels=kernels, metadata={**pattern.metadata, "stack": str(stack)})
 
 
-def stack_of(specs: Sequence[str]) -> OpticalStack:
-    """The stack of element names (:data:`ELEMENTS`) and CSV curve files.
+def stack_of(specs: str | Sequence[str]) -> OpticalStack:
+    """The stack of element names (:data:`ELEMENTS`) and CSV curve files, as a list or as the
+    comma-separated text of a ``--stack`` option.
 
     Raises:
         ValueError: An unknown element (the message lists the known ones) or a bad curve file.
     """
+    if isinstance(specs, str):
+        specs = [t for t in specs.split(",") if t.strip()]
     elements = []
     for spec in specs:
         spec = spec.strip()
