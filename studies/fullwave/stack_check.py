@@ -13,6 +13,7 @@ minutes of one thread.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
 from pathlib import Path
@@ -21,7 +22,7 @@ import torch
 
 from splitcam.design.fullwave import FullwaveDesign, beta_at
 from splitcam.io.tensorfiles import load_pair
-from splitcam.physics.fullwave import RouterDesign, cone_directions, read_design
+from splitcam.physics.fullwave import read_design
 from splitcam.physics.stack import stack_of
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -41,19 +42,8 @@ def main() -> None:
             state = DESIGNS / name / "state"
             tensors, meta, _ = load_pair(state, "splitcam-fullwave-design", 1, name, ValueError)
             s = meta["settings"]
-            geometry = RouterDesign(grid, *s["stack"])
-            cell = 2.0 * geometry.pitch / max(grid.shape)
-            settings = {
-                "wavelengths": s["wavelengths"],
-                "photons": s["photons"],
-                "read_noise": s["read_noise"],
-                "directions": cone_directions(s["f_number"]),
-                "radius": s["feature"] / cell,
-                "solver": s["solver"],
-                "terms": s["terms"],
-            }
-            bare = FullwaveDesign(geometry, **settings)
-            behind = FullwaveDesign(geometry, optics=optics, **settings)
+            bare = FullwaveDesign.from_settings(grid, s)
+            behind = dataclasses.replace(bare, optics=optics)
             if t_start is None:  # the same solves for every run of this setting
                 t_start = bare.transmission(torch.from_numpy(grid))[0].clamp_min(0)
             step = len(meta["history"])

@@ -109,6 +109,47 @@ def test_the_image_error_behind_a_stack_is_that_of_the_stacked_pattern():
     assert float(bare.image_error(torch.from_numpy(t))) < ours
 
 
+def test_a_design_from_saved_settings_is_the_one_built_by_hand():
+    """``from_settings`` reads a run's settings as the command writes them: materials given as
+    numbers are indices, the feature in µm becomes the filter's radius in cells, ``f_number``
+    the cone's directions (0: normal incidence), ``optics`` the stack in front of the pixels."""
+    from splitcam.physics.fullwave import cone_directions
+    from splitcam.physics.stack import stack_of
+
+    grid = np.eye(8)
+    settings = {
+        "stack": [1.0, 0.5, 1.0, "2.0", "vacuum", "SiO2"],
+        "wavelengths": [460.0, 620.0],
+        "photons": 30.0,
+        "read_noise": 1.5,
+        "f_number": 2.0,
+        "order": 3,
+        "samples": 8,
+        "feature": 0.5,  # µm; the cell is 2 µm / 8 = 0.25 µm
+        "solver": "torcwa",
+        "terms": None,
+    }
+    by_hand = FullwaveDesign(
+        RouterDesign(grid, 1.0, 0.5, 1.0, 2.0, "vacuum", "SiO2"),
+        wavelengths=[460.0, 620.0],
+        photons=30.0,
+        read_noise=1.5,
+        directions=cone_directions(2.0),
+        order=3,
+        samples=8,
+        radius=2.0,
+    )
+    ours = FullwaveDesign.from_settings(grid, settings)
+    assert repr(ours) == repr(by_hand)
+    assert ours.optics is None
+    behind = FullwaveDesign.from_settings(grid, {**settings, "optics": "silicon,ir-cut"})
+    assert str(behind.optics) == str(stack_of(["silicon", "ir-cut"]))
+    normal = FullwaveDesign.from_settings(grid, {**settings, "f_number": 0})
+    assert list(normal.directions) == [(0.0, 0.0, 1.0)]
+    with pytest.raises(FullwaveError, match="below the grid step"):
+        FullwaveDesign.from_settings(grid, {**settings, "feature": 0.2})
+
+
 def test_the_solve_is_the_spectra_solve_and_its_gradient_is_the_finite_difference():
     """torcwa_quadrants is what quadrant_spectra solves; its gradient with respect to the
     cell densities matches central differences."""
@@ -298,6 +339,13 @@ def test_the_design_command_writes_a_solved_binary_design_and_continues_a_stoppe
     report = (tmp_path / "whole" / "report.md").read_text()
     assert "best of 2 binary steps" in report
     assert "| the start as given |" in report and "| the design |" in report  # bands
+    # The saved settings describe the run's problem: the binary design, solved again through
+    # the design they rebuild, scores what the run said.
+    settings = json.loads((tmp_path / "whole" / "state.json").read_text())["settings"]
+    again = fd.FullwaveDesign.from_settings(binary, settings)
+    with torch.no_grad():
+        t = again.transmission(torch.from_numpy(binary))[0].clamp_min(0.0)
+    assert -10 * math.log10(float(again.image_error(t))) == pytest.approx(solved_again, abs=0.006)
 
     real = fd.FullwaveDesign.objective
     count = {"n": 0}

@@ -101,16 +101,16 @@ def add_stack_options(
 
 def stack_of(args: argparse.Namespace, grid):
     """The :class:`~splitcam.physics.fullwave.RouterDesign` of :func:`add_stack_options`."""
-    from ..physics.fullwave import RouterDesign
+    from ..physics.fullwave import RouterDesign, material_of
 
     return RouterDesign(
         grid,
         pitch=args.pitch,
         thickness=args.thickness,
         depth=args.depth,
-        pillar=_material(args.pillar),
-        background=_material(args.background),
-        substrate=_material(args.substrate),
+        pillar=material_of(args.pillar),
+        background=material_of(args.background),
+        substrate=material_of(args.substrate),
     )
 
 
@@ -305,13 +305,6 @@ def _solved_by(args: argparse.Namespace, terms: int) -> str:
     """``order 9`` for torcwa (the provenance the shipped files carry), ``fmmax-jones, 997
     terms`` for fmmax."""
     return f"order {args.order}" if args.solver == "torcwa" else f"{args.solver}, {terms} terms"
-
-
-def _material(text: str) -> str | float:
-    try:
-        return float(text)
-    except ValueError:
-        return text
 
 
 def _chart(lams, t, reflection, roles: dict[str, int] | None, path: Path, title: str) -> None:

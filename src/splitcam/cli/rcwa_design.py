@@ -8,7 +8,7 @@ import math
 import re
 from pathlib import Path
 
-from .rcwa import add_stack_options, stack_of, wavelengths_of
+from .rcwa import add_stack_options, wavelengths_of
 
 
 def register(optics_sub: argparse._SubParsersAction) -> None:
@@ -101,20 +101,20 @@ def run(args: argparse.Namespace) -> int:
     import numpy as np
     import torch
 
-    from ..design.fullwave import run_design
+    from ..design.fullwave import FullwaveDesign, run_design
     from ..physics.fullwave import check_solver
 
     check_solver(args.solver)
     grid = _start_grid(args.start, args.seed)
     lams = wavelengths_of(args.wavelengths)
-    design = _design_of(args, grid, lams)
+    settings = _settings_of(args, grid, lams)
+    design = FullwaveDesign.from_settings(grid, settings)
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise ValueError(f"--out {out} is a file, not a folder")
     name = args.name or out.name
     if args.threads:
         torch.set_num_threads(args.threads)
-    settings = _settings_of(args, grid, lams)
     bar = None
     if not args.quiet:
         from tqdm import tqdm
@@ -150,39 +150,6 @@ def run(args: argparse.Namespace) -> int:
             "transmission": start_t.numpy(),
         }
     return _finish(args, design, out, name, binary, density, result["history"], lams, np, start)
-
-
-def _design_of(args: argparse.Namespace, grid, lams: list[float]):
-    """The design problem: the stack around the start grid, the feature size in cells, the
-    lens's cone, the exposure and the solver."""
-    from ..design.fullwave import FullwaveDesign
-    from ..physics.fullwave import FullwaveError, cone_directions
-
-    geometry = stack_of(args, grid)
-    cell = 2.0 * args.pitch / max(grid.shape)
-    if args.feature < cell:
-        raise FullwaveError(
-            f"--feature {args.feature:g} µm is below the grid step ({cell:.4g} µm per cell)"
-        )
-    directions = cone_directions(args.f_number) if args.f_number else [(0.0, 0.0, 1.0)]
-    optics = None
-    if args.stack:
-        from ..physics.stack import stack_of as optical_stack
-
-        optics = optical_stack(args.stack)
-    return FullwaveDesign(
-        geometry,
-        wavelengths=lams,
-        photons=args.photons,
-        read_noise=args.read_noise,
-        directions=directions,
-        order=args.order,
-        samples=args.samples,
-        radius=args.feature / cell,
-        solver=args.solver,
-        terms=args.terms,
-        optics=optics,
-    )
 
 
 def _settings_of(args: argparse.Namespace, grid, lams: list[float]) -> dict:

@@ -29,7 +29,7 @@ linearly in between, as :class:`~splitcam.physics.fullwave.RouterDesign` does).
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -42,7 +42,9 @@ from ..physics.fullwave import (
     SOLVERS,
     FullwaveError,
     RouterDesign,
+    cone_directions,
     fmmax_quadrants,
+    material_of,
     torcwa_quadrants,
 )
 from ..physics.noise import Exposure
@@ -154,6 +156,44 @@ class FullwaveDesign:
         if self.terms is not None and (self.solver == "torcwa" or self.terms < 1):
             raise FullwaveError("terms: a number >= 1, for an fmmax solver (torcwa takes order)")
         self._stats = shipped_image_statistics("linear")
+
+    @classmethod
+    def from_settings(cls, grid: np.ndarray, settings: Mapping[str, Any]) -> FullwaveDesign:
+        """The design problem a run's ``settings`` describe (as ``splitcam optics
+        rcwa-design`` saves them beside its state): the stack (``[pitch, thickness, depth,
+        pillar, background, substrate]``) around ``grid``, the lens's cone (``f_number`` 0:
+        normal incidence), the exposure, the solver, the minimum feature in µm, and the optical
+        stack in front of every pixel where ``optics`` (its comma-separated names) is given.
+
+        Raises:
+            FullwaveError: A feature size below the grid step, or any of the stack's or the
+                design's own refusals.
+        """
+        from ..physics.stack import stack_of
+
+        pitch, thickness, depth, *materials = settings["stack"]
+        geometry = RouterDesign(grid, pitch, thickness, depth, *map(material_of, materials))
+        cell = 2.0 * pitch / max(geometry.grid.shape)
+        feature = settings["feature"]
+        if feature < cell:
+            raise FullwaveError(
+                f"feature {feature:g} µm is below the grid step ({cell:.4g} µm per cell)"
+            )
+        f_number = settings["f_number"]
+        optics = settings.get("optics")
+        return cls(
+            geometry,
+            wavelengths=settings["wavelengths"],
+            photons=settings["photons"],
+            read_noise=settings["read_noise"],
+            directions=cone_directions(f_number) if f_number else ((0.0, 0.0, 1.0),),
+            order=settings["order"],
+            samples=settings["samples"],
+            radius=feature / cell,
+            solver=settings["solver"],
+            terms=settings["terms"],
+            optics=stack_of(optics) if optics else None,
+        )
 
     def start(self) -> torch.Tensor:
         """Design variables whose densities (``beta`` 0, no filter) are the geometry's grid,

@@ -86,6 +86,15 @@ MATERIALS: dict[str, Callable[[np.ndarray], np.ndarray]] = {
 }
 
 
+def material_of(text: str | float) -> str | float:
+    """A material as given in text: a number is an index, anything else a name of
+    :data:`MATERIALS` (checked where it is used)."""
+    try:
+        return float(text)
+    except ValueError:
+        return text
+
+
 def index_of(material: str | float, wavelength_nm: float) -> float:
     """The refractive index of a named material (:data:`MATERIALS`) or a number."""
     if isinstance(material, (int, float)):
