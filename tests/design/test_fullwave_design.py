@@ -272,6 +272,8 @@ def test_bad_settings_are_refused():
         FullwaveDesign(RouterDesign(np.eye(4)), photons=0.0)
     with pytest.raises(FullwaveError, match="radius"):
         FullwaveDesign(RouterDesign(np.eye(4)), radius=-1)
+    with pytest.raises(FullwaveError, match=r"feature \(5 cells\) is wider than the layer"):
+        FullwaveDesign(RouterDesign(np.eye(4)), radius=5)
     with pytest.raises(FullwaveError, match="density of shape"):
         torcwa_quadrants(RouterDesign(np.eye(4)), torch.zeros(3, 3, dtype=torch.float64), 500.0)
     with pytest.raises(FullwaveError, match="unknown solver 'meep'"):
@@ -429,6 +431,7 @@ def test_the_binary_steps_start_a_fresh_optimiser_at_their_own_rate(tmp_path):
     ("extra", "message"),
     [
         (["noise:6x6", "--feature", "0.1"], "below the grid step"),
+        (["noise:6x6", "--feature", "2.4"], "wider than the layer"),
         (["noise:6x6", "--feature", "0.4", "--photons", "0"], "exposure must be > 0"),
         (["noise:1x1"], "at least 2x2"),
         (["nowhere.csv"], "cannot read design"),

@@ -63,8 +63,8 @@ def register(optics_sub: argparse._SubParsersAction) -> None:
         "--feature",
         type=float,
         default=0.08,
-        help="minimum feature size, µm: the conic filter's radius (default 0.08, the "
-        "leaderboard's)",
+        help="minimum feature size, µm: the conic filter's radius, and the brush that paints "
+        "every pillar and gap of the binary design (default 0.08, the leaderboard's)",
     )
     p.add_argument(
         "--f-number", type=float, help="design behind a lens's cone (7 directions per solve)"

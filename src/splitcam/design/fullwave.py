@@ -10,7 +10,10 @@ The chain, every step differentiable (PyTorch autograd through torcwa's RCWA):
    Struct. Multidisc. Optim. 43, 2011). The filter removes features narrower than about its
    radius, so ``r`` times the cell size is the design's minimum feature size; raising ``beta``
    over the run drives the densities to 0 and 1, and the reported design is the projection
-   thresholded at 0.5 (:meth:`FullwaveDesign.binary`), solved again as a binary layer.
+   thresholded at 0.5 and made to keep that feature size in solid and void alike (a brush of
+   ``r`` cells paints every feature: :mod:`splitcam.design.lengthscale`; thresholding alone
+   leaves specks and slits where the densities are grey) (:meth:`FullwaveDesign.binary`),
+   solved again as a binary layer.
 2. **Densities → spectra.** :func:`splitcam.physics.fullwave.torcwa_quadrants`: the light of
    each wavelength crossing each pixel quadrant at the monitor depth, averaged over the two
    polarisations and over the directions of a lens's cone (normal incidence by default).
@@ -50,6 +53,7 @@ from ..physics.fullwave import (
 from ..physics.noise import Exposure
 from ..physics.sensor import pixel_kernels
 from ..recon.closed_form import closed_form_mse, shipped_image_statistics
+from .lengthscale import with_minimum_feature
 
 __all__ = ["FullwaveDesign", "beta_at", "conic_filter", "project", "rgb_kernels", "run_design"]
 
@@ -151,6 +155,12 @@ class FullwaveDesign:
             )
         if self.radius < 0:
             raise FullwaveError(f"the filter radius must be >= 0 cells, got {self.radius}")
+        if self.feature_cells > min(self.geometry.grid.shape):
+            rows, cols = self.geometry.grid.shape
+            raise FullwaveError(
+                f"the minimum feature ({self.feature_cells} cells) is wider than the layer "
+                f"({rows} x {cols} cells)"
+            )
         if self.solver not in SOLVERS:
             raise FullwaveError(f"unknown solver {self.solver!r}; expected one of {SOLVERS}")
         if self.terms is not None and (self.solver == "torcwa" or self.terms < 1):
@@ -207,17 +217,28 @@ class FullwaveDesign:
         """Sigmoid, conic filter, projection: the layer's densities in [0, 1]."""
         return project(conic_filter(torch.sigmoid(theta), self.radius), beta)
 
+    @property
+    def feature_cells(self) -> int:
+        """The minimum feature of the binary layer, in cells: the filter's radius, rounded."""
+        return int(round(self.radius))
+
     def binary(self, theta: torch.Tensor, beta: float) -> np.ndarray:
-        """The fabricable design: the projected densities thresholded at 0.5 (0/1 cells)."""
+        """The fabricable design (0/1 cells): the projected densities thresholded at 0.5, made
+        to keep :attr:`feature_cells` in solid and void
+        (:func:`~splitcam.design.lengthscale.with_minimum_feature`)."""
         with torch.no_grad():
-            return (self.densities(theta, beta) >= 0.5).to(torch.float64).numpy()
+            return self._fabricable(self.densities(theta, beta))
+
+    def _fabricable(self, density: torch.Tensor) -> np.ndarray:
+        layer = (density.detach() >= 0.5).numpy()
+        return with_minimum_feature(layer, self.feature_cells).astype(np.float64)
 
     def binarised(self, theta: torch.Tensor, beta: float) -> torch.Tensor:
         """The binary layer of :meth:`binary` in the forward pass, the projected densities'
         gradient in the backward (a straight-through estimator): the loss is the fabricable
         design's own, which the continuous densities only approach."""
         d = self.densities(theta, beta)
-        return d + ((d >= 0.5).to(d) - d).detach()
+        return d + (torch.from_numpy(self._fabricable(d)).to(d) - d).detach()
 
     def transmission(self, density: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """``(2, 2, L)`` transmission into each pixel (mean of the polarisations and the
