@@ -427,6 +427,40 @@ def test_the_binary_steps_start_a_fresh_optimiser_at_their_own_rate(tmp_path):
         run_design(design, tmp_path / "d", steps=2, binary_steps=1, binary_lr=0.0)
 
 
+def test_a_run_of_binary_steps_only_descends_on_fabricable_layers_from_a_binary_start(
+    tmp_path, capsys
+):
+    """``--steps 0``: every step scores the binary layer that keeps the minimum feature,
+    from the first; a state saved before binary layers kept it is not continued."""
+    from splitcam.cli import main
+    from splitcam.design.fullwave import _save_state
+    from splitcam.design.lengthscale import keeps_minimum_feature
+
+    rows, cols = np.indices((16, 16))
+    start = ((rows - 7.5) ** 2 + (cols - 4.5) ** 2 < 16) | ((rows - 3) ** 2 + (cols - 12) ** 2 < 9)
+    np.savetxt(tmp_path / "start.csv", start.astype(float), delimiter=",", fmt="%g")
+    args = ["optics", "rcwa-design", str(tmp_path / "start.csv"), "--steps", "0"]
+    args += ["--binary-steps", "2", "--binary-lr", "0.3", "--order", "1", "--samples", "8"]
+    args += ["--feature", "0.5", "--wavelengths", "460,620", "--quiet"]  # 4 cells of 0.125 µm
+    assert main([*args, "--out", str(tmp_path / "b")]) == 0
+    state = json.loads((tmp_path / "b" / "state.json").read_text())
+    assert [r["binary"] for r in state["history"]] == [True, True]
+    design = np.loadtxt(tmp_path / "b" / "b.csv", delimiter=",")
+    assert keeps_minimum_feature(design, 4)
+    report = (tmp_path / "b" / "report.md").read_text()
+    assert "first step" not in report and "best of 2 binary steps" in report
+    # A run saved before binary layers kept the feature scored other layers: refused.
+    old = {k: v for k, v in state["settings"].items() if k != "binary_layer"}
+    theta = torch.zeros(16, 16, dtype=torch.float64, requires_grad=True)
+    opt = torch.optim.Adam([theta])
+    theta.sum().backward()
+    opt.step()
+    _save_state(tmp_path / "old" / "state", theta, opt, None, old, state["history"][:1])
+    capsys.readouterr()
+    assert main([*args, "--out", str(tmp_path / "old")]) == 1
+    assert "saved before binary layers kept their minimum feature" in capsys.readouterr().err
+
+
 @pytest.mark.parametrize(
     ("extra", "message"),
     [

@@ -35,7 +35,12 @@ def register(optics_sub: argparse._SubParsersAction) -> None:
     p.add_argument("--name", help="the design's name (default: the folder's)")
     p.add_argument("--photons", type=float, default=100.0, help="target exposure N (default 100)")
     p.add_argument("--read-noise", type=float, default=2.0, help="electrons (default 2)")
-    p.add_argument("--steps", type=int, default=50, help="gradient steps (default 50)")
+    p.add_argument(
+        "--steps",
+        type=int,
+        default=50,
+        help="gradient steps on continuous densities (default 50; 0: binary steps only)",
+    )
     p.add_argument("--lr", type=float, default=0.1, help="Adam's step (default 0.1)")
     p.add_argument(
         "--beta",
@@ -228,14 +233,19 @@ def _finish(
     psnr = -10.0 * math.log10(error)
     start_psnr = start["psnr"]
     chart = _report_chart(history, density, binary, out / "report.png")
+    first = (
+        ""
+        if history[0].get("binary")
+        else f"{history[0]['psnr']:.2f} dB at the first step (its densities pulled to "
+        "[0.25, 0.75]), "
+    )
     lines = [
         f"# {name}: a router designed for the image at N = {args.photons:g}",
         "",
         info["provenance"] + ".",
         "",
         f"- Closed-form LMMSE PSNR at the target exposure: {start_psnr:.2f} dB for the start "
-        f"as given ({args.start}), {history[0]['psnr']:.2f} dB at the first step (its "
-        f"densities pulled to [0.25, 0.75]), {_last_steps(history)}, {psnr:.2f} dB for the "
+        f"as given ({args.start}), {first}{_last_steps(history)}, {psnr:.2f} dB for the "
         f"binary design solved again; all at {_solved_by(args, solved['terms'])}.",
         f"- Reflection {float(solved['reflection'].mean()):.3f}; solving time "
         f"{sum(r['seconds'] for r in history) / 60:.1f} minutes over {len(history)} steps.",
@@ -286,14 +296,16 @@ def _last_steps(history: list[dict]) -> str:
     binary steps where there were some."""
     continuous = [r for r in history if not r.get("binary")]
     binary = [r for r in history if r.get("binary")]
-    said = f"{continuous[-1]['psnr']:.2f} dB at the last step of continuous densities"
+    said = []
+    if continuous:
+        said.append(f"{continuous[-1]['psnr']:.2f} dB at the last step of continuous densities")
     if binary:
         best = max(binary, key=lambda r: r["psnr"])
-        said += (
-            f", {binary[0]['psnr']:.2f} dB for its binary layer and {best['psnr']:.2f} dB for "
+        said.append(
+            f"{binary[0]['psnr']:.2f} dB for its first binary layer and {best['psnr']:.2f} dB for "
             f"the best of {len(binary)} binary steps (step {best['step']}, the design)"
         )
-    return said
+    return ", ".join(said)
 
 
 def _csv(grid, fmt: str = "{:g}") -> str:

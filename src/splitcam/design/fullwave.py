@@ -358,21 +358,34 @@ def run_design(
     Returns ``{"theta", "history", "beta"}``; ``history``: one row per step (``step``, ``beta``,
     ``binary``, ``psnr``, ``mse``, ``reflection``, ``seconds``).
 
+    ``steps`` 0: binary steps only, from the start as given (a binary start such as a
+    published design: the steps descend on fabricable layers from the first).
+
     Raises:
-        FullwaveError: Steps below 1, binary steps below 0, a learning rate or sharpness of 0 or
-            less, or ``out`` holding a run of other settings.
+        FullwaveError: No steps, steps or binary steps below 0, a learning rate or sharpness of
+            0 or less, or ``out`` holding a run of other settings (or one saved before binary
+            layers kept their minimum feature).
     """
     import time
     from pathlib import Path
 
     rate = lr if binary_lr is None else binary_lr
-    if steps < 1 or binary_steps < 0 or not min(lr, rate) > 0 or not 0 < beta_start <= beta_end:
+    if (
+        min(steps, binary_steps) < 0
+        or steps + binary_steps < 1
+        or not min(lr, rate) > 0
+        or not 0 < beta_start <= beta_end
+    ):
         raise FullwaveError(
-            f"steps >= 1, binary steps >= 0, learning rates > 0 and 0 < beta start <= beta end, "
-            f"got {steps}, {binary_steps}, {lr}, {rate}, {beta_start}, {beta_end}"
+            f"steps >= 0, binary steps >= 0 (at least one step in all), learning rates > 0 and "
+            f"0 < beta start <= beta end, got {steps}, {binary_steps}, {lr}, {rate}, "
+            f"{beta_start}, {beta_end}"
         )
     out = Path(out)
     settings = {**(settings or {}), "steps": steps, "lr": lr, "beta": [beta_start, beta_end]}
+    # Binary layers keep the minimum feature (FullwaveDesign.binary): a run saved before they
+    # did scored other layers, and is not continued.
+    settings["binary_layer"] = "keeps the minimum feature"
     if binary_steps:  # absent otherwise: runs saved before binary steps existed continue
         settings["binary_steps"] = binary_steps
         if binary_lr is not None:
@@ -428,8 +441,11 @@ def _restored(
         return opt, [], None
     tensors, meta, _ = load_pair(state_path, STATE_FORMAT, 1, "design state", FullwaveError)
     if _fixed(meta["settings"]) != _fixed(json_safe(settings)):
+        older = "binary_layer" not in meta["settings"]
         raise FullwaveError(
-            f"{state_path.parent} holds a design run of other settings; give another folder"
+            f"{state_path.parent} holds a design run of other settings"
+            + (" (saved before binary layers kept their minimum feature)" if older else "")
+            + "; give another folder"
         )
     with torch.no_grad():
         theta.copy_(tensors["theta"])
