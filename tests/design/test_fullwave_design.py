@@ -138,9 +138,13 @@ def test_a_design_from_saved_settings_is_the_one_built_by_hand():
         order=3,
         samples=8,
         radius=2.0,
+        feature=2,
     )
     ours = FullwaveDesign.from_settings(grid, settings)
     assert repr(ours) == repr(by_hand)
+    assert ours.feature_cells == 2 == FullwaveDesign(by_hand.geometry, radius=2.0).feature_cells
+    narrow = FullwaveDesign.from_settings(grid, {**settings, "filter": 0.25})
+    assert narrow.radius == 1.0 and narrow.feature_cells == 2  # the filter apart from the rule
     assert ours.optics is None
     behind = FullwaveDesign.from_settings(grid, {**settings, "optics": "silicon,ir-cut"})
     assert str(behind.optics) == str(stack_of(["silicon", "ir-cut"]))
@@ -344,6 +348,7 @@ def test_the_design_command_writes_a_solved_binary_design_and_continues_a_stoppe
     # The saved settings describe the run's problem: the binary design, solved again through
     # the design they rebuild, scores what the run said.
     settings = json.loads((tmp_path / "whole" / "state.json").read_text())["settings"]
+    assert "filter" not in settings  # recorded only where given: older runs continue
     again = fd.FullwaveDesign.from_settings(binary, settings)
     with torch.no_grad():
         t = again.transmission(torch.from_numpy(binary))[0].clamp_min(0.0)
@@ -442,8 +447,10 @@ def test_a_run_of_binary_steps_only_descends_on_fabricable_layers_from_a_binary_
     args = ["optics", "rcwa-design", str(tmp_path / "start.csv"), "--steps", "0"]
     args += ["--binary-steps", "2", "--binary-lr", "0.3", "--order", "1", "--samples", "8"]
     args += ["--feature", "0.5", "--wavelengths", "460,620", "--quiet"]  # 4 cells of 0.125 µm
+    args += ["--filter", "0.25"]  # narrower than the feature: the start's discs survive it
     assert main([*args, "--out", str(tmp_path / "b")]) == 0
     state = json.loads((tmp_path / "b" / "state.json").read_text())
+    assert state["settings"]["filter"] == 0.25
     assert [r["binary"] for r in state["history"]] == [True, True]
     design = np.loadtxt(tmp_path / "b" / "b.csv", delimiter=",")
     assert keeps_minimum_feature(design, 4)

@@ -68,8 +68,15 @@ def register(optics_sub: argparse._SubParsersAction) -> None:
         "--feature",
         type=float,
         default=0.08,
-        help="minimum feature size, µm: the conic filter's radius, and the brush that paints "
-        "every pillar and gap of the binary design (default 0.08, the leaderboard's)",
+        help="minimum feature size, µm: the brush that paints every pillar and gap of the "
+        "binary design (default 0.08, the leaderboard's)",
+    )
+    p.add_argument(
+        "--filter",
+        type=float,
+        help="the conic filter's radius, µm (default: --feature). A radius as wide as the "
+        "feature blurs away the start's features of that width (a disc as wide as the radius "
+        "filters to 0.5 at its centre); the binary layer keeps --feature whatever the filter",
     )
     p.add_argument(
         "--f-number", type=float, help="design behind a lens's cone (7 directions per solve)"
@@ -158,8 +165,8 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _settings_of(args: argparse.Namespace, grid, lams: list[float]) -> dict:
-    """What the run was started with: a continued run must have the same (``optics`` only
-    where a stack is given, so that runs saved before it continue)."""
+    """What the run was started with: a continued run must have the same (``optics`` and
+    ``filter`` only where given, so that runs saved before them continue)."""
     settings = {
         "start": args.start,
         "seed": args.seed,
@@ -184,6 +191,8 @@ def _settings_of(args: argparse.Namespace, grid, lams: list[float]) -> dict:
     }
     if args.stack:
         settings["optics"] = args.stack
+    if args.filter is not None:  # absent otherwise: runs saved before it continue
+        settings["filter"] = args.filter
     return settings
 
 

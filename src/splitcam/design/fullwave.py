@@ -123,6 +123,8 @@ class FullwaveDesign:
             ``terms`` is not given).
         samples: Flux grid points per pixel and axis.
         radius: The conic filter's radius in cells (the minimum feature, about radius x cell).
+        feature: The binary layer's minimum feature in cells, in pillars and gaps alike (the
+            brush of :mod:`splitcam.design.lengthscale`); None: the filter's radius, rounded.
         solver: One of :data:`~splitcam.physics.fullwave.SOLVERS`: torcwa (exact gradients), or
             fmmax (:func:`~splitcam.physics.fullwave.fmmax_quadrants`), whose Jones-direct
             formulation converges in fewer terms; its gradient holds the formulation's vector
@@ -143,6 +145,7 @@ class FullwaveDesign:
     order: int = 5
     samples: int = 16
     radius: float = 2.0
+    feature: int | None = None
     solver: str = "torcwa"
     terms: int | None = None
     optics: Any = None
@@ -172,8 +175,9 @@ class FullwaveDesign:
         """The design problem a run's ``settings`` describe (as ``splitcam optics
         rcwa-design`` saves them beside its state): the stack (``[pitch, thickness, depth,
         pillar, background, substrate]``) around ``grid``, the lens's cone (``f_number`` 0:
-        normal incidence), the exposure, the solver, the minimum feature in µm, and the optical
-        stack in front of every pixel where ``optics`` (its comma-separated names) is given.
+        normal incidence), the exposure, the solver, the minimum feature in µm (and the filter's
+        radius in µm where ``filter`` is given; else the feature), and the optical stack in
+        front of every pixel where ``optics`` (its comma-separated names) is given.
 
         Raises:
             FullwaveError: A feature size below the grid step, or any of the stack's or the
@@ -189,6 +193,9 @@ class FullwaveDesign:
             raise FullwaveError(
                 f"feature {feature:g} µm is below the grid step ({cell:.4g} µm per cell)"
             )
+        radius = settings.get("filter", feature)
+        if radius < 0:
+            raise FullwaveError(f"the filter's radius must be >= 0 µm, got {radius:g}")
         f_number = settings["f_number"]
         optics = settings.get("optics")
         return cls(
@@ -199,7 +206,8 @@ class FullwaveDesign:
             directions=cone_directions(f_number) if f_number else ((0.0, 0.0, 1.0),),
             order=settings["order"],
             samples=settings["samples"],
-            radius=feature / cell,
+            radius=radius / cell,
+            feature=int(round(feature / cell)),
             solver=settings["solver"],
             terms=settings["terms"],
             optics=stack_of(optics) if optics else None,
@@ -219,8 +227,9 @@ class FullwaveDesign:
 
     @property
     def feature_cells(self) -> int:
-        """The minimum feature of the binary layer, in cells: the filter's radius, rounded."""
-        return int(round(self.radius))
+        """The minimum feature of the binary layer, in cells (by default the filter's radius,
+        rounded)."""
+        return int(round(self.radius)) if self.feature is None else int(self.feature)
 
     def binary(self, theta: torch.Tensor, beta: float) -> np.ndarray:
         """The fabricable design (0/1 cells): the projected densities thresholded at 0.5, made
