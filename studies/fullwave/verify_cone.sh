@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
-# The cone designs (docs/results/fullwave/README.md, "The cone in the loss") verified once their
-# runs end, in three resumable stages (each keeps its solves; run the same line again after a
+# A cone design (docs/results/fullwave/README.md, "The cone in the loss") verified once its run
+# ends, in three resumable stages (each keeps its solves; run the same line again after a
 # stop). One thread each; run two designs' stages side by side on the two cores.
 #
 #   bash studies/fullwave/verify_cone.sh solve best-n30-f2     # the binary design at 797 terms,
