@@ -10,10 +10,11 @@ The chain, every step differentiable (PyTorch autograd through torcwa's RCWA):
    Struct. Multidisc. Optim. 43, 2011). The filter removes features narrower than about its
    radius, so ``r`` times the cell size is the design's minimum feature size; raising ``beta``
    over the run drives the densities to 0 and 1, and the reported design is the projection
-   thresholded at 0.5 and made to keep that feature size in solid and void alike (a brush of
-   ``r`` cells paints every feature: :mod:`splitcam.design.lengthscale`; thresholding alone
-   leaves specks and slits where the densities are grey) (:meth:`FullwaveDesign.binary`),
-   solved again as a binary layer.
+   thresholded at 0.5 and made to keep the minimum feature (by default ``r`` cells) in solid
+   and void alike (a brush of that diameter paints every feature:
+   :mod:`splitcam.design.lengthscale`; thresholding alone leaves specks and slits where the
+   densities are grey) (:meth:`FullwaveDesign.binary`), solved again as a binary layer.
+   Binary steps descend on that layer itself.
 2. **Densities → spectra.** :func:`splitcam.physics.fullwave.torcwa_quadrants`: the light of
    each wavelength crossing each pixel quadrant at the monitor depth, averaged over the two
    polarisations and over the directions of a lens's cone (normal incidence by default).
