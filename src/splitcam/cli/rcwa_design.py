@@ -35,6 +35,26 @@ def register(optics_sub: argparse._SubParsersAction) -> None:
     p.add_argument("--name", help="the design's name (default: the folder's)")
     p.add_argument("--photons", type=float, default=100.0, help="target exposure N (default 100)")
     p.add_argument("--read-noise", type=float, default=2.0, help="electrons (default 2)")
+    _add_descent_options(p)
+    p.add_argument(
+        "--f-number", type=float, help="design behind a lens's cone (7 directions per solve)"
+    )
+    p.add_argument(
+        "--stack",
+        help="design for a sensor behind this optical stack in front of every pixel, "
+        "comma-separated as `splitcam study exposure --stack` takes it (silicon, ir-cut, lens, "
+        "CSV files); the spectra written stay the router's own (default: a bare pixel)",
+    )
+    p.add_argument("--samples", type=int, default=16, help="flux grid points per pixel")
+    p.add_argument("--seed", type=int, default=0, help="of a noise: start (default 0)")
+    p.add_argument("--threads", type=int, help="CPU threads (default: torch's)")
+    p.add_argument("--quiet", action="store_true")
+    add_stack_options(p, wavelengths="450,550,650", order=5)
+    p.set_defaults(handler=run)
+
+
+def _add_descent_options(p: argparse.ArgumentParser) -> None:
+    """The descent: its steps, rates and sharpness, the binary phase and the feature size."""
     p.add_argument(
         "--steps",
         type=int,
@@ -78,21 +98,6 @@ def register(optics_sub: argparse._SubParsersAction) -> None:
         "feature blurs away the start's features of that width (a disc as wide as the radius "
         "filters to 0.5 at its centre); the binary layer keeps --feature whatever the filter",
     )
-    p.add_argument(
-        "--f-number", type=float, help="design behind a lens's cone (7 directions per solve)"
-    )
-    p.add_argument(
-        "--stack",
-        help="design for a sensor behind this optical stack in front of every pixel, "
-        "comma-separated as `splitcam study exposure --stack` takes it (silicon, ir-cut, lens, "
-        "CSV files); the spectra written stay the router's own (default: a bare pixel)",
-    )
-    p.add_argument("--samples", type=int, default=16, help="flux grid points per pixel")
-    p.add_argument("--seed", type=int, default=0, help="of a noise: start (default 0)")
-    p.add_argument("--threads", type=int, help="CPU threads (default: torch's)")
-    p.add_argument("--quiet", action="store_true")
-    add_stack_options(p, wavelengths="450,550,650", order=5)
-    p.set_defaults(handler=run)
 
 
 def _start_grid(text: str, seed: int):
