@@ -527,3 +527,65 @@ def test_a_gradient_holds_one_solve_at_a_time_and_equals_the_solves_held_togethe
     ref.backward()
     assert float(loss.detach()) == pytest.approx(float(ref.detach()), rel=1e-12)
     assert torch.allclose(theta.grad, theta_ref.grad, rtol=1e-9, atol=1e-14)
+
+
+class _Bowl:
+    """A stand-in design for the descent alone: the loss is ``sum((theta - 0.3)^2)`` (its
+    gradient known in closed form) and every theta scored is recorded. At a rate of 1 Adam
+    overshoots the bowl, so the binary steps fall below their best."""
+
+    def __init__(self):
+        self.scored = []
+
+    def start(self):
+        return torch.tensor([1.1, -1.1, 0.7], dtype=torch.float64)
+
+    def objective(self, theta, beta, binary=False):
+        self.scored.append(theta.detach().clone())
+        loss = ((theta - 0.3) ** 2).sum()
+        psnr = -10 * math.log10(float(loss.detach()))
+        return loss, {"psnr": psnr, "mse": float(loss.detach()), "reflection": 0.0}
+
+
+def test_backtracking_returns_to_the_best_layer_at_half_the_rate_and_continues_exactly(tmp_path):
+    from splitcam.design.fullwave import run_design
+    from splitcam.io.tensorfiles import load_pair, save_pair
+
+    kw = {"steps": 0, "binary_steps": 8, "binary_lr": 1.0}
+    plain = _Bowl()
+    flat = run_design(plain, tmp_path / "plain", **kw)["history"]
+    bowl = _Bowl()
+    rows = run_design(bowl, tmp_path / "b", backtrack=True, **kw)["history"]
+    assert [r["lr"] for r in flat] == [1.0] * 8  # without it: the same rate throughout
+    fell = [k for k in range(1, 7) if rows[k]["psnr"] < max(r["psnr"] for r in rows[:k])]
+    assert fell, "the bowl at rate 1 must overshoot"
+    for k in fell:
+        best = max(range(k), key=lambda j: (rows[j]["psnr"], j))
+        step = rows[k]["lr"] / 2
+        assert rows[k + 1]["lr"] == step
+        # Adam's first step from the best layer along its own gradient, 2 (theta - 0.3)
+        sign = torch.sign(bowl.scored[best] - 0.3)
+        torch.testing.assert_close(bowl.scored[k + 1], bowl.scored[best] - step * sign)
+    assert max(r["psnr"] for r in rows) > max(r["psnr"] for r in flat)
+    # Continued after any step, the run is the one that never stopped.
+    for stop in (2, fell[0] + 1, fell[0] + 2):
+        again = _Bowl()
+        run_design(again, tmp_path / f"s{stop}", backtrack=True, **{**kw, "binary_steps": stop})
+        rest = run_design(again, tmp_path / f"s{stop}", backtrack=True, **kw)["history"]
+        assert [r["psnr"] for r in rest] == [r["psnr"] for r in rows]
+        torch.testing.assert_close(torch.stack(again.scored), torch.stack(bowl.scored))
+    # Switched on when a run saved without the best layer's gradient (as runs were before
+    # backtracking) is continued after a fall: the best layer is scored once more, then the
+    # descent goes on at half the rate.
+    late = _Bowl()
+    first = next(k for k in range(1, 8) if flat[k]["psnr"] < max(r["psnr"] for r in flat[:k]))
+    run_design(late, tmp_path / "late", **{**kw, "binary_steps": first + 1})
+    state = tmp_path / "late" / "state"
+    tensors, meta, _ = load_pair(state, "splitcam-fullwave-design", 1, "", ValueError)
+    del tensors["best_grad"], meta["adam_step"]
+    save_pair(state, tensors, "splitcam-fullwave-design", 1, meta)
+    on = run_design(late, tmp_path / "late", backtrack=True, **kw)["history"]
+    best = max(range(first), key=lambda j: (flat[j]["psnr"], j))
+    torch.testing.assert_close(late.scored[first + 1], late.scored[best])
+    assert on[first + 1]["psnr"] == flat[best]["psnr"] and on[first + 1]["lr"] == 0.5
+    assert on[first + 2]["lr"] == 0.5 and not torch.equal(late.scored[first + 2], late.scored[best])

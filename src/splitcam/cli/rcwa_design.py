@@ -85,6 +85,13 @@ def _add_descent_options(p: argparse.ArgumentParser) -> None:
         "a step",
     )
     p.add_argument(
+        "--backtrack",
+        action="store_true",
+        help="a binary step that scores below the best layer so far sends the next one back "
+        "to that layer at half the rate (a descent that settles instead of oscillating); may "
+        "be switched on when a run is continued",
+    )
+    p.add_argument(
         "--feature",
         type=float,
         default=0.08,
@@ -153,6 +160,7 @@ def run(args: argparse.Namespace) -> int:
         beta_end=args.beta[1],
         binary_steps=args.binary_steps,
         binary_lr=args.binary_lr,
+        backtrack=args.backtrack,
         settings=settings,
         progress=shown,
     )

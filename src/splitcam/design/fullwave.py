@@ -346,6 +346,7 @@ def run_design(
     beta_end: float = 32.0,
     binary_steps: int = 0,
     binary_lr: float | None = None,
+    backtrack: bool = False,
     settings: dict | None = None,
     progress: Any = None,
 ) -> dict[str, Any]:
@@ -364,6 +365,13 @@ def run_design(
     them scored (Adam on a thresholded layer does not descend monotonically). The number of
     binary steps is the one setting a continued run may change: more extends the binary phase,
     fewer ends it early, with the best binary layer of the steps done.
+
+    ``backtrack``: a binary step that scores below the best binary layer so far sends the
+    next one back to that layer, by a fresh Adam at half the rate of the step that fell (the
+    best layer's gradient, kept from when it was scored, takes the first step, so no solve is
+    spent scoring it again). A non-monotone descent then settles instead of oscillating. It may
+    be switched on when a run is continued (a run saved before it kept no gradient: the best
+    layer is scored once more); each binary row records its ``lr``.
 
     Returns ``{"theta", "history", "beta"}``; ``history``: one row per step (``step``, ``beta``,
     ``binary``, ``psnr``, ``mse``, ``reflection``, ``seconds``).
@@ -400,6 +408,8 @@ def run_design(
         settings["binary_steps"] = binary_steps
         if binary_lr is not None:
             settings["binary_lr"] = binary_lr
+    if backtrack:
+        settings["backtrack"] = True
     state_path = out / "state"
     theta = design.start().clone().requires_grad_(True)
     opt, history, best = _restored(state_path, settings, theta, steps, lr, rate)
@@ -410,14 +420,22 @@ def run_design(
         binary = step >= steps
         if step == steps:  # the binary steps start: a fresh optimiser
             opt = torch.optim.Adam([theta], lr=rate)
+        if binary and backtrack and _fell(history):
+            opt = _back_to_best(theta, best, opt)
         beta = beta_at(min(step, steps - 1), steps, beta_start, beta_end)
         before = theta.detach().clone() if binary else None  # the layer a binary step scores
         opt.zero_grad()
         loss, info = design.objective(theta, beta, binary=binary)
         loss.backward()
+        if binary and (
+            best is None
+            or info["psnr"] >= _best_binary(history)
+            or torch.equal(before, best["best"])  # the best layer scored again
+        ):
+            # the layer this step scored, before its update, and its gradient (a backtrack
+            # steps from it without scoring it again)
+            best = {"best": before, "best_grad": theta.grad.detach().clone()}
         opt.step()
-        if binary and (best is None or info["psnr"] > _best_binary(history)):
-            best = before  # the layer this step scored, before its update
         history.append(
             {
                 "step": step + 1,
@@ -427,13 +445,14 @@ def run_design(
                 "mse": info["mse"],
                 "reflection": info["reflection"],
                 "seconds": round(time.perf_counter() - start, 2),
+                **({"lr": opt.param_groups[0]["lr"]} if binary else {}),
             }
         )
         _save_state(state_path, theta, opt, best, settings, history)
         if progress is not None:
             progress(history[-1])
     return {
-        "theta": theta.detach() if best is None else best,
+        "theta": theta.detach() if best is None else best["best"],
         "history": history,
         "beta": beta_end if binary_steps else beta_at(steps - 1, steps, beta_start, beta_end),
     }
@@ -461,32 +480,57 @@ def _restored(
         theta.copy_(tensors["theta"])
     history = meta["history"]
     done = len(history)  # the steps the saved moments have seen
-    if done > steps:  # in the binary steps: their own optimiser
-        opt, done = torch.optim.Adam([theta], lr=rate), done - steps
+    if done > steps:  # in the binary steps: their own optimiser, at the rate it last had
+        opt, done = torch.optim.Adam([theta], lr=history[-1].get("lr", rate)), done - steps
     if history and len(history) != steps:  # (at ``steps`` the binary optimiser starts fresh)
         opt.state[theta] = {
-            "step": torch.tensor(float(done)),
+            "step": torch.tensor(float(meta.get("adam_step", done))),
             "exp_avg": tensors["exp_avg"].clone(),
             "exp_avg_sq": tensors["exp_avg_sq"].clone(),
         }
-    return opt, history, tensors.get("best")
+    best = {k: tensors[k] for k in ("best", "best_grad") if k in tensors}
+    return opt, history, best or None
+
+
+def _fell(history: list[dict]) -> bool:
+    """Whether the last step was a binary one that scored below the best binary layer
+    before it."""
+    return bool(history) and bool(history[-1].get("binary")) and (
+        history[-1]["psnr"] < _best_binary(history[:-1])
+    )
+
+
+def _back_to_best(
+    theta: torch.Tensor, best: dict[str, torch.Tensor], opt: torch.optim.Adam
+) -> torch.optim.Adam:
+    """``theta`` back at the best binary layer's variables and a fresh Adam at half the
+    rate; the best layer's gradient, where it was kept, takes that optimiser's first step."""
+    with torch.no_grad():
+        theta.copy_(best["best"])
+    fresh = torch.optim.Adam([theta], lr=opt.param_groups[0]["lr"] / 2)
+    if "best_grad" in best:
+        theta.grad = best["best_grad"].clone()
+        fresh.step()
+    return fresh
 
 
 def _fixed(settings: dict) -> dict:
-    """The settings a continued run must share: all but the number of binary steps."""
-    return {k: v for k, v in settings.items() if k != "binary_steps"}
+    """The settings a continued run must share: all but the number of binary steps and
+    whether they backtrack."""
+    return {k: v for k, v in settings.items() if k not in ("binary_steps", "backtrack")}
 
 
 def _save_state(
     state_path: Any,
     theta: torch.Tensor,
     opt: torch.optim.Adam,
-    best: torch.Tensor | None,
+    best: dict[str, torch.Tensor] | None,
     settings: dict,
     history: list[dict],
 ) -> None:
-    """Everything a stopped run continues from: the variables, the optimiser's moments, the
-    best binary layer so far, the settings and the history."""
+    """Everything a stopped run continues from: the variables, the optimiser's moments and
+    its step count, the best binary layer so far (and its gradient), the settings and the
+    history."""
     from ..io.tensorfiles import save_pair
 
     moments = opt.state[theta]
@@ -494,10 +538,13 @@ def _save_state(
         "theta": theta.detach(),
         "exp_avg": moments["exp_avg"],
         "exp_avg_sq": moments["exp_avg_sq"],
+        **(best or {}),
     }
-    if best is not None:
-        tensors["best"] = best
-    meta = {"settings": json_safe(settings), "history": history}
+    meta = {
+        "settings": json_safe(settings),
+        "history": history,
+        "adam_step": int(moments["step"]),
+    }
     save_pair(state_path, tensors, STATE_FORMAT, 1, meta)
 
 
