@@ -495,8 +495,10 @@ def _restored(
 def _fell(history: list[dict]) -> bool:
     """Whether the last step was a binary one that scored below the best binary layer
     before it."""
-    return bool(history) and bool(history[-1].get("binary")) and (
-        history[-1]["psnr"] < _best_binary(history[:-1])
+    return (
+        bool(history)
+        and bool(history[-1].get("binary"))
+        and (history[-1]["psnr"] < _best_binary(history[:-1]))
     )
 
 
