@@ -456,6 +456,9 @@ def test_a_run_of_binary_steps_only_descends_on_fabricable_layers_from_a_binary_
     assert keeps_minimum_feature(design, 4)
     report = (tmp_path / "b" / "report.md").read_text()
     assert "first step" not in report and "best of 2 binary steps" in report
+    found = re.search(r"solid (\d+) cells .* void (\d+) cells", report)
+    solid, void = map(int, found.groups())
+    assert min(solid, void) >= 4 and keeps_minimum_feature(design, min(solid, void))
     # A run saved before binary layers kept the feature scored other layers: refused.
     old = {k: v for k, v in state["settings"].items() if k != "binary_layer"}
     theta = torch.zeros(16, 16, dtype=torch.float64, requires_grad=True)

@@ -103,3 +103,39 @@ def test_the_designs_binary_layer_keeps_its_feature_and_the_loss_sees_that_layer
     assert not keeps_minimum_feature(raw, 6)  # the threshold alone would not
     forward = design.binarised(theta.clone().requires_grad_(True), 8.0)
     assert np.array_equal(forward.detach().numpy(), layer)
+
+
+def test_the_measured_length_scale_is_the_narrowest_feature_solid_and_void():
+    from splitcam.design.lengthscale import minimum_length_scale
+
+    shape = (48, 48)
+    discs = _disc(shape, (0, 0), 14) | _disc(shape, (24, 30), 11)  # one wraps the corners
+    solid, void = minimum_length_scale(discs)
+    assert solid == 11 and void > 11  # the smaller disc; the gaps between them are wide
+    slit = discs.copy()
+    slit[:, 40:43] = True  # a wall 3 cells wide, across the period
+    assert minimum_length_scale(slit)[0] == 3
+    cut = discs.copy()
+    cut[24, :] = False  # a one-cell slit across the period and through the smaller disc
+    assert minimum_length_scale(cut)[1] == 1
+    uniform = np.zeros((20, 30), bool)
+    assert minimum_length_scale(uniform) == (20, 20)
+    assert minimum_length_scale(discs, limit=5) == (5, 5)
+    with pytest.raises(LengthScaleError, match="2-D grid"):
+        minimum_length_scale(np.zeros(5, bool))
+
+
+@pytest.mark.parametrize("seed", [0, 3])
+def test_the_measured_length_scale_is_at_most_imagerulers_and_kept_by_the_repair(seed):
+    """imageruler lets the brush miss single cells along an interface, so it measures at
+    least ours; a layer made to keep d cells measures at least d by both."""
+    imageruler = pytest.importorskip("imageruler")
+    from splitcam.design.lengthscale import minimum_length_scale
+
+    layer = _thresholded_noise(seed, blur=4.0)
+    for x in (layer, with_minimum_feature(layer, 6)):
+        ours = minimum_length_scale(x)
+        theirs = imageruler.minimum_length_scale(x, periodic=(True, True))
+        assert ours[0] <= theirs[0] and ours[1] <= theirs[1]
+        assert keeps_minimum_feature(x, min(ours))
+    assert min(minimum_length_scale(with_minimum_feature(layer, 6))) >= 6

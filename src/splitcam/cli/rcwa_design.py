@@ -269,6 +269,7 @@ def _finish(
         f"- Closed-form LMMSE PSNR at the target exposure: {start_psnr:.2f} dB for the start "
         f"as given ({args.start}), {first}{_last_steps(history)}, {psnr:.2f} dB for the "
         f"binary design solved again; all at {_solved_by(args, solved['terms'])}.",
+        _measured_feature(binary, 2.0 * g.pitch / max(binary.shape)),
         f"- Reflection {float(solved['reflection'].mean()):.3f}; solving time "
         f"{sum(r['seconds'] for r in history) / 60:.1f} minutes over {len(history)} steps.",
         f"- Files: `{stem}.csv` (the design), `{stem}-density.csv`, `{stem}-spectra.csv`, "
@@ -286,6 +287,18 @@ def _finish(
         f"{pattern_file.name} and report.md"
     )
     return 0
+
+
+def _measured_feature(binary, cell: float) -> str:
+    """The binary design's minimum solid and void length scales, measured (the rule the
+    binary steps keep, checked on the design written)."""
+    from ..design.lengthscale import minimum_length_scale
+
+    solid, void = minimum_length_scale(binary)
+    return (
+        f"- Minimum feature, measured on the design (periodic): solid {solid} cells "
+        f"({solid * cell:.3g} µm), void {void} cells ({void * cell:.3g} µm)."
+    )
 
 
 def _band_table(lams: list[float], spectra: dict) -> list[str]:

@@ -63,6 +63,40 @@ def keeps_minimum_feature(layer: np.ndarray, diameter: int) -> bool:
     )
 
 
+def minimum_length_scale(layer: np.ndarray, limit: int = 64) -> tuple[int, int]:
+    """The periodic layer's minimum solid and void length scales, in cells: the widest brush
+    that paints every solid (opening leaves the layer as it is), and the same of void
+    (closing), so that :func:`keeps_minimum_feature` holds for the smaller of the two; at most
+    ``limit`` (or the layer's shorter side), which a phase absent or unbroken measures. A
+    disc of odd width is not a union of the even brush one narrower (their centres sit half a
+    cell apart), so the search goes on past a brush that fails and stops where two widths in
+    a row fail. The measure the binary designs' reports print; imageruler's lets the brush
+    miss single cells along an interface, and measures at least as wide."""
+    layer = np.asarray(layer, dtype=bool)
+    if layer.ndim != 2 or min(layer.shape) < 1 or limit < 1:
+        raise LengthScaleError(
+            f"a layer is a 2-D grid and the limit at least 1, got {layer.shape}, {limit}"
+        )
+    top = min(limit, *layer.shape)
+    if layer.all() or not layer.any():
+        return top, top
+
+    def widest(keeps) -> int:
+        best, d = 0, 1
+        while d <= top:
+            if keeps(d):
+                best, d = d, d + 1
+            elif d + 1 <= top and keeps(d + 1):
+                best, d = d + 1, d + 2
+            else:
+                break
+        return best
+
+    solid = widest(lambda d: np.array_equal(opened(layer, d), layer))
+    void = widest(lambda d: np.array_equal(closed(layer, d), layer))
+    return solid, void
+
+
 def with_minimum_feature(layer: np.ndarray, diameter: int, rounds: int = 20) -> np.ndarray:
     """The binary periodic ``layer`` (bool, or 0/1) changed as little as the rule allows so that
     a brush of ``diameter`` cells paints its every solid and void feature (module docstring).
