@@ -15,6 +15,10 @@ networks that take kernels up to 5 x 5), the pattern of the nearest-copy rule on
 (the computed kernels' sums over the period, ``NAME-f2-nearest.toml``), ``kernels.md`` (the
 shares kept, sent to the nearest neighbours and farther, per band, and the fit's misfit) and
 ``NAME-kernels.png``. The solves are kept in ``solves.jsonl``: a stopped run continues.
+
+``--part K/N`` solves only every N-th wavelength from the K-th, into ``solves-KofN.jsonl``, and
+writes nothing else: N such processes side by side share the solving (one core each), then the
+same command without ``--part`` takes their solves into ``solves.jsonl`` and writes the files.
 """
 
 from __future__ import annotations
@@ -77,8 +81,13 @@ def main() -> None:
     parser.add_argument("--designs", default="zou,best")
     parser.add_argument("--terms", type=int, default=97)
     parser.add_argument("--out", type=Path, default=Path("docs/results/fullwave/kernels"))
+    parser.add_argument("--part", help="K/N: solve every N-th wavelength from the K-th, only")
     args = parser.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
+    if args.part:
+        _solve_part(args)
+        return
+    _take_parts(args.out)
     lines = [
         "# Kernels computed from the fields, beside the nearest-copy rule",
         "",
@@ -171,6 +180,51 @@ def main() -> None:
     lines += misfits
     write_text(args.out / "kernels.md", "\n".join(lines) + "\n")
     print((args.out / "kernels.md").read_text(encoding="utf-8"))
+
+
+def _solve_part(args) -> None:
+    """Solve one part's wavelengths into its own file (appends from two processes to one
+    file could interleave)."""
+    import re
+
+    found = re.fullmatch(r"(\d+)/(\d+)", args.part)
+    if not found or not 1 <= int(found[1]) <= int(found[2]):
+        raise SystemExit(f"--part is K/N with 1 <= K <= N, got {args.part!r}")
+    k, n = int(found[1]), int(found[2])
+    lams = WAVELENGTHS[k - 1 :: n]
+    for spec in args.designs.split(","):
+        key, _, design, _ = _router(spec)
+        pixel_kernels(
+            design,
+            lams,
+            f_number=2.0,
+            terms=args.terms,
+            cache=args.out / f"solves-{k}of{n}.jsonl",
+            progress=lambda done, key=key: print(
+                f"{key} part {k}/{n}: {done}/{len(lams)}", flush=True
+            ),
+        )
+
+
+def _take_parts(out: Path) -> None:
+    """The parts' solves appended to ``solves.jsonl`` (the lines it does not hold yet), each
+    part's file removed once its lines are in."""
+    parts = sorted(out.glob("solves-*of*.jsonl"))
+    if not parts:
+        return
+    whole = out / "solves.jsonl"
+    text = whole.read_text(encoding="utf-8") if whole.exists() else ""
+    held = set(text.splitlines())
+    with whole.open("a", encoding="utf-8") as f:
+        if text and not text.endswith("\n"):
+            f.write("\n")  # a line a stopped run cut short stays apart
+        for part in parts:
+            for line in part.read_text(encoding="utf-8").splitlines():
+                if line.strip() and line not in held:
+                    f.write(line + "\n")
+                    held.add(line)
+    for part in parts:
+        part.unlink()
 
 
 def _figure(path: Path, kernels: np.ndarray, rule: np.ndarray, key: str) -> None:

@@ -6,7 +6,8 @@
 #   bash studies/fullwave/verify_cone.sh solve best-n30-f2     # the binary design at 797 terms,
 #       # f/2 cone, six wavelengths, against the leaderboard design at the same setting
 #   bash studies/fullwave/verify_cone.sh kernels best-n30-f2   # its kernels from the fields
-#       # (793 terms, 410-690 nm, f/2; about two hours of one thread), in the design's folder
+#       # (793 terms, 410-690 nm, f/2; about two hours of one thread), in the design's folder;
+#       # PARTS=2 shares the solving between two processes, one core each
 #   SPLITCAM_DATA=DIR bash studies/fullwave/verify_cone.sh answer best-n30-f2 best-n300-f2
 #       # the exposure answer with the designs added (only the new patterns are scored)
 set -euo pipefail
@@ -31,8 +32,14 @@ solve)
 kernels)
     for name in "$@"; do
         # files named as the published routers' (KEY-f2-computed.json): the key without -f2
-        python studies/fullwave/kernels.py --designs "${name%-f2}=$D/$name/$name.csv" --terms 793 \
-            --out "$D/$name/kernels-793"
+        kernels=(python studies/fullwave/kernels.py --designs "${name%-f2}=$D/$name/$name.csv"
+            --terms 793 --out "$D/$name/kernels-793")
+        parts=${PARTS:-1}
+        if [ "$parts" -gt 1 ]; then
+            for k in $(seq 1 "$parts"); do "${kernels[@]}" --part "$k/$parts" & done
+            wait
+        fi
+        "${kernels[@]}"
     done
     ;;
 answer)
