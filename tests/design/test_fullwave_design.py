@@ -554,21 +554,22 @@ def test_backtracking_returns_to_the_best_layer_at_half_the_rate_and_continues_e
     from splitcam.design.fullwave import run_design
     from splitcam.io.tensorfiles import load_pair, save_pair
 
-    kw = {"steps": 0, "binary_steps": 8, "binary_lr": 1.0}
+    kw = {"steps": 0, "binary_steps": 12, "binary_lr": 1.0}
     plain = _Bowl()
     flat = run_design(plain, tmp_path / "plain", **kw)["history"]
     bowl = _Bowl()
     rows = run_design(bowl, tmp_path / "b", backtrack=True, **kw)["history"]
-    assert [r["lr"] for r in flat] == [1.0] * 8  # without it: the same rate throughout
-    fell = [k for k in range(1, 7) if rows[k]["psnr"] < max(r["psnr"] for r in rows[:k])]
+    assert [r["lr"] for r in flat] == [1.0] * 12  # without it: the same rate throughout
+    fell = [k for k in range(1, 11) if rows[k]["psnr"] < max(r["psnr"] for r in rows[:k])]
     assert fell, "the bowl at rate 1 must overshoot"
     for k in fell:
         best = max(range(k), key=lambda j: (rows[j]["psnr"], j))
-        step = rows[k]["lr"] / 2
-        assert rows[k + 1]["lr"] == step
-        # Adam's first step from the best layer along its own gradient, 2 (theta - 0.3)
-        sign = torch.sign(bowl.scored[best] - 0.3)
-        torch.testing.assert_close(bowl.scored[k + 1], bowl.scored[best] - step * sign)
+        rate = rows[k]["lr"] / 2
+        assert rows[k + 1]["lr"] == rate
+        # the step taken from the best layer (to the next layer scored), again at that rate
+        step = bowl.scored[best + 1] - bowl.scored[best]
+        expected = bowl.scored[best] + step * rate / rows[best]["lr"]
+        torch.testing.assert_close(bowl.scored[k + 1], expected)
     assert max(r["psnr"] for r in rows) > max(r["psnr"] for r in flat)
     # Continued after any step, the run is the one that never stopped.
     for stop in (2, fell[0] + 1, fell[0] + 2):
@@ -577,7 +578,19 @@ def test_backtracking_returns_to_the_best_layer_at_half_the_rate_and_continues_e
         rest = run_design(again, tmp_path / f"s{stop}", backtrack=True, **kw)["history"]
         assert [r["psnr"] for r in rest] == [r["psnr"] for r in rows]
         torch.testing.assert_close(torch.stack(again.scored), torch.stack(bowl.scored))
-    # Switched on when a run saved without the best layer's gradient (as runs were before
+    # The backtracked step's optimiser carries on from the best layer's moments: its count is
+    # the best step's plus one (a fresh Adam's would be 1).
+    k = fell[0]
+    best = max(range(k), key=lambda j: (rows[j]["psnr"], j))
+    saved = load_pair(
+        tmp_path / f"s{k + 2}" / "state", "splitcam-fullwave-design", 1, "", ValueError
+    )
+    assert saved[1]["history"] == rows  # (the folder continued to the end: read its rows)
+    short = tmp_path / "short"
+    run_design(_Bowl(), short, backtrack=True, **{**kw, "binary_steps": k + 2})
+    meta = load_pair(short / "state", "splitcam-fullwave-design", 1, "", ValueError)[1]
+    assert meta["adam_step"] == best + 2
+    # Switched on when a run saved without the step from its best layer (as runs were before
     # backtracking) is continued after a fall: the best layer is scored once more, then the
     # descent goes on at half the rate.
     late = _Bowl()
@@ -585,7 +598,8 @@ def test_backtracking_returns_to_the_best_layer_at_half_the_rate_and_continues_e
     run_design(late, tmp_path / "late", **{**kw, "binary_steps": first + 1})
     state = tmp_path / "late" / "state"
     tensors, meta, _ = load_pair(state, "splitcam-fullwave-design", 1, "", ValueError)
-    del tensors["best_grad"], meta["adam_step"]
+    tensors = {k: v for k, v in tensors.items() if k == "best" or not k.startswith("best")}
+    del meta["adam_step"]
     save_pair(state, tensors, "splitcam-fullwave-design", 1, meta)
     on = run_design(late, tmp_path / "late", backtrack=True, **kw)["history"]
     best = max(range(first), key=lambda j: (flat[j]["psnr"], j))

@@ -367,11 +367,12 @@ def run_design(
     fewer ends it early, with the best binary layer of the steps done.
 
     ``backtrack``: a binary step that scores below the best binary layer so far sends the
-    next one back to that layer, by a fresh Adam at half the rate of the step that fell (the
-    best layer's gradient, kept from when it was scored, takes the first step, so no solve is
-    spent scoring it again). A non-monotone descent then settles instead of oscillating. It may
-    be switched on when a run is continued (a run saved before it kept no gradient: the best
-    layer is scored once more); each binary row records its ``lr``.
+    next one back to that layer, at half the rate of the step that fell: the step the optimiser
+    took from the best layer is taken again at that rate (its direction and Adam's moments as
+    they were there), so no solve is spent scoring the best layer again. A non-monotone descent
+    then settles instead of oscillating. It may be switched on when a run is continued (a run
+    saved before it kept no moments of its best layer: that layer is scored once more, by a
+    fresh Adam); each binary row records its ``lr``.
 
     Returns ``{"theta", "history", "beta"}``; ``history``: one row per step (``step``, ``beta``,
     ``binary``, ``psnr``, ``mse``, ``reflection``, ``seconds``).
@@ -427,15 +428,15 @@ def run_design(
         opt.zero_grad()
         loss, info = design.objective(theta, beta, binary=binary)
         loss.backward()
+        opt.step()
         if binary and (
             best is None
             or info["psnr"] >= _best_binary(history)
             or torch.equal(before, best["best"])  # the best layer scored again
         ):
-            # the layer this step scored, before its update, and its gradient (a backtrack
-            # steps from it without scoring it again)
-            best = {"best": before, "best_grad": theta.grad.detach().clone()}
-        opt.step()
+            # the layer this step scored, before its update, and the step taken from it (a
+            # backtrack takes it again, shorter, without scoring the layer again)
+            best = {"best": before, **_step_from(theta, opt)}
         history.append(
             {
                 "step": step + 1,
@@ -488,7 +489,7 @@ def _restored(
             "exp_avg": tensors["exp_avg"].clone(),
             "exp_avg_sq": tensors["exp_avg_sq"].clone(),
         }
-    best = {k: tensors[k] for k in ("best", "best_grad") if k in tensors}
+    best = {k: v for k, v in tensors.items() if k.startswith("best")}
     return opt, history, best or None
 
 
@@ -502,18 +503,37 @@ def _fell(history: list[dict]) -> bool:
     )
 
 
+def _step_from(theta: torch.Tensor, opt: torch.optim.Adam) -> dict[str, torch.Tensor]:
+    """The step the optimiser just took from the best layer: where it led, at which rate, and
+    Adam's moments and count after it."""
+    moments = opt.state[theta]
+    return {
+        "best_after": theta.detach().clone(),
+        "best_lr": torch.tensor(float(opt.param_groups[0]["lr"])),
+        "best_adam_step": torch.tensor(float(moments["step"])),
+        "best_exp_avg": moments["exp_avg"].clone(),
+        "best_exp_avg_sq": moments["exp_avg_sq"].clone(),
+    }
+
+
 def _back_to_best(
     theta: torch.Tensor, best: dict[str, torch.Tensor], opt: torch.optim.Adam
 ) -> torch.optim.Adam:
-    """``theta`` back at the best binary layer's variables and a fresh Adam at half the
-    rate; the best layer's gradient, where it was kept, takes that optimiser's first step."""
+    """The step from the best binary layer taken again at half the rate of the step that fell
+    (an Adam at that rate, with the moments it had there); where that step was not kept (a run
+    saved before backtracking), ``theta`` back at the best layer and a fresh Adam."""
+    rate = opt.param_groups[0]["lr"] / 2
+    back = torch.optim.Adam([theta], lr=rate)
     with torch.no_grad():
         theta.copy_(best["best"])
-    fresh = torch.optim.Adam([theta], lr=opt.param_groups[0]["lr"] / 2)
-    if "best_grad" in best:
-        theta.grad = best["best_grad"].clone()
-        fresh.step()
-    return fresh
+        if "best_after" in best:
+            theta.add_((best["best_after"] - best["best"]) * (rate / float(best["best_lr"])))
+            back.state[theta] = {
+                "step": best["best_adam_step"].clone(),
+                "exp_avg": best["best_exp_avg"].clone(),
+                "exp_avg_sq": best["best_exp_avg_sq"].clone(),
+            }
+    return back
 
 
 def _fixed(settings: dict) -> dict:
@@ -531,8 +551,8 @@ def _save_state(
     history: list[dict],
 ) -> None:
     """Everything a stopped run continues from: the variables, the optimiser's moments and
-    its step count, the best binary layer so far (and its gradient), the settings and the
-    history."""
+    its step count, the best binary layer so far (and the step taken from it), the settings
+    and the history."""
     from ..io.tensorfiles import save_pair
 
     moments = opt.state[theta]
