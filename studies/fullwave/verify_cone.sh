@@ -9,7 +9,8 @@
 #       # (793 terms, 410-690 nm, f/2; about two hours of one thread), in the design's folder;
 #       # PARTS=2 shares the solving between two processes, one core each
 #   SPLITCAM_DATA=DIR bash studies/fullwave/verify_cone.sh answer best-n30-f2 best-n300-f2
-#       # the exposure answer with the designs added (only the new patterns are scored)
+#       # the exposure answer with the designs added (only the new patterns are scored): the
+#       # solve's pattern, and the kernels' where that stage has run
 set -euo pipefail
 export OMP_NUM_THREADS=1
 D=docs/results/fullwave/design
@@ -46,8 +47,11 @@ answer)
     : "${SPLITCAM_DATA:?set SPLITCAM_DATA to the data folder}"
     added=""
     for name in "$@"; do
-        added="$added,$D/$name/kernels-793/${name%-f2}-f2-computed.json"
-        added="$added,$D/$name/kernels-793/${name%-f2}-f2-nearest.toml"
+        # the kernels where that stage has run (the solve's pattern alone otherwise)
+        for f in "$D/$name/kernels-793/${name%-f2}-f2-computed.json" \
+            "$D/$name/kernels-793/${name%-f2}-f2-nearest.toml"; do
+            if [ -f "$f" ]; then added="$added,$f"; fi
+        done
         added="$added,$D/$name/verify/$name-f2-fmmax797.toml"
     done
     V=$D/zou-n30-binary-lr0.03/verify
