@@ -26,8 +26,12 @@ solve)
         splitcam optics rcwa "$D/$name/$name.csv" --thickness 0.699 --depth 2.8 \
             --solver fmmax-jones --terms 797 --wavelengths $LAMS --f-number 2 --threads 1 \
             --name "$name-f2-fmmax797" --out "$D/$name/verify" --quiet
-        python studies/fullwave/verify_design.py "$D/$name/verify/$name-f2-fmmax797-spectra.csv" \
-            "$A/best-f2-centre-6wl.toml" | tee "$D/$name/verify/verify.md"
+        verify=(python studies/fullwave/verify_design.py
+            "$D/$name/verify/$name-f2-fmmax797-spectra.csv" "$A/best-f2-centre-6wl.toml")
+        { echo "# $name solved again: 797 terms, f/2 cone, against the leaderboard design"
+          echo; echo "The bare pixel:"; echo
+          "${verify[@]}"
+          echo; "${verify[@]}" --stack silicon,ir-cut; } | tee "$D/$name/verify/verify.md"
     done
     ;;
 kernels)

@@ -2,13 +2,14 @@
 band efficiencies and the closed-form LMMSE PSNR at several exposures.
 
     python studies/fullwave/verify_design.py DESIGNED-spectra.csv START-spectra.csv \
-        [--photons 10 30 100 300 1000] [--read-noise 2]
+        [--photons 10 30 100 300 1000] [--read-noise 2] [--stack silicon,ir-cut]
 
 Each file is the ``NAME-spectra.csv`` that ``splitcam optics rcwa`` writes, or a spectral
 pattern file of transmissions (``.toml``); the same solver, terms and wavelengths for both. The
 PSNR is :meth:`splitcam.design.fullwave.FullwaveDesign.image_error` of the spectra: the expected
 error of the closed-form LMMSE in linear light under the photon model, away from image borders,
-no images needed.
+no images needed. ``--stack``: every pixel behind that optical stack (as the design loss with
+``rcwa-design --stack`` and the exposure study see it); the efficiencies stay the router's own.
 """
 
 from __future__ import annotations
@@ -44,7 +45,15 @@ def main() -> None:
     parser.add_argument("start", type=Path)
     parser.add_argument("--photons", type=float, nargs="+", default=[10, 30, 100, 300, 1000])
     parser.add_argument("--read-noise", type=float, default=2.0)
+    parser.add_argument("--stack", help="comma-separated optical stack in front of every pixel")
     args = parser.parse_args()
+    optics = None
+    if args.stack:
+        from splitcam.physics.stack import stack_of
+
+        optics = stack_of(args.stack)
+    if optics is not None:
+        print(f"Every pixel behind {optics}.\n")
     print(
         "| router | blue / green / red band efficiency | "
         + " | ".join(f"LMMSE PSNR at N = {n:g}" for n in args.photons)
@@ -57,7 +66,11 @@ def main() -> None:
         cells = []
         for n in args.photons:
             design = FullwaveDesign(
-                RouterDesign(np.eye(2)), wavelengths=lams, photons=n, read_noise=args.read_noise
+                RouterDesign(np.eye(2)),
+                wavelengths=lams,
+                photons=n,
+                read_noise=args.read_noise,
+                optics=optics,
             )
             mse = float(design.image_error(torch.from_numpy(t)))
             cells.append(f"{-10 * math.log10(mse):.2f}")
