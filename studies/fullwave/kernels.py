@@ -103,14 +103,7 @@ def main() -> None:
     misfits = []
     for spec in args.designs.split(","):
         key, csv, design, words = _router(spec)
-        result = pixel_kernels(
-            design,
-            WAVELENGTHS,
-            f_number=2.0,
-            terms=args.terms,
-            cache=args.out / "solves.jsonl",
-            progress=lambda done, key=key: print(f"{key}: {done}/{len(WAVELENGTHS)}", flush=True),
-        )
+        result = _solved(design, WAVELENGTHS, args.terms, args.out / "solves.jsonl", key)
         kernels = result["kernels"]
         totals = quadrant_sums(kernels)
         rule = _nearest_kernels(totals)
@@ -182,6 +175,19 @@ def main() -> None:
     print((args.out / "kernels.md").read_text(encoding="utf-8"))
 
 
+def _solved(design: RouterDesign, lams: list[float], terms: int, cache: Path, label: str) -> dict:
+    """The design's kernels behind f/2 at the centre of the field, its solves kept in
+    ``cache``, progress printed under ``label``."""
+    return pixel_kernels(
+        design,
+        lams,
+        f_number=2.0,
+        terms=terms,
+        cache=cache,
+        progress=lambda done: print(f"{label}: {done}/{len(lams)}", flush=True),
+    )
+
+
 def _solve_part(args) -> None:
     """Solve one part's wavelengths into its own file (appends from two processes to one
     file could interleave)."""
@@ -194,15 +200,8 @@ def _solve_part(args) -> None:
     lams = WAVELENGTHS[k - 1 :: n]
     for spec in args.designs.split(","):
         key, _, design, _ = _router(spec)
-        pixel_kernels(
-            design,
-            lams,
-            f_number=2.0,
-            terms=args.terms,
-            cache=args.out / f"solves-{k}of{n}.jsonl",
-            progress=lambda done, key=key: print(
-                f"{key} part {k}/{n}: {done}/{len(lams)}", flush=True
-            ),
+        _solved(
+            design, lams, args.terms, args.out / f"solves-{k}of{n}.jsonl", f"{key} part {k}/{n}"
         )
 
 

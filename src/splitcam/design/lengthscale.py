@@ -131,10 +131,10 @@ def _settled(x: np.ndarray, diameter: int, rounds: int) -> np.ndarray | None:
     """Opening, then closing, until neither changes the layer (None if not in ``rounds``)."""
     kernel = brush(diameter)
     for _ in range(rounds + 1):
-        once = opened(x, diameter)  # the check's opening is the alternation's first half
-        if np.array_equal(once, x) and np.array_equal(closed(x, diameter), x):
+        once = opened(x, diameter)  # the check's opening and closing are the alternation's
+        y = closed(once, diameter)  # (where the opening leaves x, this is x closed)
+        if np.array_equal(once, x) and np.array_equal(y, x):
             return x
-        y = closed(once, diameter)
         necks = y & ~opened(y, diameter)  # joins the closing made that the opening cuts
         x = y & ~_periodic(ndimage.binary_dilation, necks, kernel)
     return None
