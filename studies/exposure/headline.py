@@ -27,11 +27,13 @@ from splitcam.viz.charts import difference_chart
 ROOT = Path(__file__).resolve().parents[2]
 NET = "net-universal-photon-"
 #: The answer's candidates (``study label=legend label``): both routers behind an f/2 lens at the
-#: centre of the field with the kernels computed from their fields, and both at the corner
-#: (chief ray 25 degrees; six wavelengths, the nearest-copy rule).
+#: centre of the field with the kernels computed from their fields, the fabricable design made
+#: for N = 30 (docs/results/fullwave/) the same way, and both routers at the corner (chief ray 25
+#: degrees; six wavelengths, the nearest-copy rule).
 ROUTERS = (
     "best-f2-computed=leaderboard design, centre",
     "zou-f2-computed=Zou, centre",
+    "best-n30-fab-f2-computed=designed for N = 30 (80 nm rule), centre",
     "best-f2-corner-6wl=leaderboard design, corner (25°)",
     "zou-f2-corner-6wl=Zou, corner (25°)",
 )
