@@ -23,7 +23,11 @@ case "$stage" in
 solve)
     for name in "$@"; do
         [ -f "$D/$name/$name.csv" ] || { echo "$D/$name/$name.csv: the run has not ended" >&2; exit 1; }
-        splitcam optics rcwa "$D/$name/$name.csv" --thickness 0.699 --depth 2.8 \
+        # the run's own layer thickness and spacer depth (its state's stack)
+        read -r thickness depth < <(python -c 'import json, sys
+s = json.load(open(sys.argv[1]))["settings"]["stack"]
+print(s[1], s[2])' "$D/$name/state.json")
+        splitcam optics rcwa "$D/$name/$name.csv" --thickness "$thickness" --depth "$depth" \
             --solver fmmax-jones --terms 797 --wavelengths $LAMS --f-number 2 --threads 1 \
             --name "$name-f2-fmmax797" --out "$D/$name/verify" --quiet
         verify=(python studies/fullwave/verify_design.py
