@@ -121,3 +121,27 @@ def test_budgets_keep_cpu_and_gpu_minutes_apart():
     row = model_summary("A", both)
     assert row["batch"] == "8/64" and row["train time"] == "162 min CPU + 2.3 min GPU"
     assert training_budget(both).startswith("100 steps of batch 8/64, 162 min CPU + 2.3 min GPU")
+
+
+def test_a_model_exported_without_a_description_is_described_by_its_provenance(
+    trained_run, tmp_path
+):
+    """`splitcam models export` without --description composes the line from the header: the
+    network, the pattern, the light and noise, and each stage's recipe and steps, as the
+    provenance records them; a description given is kept as given."""
+    meta = json.loads(export_model(trained_run, tmp_path / "m").read_text())
+    segments = meta["provenance"]["segments"]
+    stage = segments[0].get("config_file") or segments[0]["run"]
+    assert meta["description"] == (
+        f"{meta['network']['arch']} network for pattern {meta['pattern']['name']}, trained in "
+        f"srgb light with gaussian noise; stages: {stage} ({segments[0]['steps']} steps)"
+    )
+    given = export_model(trained_run, tmp_path / "g", description="mine, by hand")
+    assert json.loads(given.read_text())["description"] == "mine, by hand"
+
+
+def test_every_shipped_model_has_a_description():
+    from splitcam.recon.loading import model_names
+
+    empty = [n for n in model_names() if not load_model(n).meta.get("description")]
+    assert empty == []

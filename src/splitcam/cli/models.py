@@ -47,7 +47,11 @@ def register(sub: argparse._SubParsersAction) -> None:
         "(recorded in its provenance)",
     )
     p.add_argument("--storage", choices=["float16", "bfloat16", "float32"], default="float16")
-    p.add_argument("--description", help="one line about the model")
+    p.add_argument(
+        "--description",
+        help="one line about the model (default: composed from its provenance: the network, "
+        "pattern, light, noise and each stage's recipe and steps)",
+    )
     p.set_defaults(handler=run)
 
 

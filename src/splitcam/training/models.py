@@ -33,7 +33,14 @@ from ..recon.loading import MODEL_FORMAT, MODEL_VERSION, ModelError, load_networ
 from .recipe import replayable
 from .rundir import METRICS_NAME, changes_rows, failure_of, last_metrics, metrics_rows
 
-__all__ = ["export_model", "model_summary", "provenance_of", "run_failure", "training_budget"]
+__all__ = [
+    "described",
+    "export_model",
+    "model_summary",
+    "provenance_of",
+    "run_failure",
+    "training_budget",
+]
 
 STORAGE = {"float16": torch.float16, "bfloat16": torch.bfloat16, "float32": torch.float32}
 
@@ -201,7 +208,7 @@ def export_model(
         )
     meta = {
         "name": name,
-        "description": description,
+        "description": description,  # composed from the provenance below where empty
         "network": loaded.meta["network"],
         "pattern": loaded.meta["pattern"],
         "start_pattern": loaded.meta.get("start_pattern"),
@@ -212,7 +219,28 @@ def export_model(
     }
     if failure:
         meta["provenance"]["failure"] = failure
+    meta["description"] = described(meta)
     return save_pair(meta_path, tensors, MODEL_FORMAT, MODEL_VERSION, meta)
+
+
+def described(meta: dict[str, Any]) -> str:
+    """A model's one line: its ``description`` where given, else one composed from the
+    header: the network, the pattern, the light and noise it was trained on, and each stage of
+    its provenance (the recipe file, or the run where none is recorded, and its steps)."""
+    if meta.get("description"):
+        return meta["description"]
+    config = meta.get("config") or {}
+    trained_on = config.get("pattern", {}).get("name")
+    pattern = "any pattern" if trained_on == "random" else f"pattern {meta['pattern']['name']}"
+    light = (config.get("data") or {}).get("domain") or SRGB
+    noise = (config.get("noise") or {}).get("model") or "gaussian"
+    stages = [
+        f"{seg.get('config_file') or seg.get('run', '?')} ({seg.get('steps', '?')} steps)"
+        for seg in (meta.get("provenance") or {}).get("segments", [])
+    ]
+    line = f"{meta['network']['arch']} network for {pattern}, trained in {light} light with "
+    line += f"{noise} noise"
+    return line + (f"; stages: {', '.join(stages)}" if stages else "")
 
 
 def run_failure(checkpoint: str | os.PathLike) -> str | None:

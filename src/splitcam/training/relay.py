@@ -238,7 +238,7 @@ def run_relay(args: argparse.Namespace) -> int:
     from ..data.patches import list_images
     from ..recon.loading import load_model
     from . import train
-    from .models import export_model
+    from .models import described, export_model
 
     if not args.minutes > 0:
         raise RelayError(f"--minutes must be > 0, got {args.minutes}")
@@ -268,7 +268,7 @@ def run_relay(args: argparse.Namespace) -> int:
         row = combine(parts)
         overhead = max(0.0, time.monotonic() - began - row["train_s"])
         if row["failure"] is None:
-            shipped = load_model(name).meta.get("description", "").rstrip(".")
+            shipped = described(load_model(name).meta).rstrip(".")
             what = "a colour stage and a cool-down" if args.colour else "the relay"
             export_model(
                 result.run_dir,
