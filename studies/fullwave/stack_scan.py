@@ -162,10 +162,14 @@ def main() -> None:
         write_text(OUT / "scan.md", table(rows()))
         print((OUT / "scan.md").read_text(encoding="utf-8"))
         return
-    k, n = (int(x) for x in args.part.split("/"))
+    try:
+        k, n = (int(x) for x in args.part.split("/"))
+        variants = [parse_variant(v) for v in args.variants]
+    except ValueError as exc:
+        parser.error(str(exc) if "variant" in str(exc) else f"--part {args.part}: expected K/N")
     if not 1 <= k <= n:
         parser.error(f"--part {args.part}: expected K/N with 1 <= K <= N")
-    mine = [parse_variant(v) for v in args.variants][k - 1 :: n]
+    mine = variants[k - 1 :: n]
     base = json.loads(SETTING.read_text(encoding="utf-8"))["settings"]
     layout = read_design(ROOT / base["start"])
     log = OUT / ("scan.jsonl" if n == 1 else f"scan-{k}of{n}.jsonl")
@@ -183,7 +187,7 @@ def main() -> None:
         with appending(log) as fh:
             fh.write(json.dumps(row) + "\n")
         print(
-            json.dumps({k: row[k] for k in ("variant", "psnr", "efficiency", "seconds")}),
+            json.dumps({key: row[key] for key in ("variant", "psnr", "efficiency", "seconds")}),
             flush=True,
         )
 
