@@ -14,18 +14,15 @@ with the RGBW to move from 22 to 44 (the network scores of the exposure answer).
 from __future__ import annotations
 
 import argparse
-import math
+import json
 import sys
 from pathlib import Path
 
 import numpy as np
-import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from verify_design import spectra  # noqa: E402  (the verification's own reader)
+from verify_design import psnr_at, spectra  # noqa: E402  (the verification's own)
 
-from splitcam.design.fullwave import FullwaveDesign  # noqa: E402
-from splitcam.physics.fullwave import RouterDesign  # noqa: E402
 from splitcam.physics.stack import stack_of  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -44,21 +41,11 @@ ANSWER = ROOT / "docs" / "results" / "exposure" / "answer" / "rn2" / "exposure.j
 def psnr_curve(path: Path, photons: np.ndarray) -> np.ndarray:
     """Closed-form LMMSE PSNR of the spectra in ``path`` at each exposure, behind the stack."""
     lams, t = spectra(path)
-    optics = stack_of("silicon,ir-cut")
-    out = []
-    for n in photons:
-        design = FullwaveDesign(
-            RouterDesign(np.eye(2)), wavelengths=lams, photons=float(n), optics=optics
-        )
-        with torch.no_grad():
-            out.append(-10 * math.log10(float(design.image_error(torch.from_numpy(t)))))
-    return np.asarray(out)
+    return np.asarray(psnr_at(lams, t, photons, optics=stack_of("silicon,ir-cut")))
 
 
 def needed_gain(at: str = "46.4") -> float:
     """The RGBW's network PSNR minus the leaderboard design's (computed kernels) at ``at``."""
-    import json
-
     results = json.loads(ANSWER.read_text(encoding="utf-8"))["results"]
     net = "net-universal-photon-"
     return results[net + "rgbw-d5100"][at]["psnr"] - results[net + "best-f2-computed"][at]["psnr"]

@@ -18,14 +18,17 @@ thread); its spectra and the closed-form LMMSE PSNR at N = 10, 30, 100, 300 and 
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import json
 import math
+import sys
 import time
 from pathlib import Path
 
 import numpy as np
 import torch
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from verify_design import psnr_at  # noqa: E402  (the verification's own PSNR)
 
 from splitcam.design.fullwave import FullwaveDesign
 from splitcam.io import appending, read_json_lines, write_text
@@ -98,11 +101,8 @@ def _solve(design: FullwaveDesign, layout: np.ndarray) -> dict:
     with torch.no_grad():
         t, reflection = design.transmission(torch.from_numpy(layout))
     t = t.clamp_min(0.0)
-    psnr = {}
-    for n in EXPOSURES:
-        with torch.no_grad():
-            mse = dataclasses.replace(design, photons=n).image_error(t)
-        psnr[f"{n:g}"] = round(-10.0 * math.log10(float(mse)), 4)
+    values = psnr_at(design.wavelengths, t.numpy(), EXPOSURES, design.read_noise, design.optics)
+    psnr = {f"{n:g}": round(p, 4) for n, p in zip(EXPOSURES, values, strict=True)}
     wl = np.asarray(design.wavelengths)
     eff = band_efficiencies(t.numpy(), wl, {"blue": 0, "red": 3})  # the bare pixel's
     return {
@@ -178,12 +178,9 @@ def main() -> None:
         label = _label(changes)
         if label in done:
             continue
-        design = FullwaveDesign.from_settings(layout, settings_of(base, changes))
-        row = {
-            "variant": label,
-            "stack": settings_of(base, changes)["stack"],
-            **_solve(design, layout),
-        }
+        settings = settings_of(base, changes)
+        design = FullwaveDesign.from_settings(layout, settings)
+        row = {"variant": label, "stack": settings["stack"], **_solve(design, layout)}
         with appending(log) as fh:
             fh.write(json.dumps(row) + "\n")
         print(

@@ -39,6 +39,24 @@ def spectra(path: Path) -> tuple[list[float], np.ndarray]:
     return lams, np.clip(t, 0.0, None)
 
 
+def psnr_at(lams, t: np.ndarray, photons, read_noise: float = 2.0, optics=None) -> list[float]:
+    """The closed-form LMMSE PSNR (dB) of a router with ``(2, 2, L)`` transmissions ``t`` at
+    each exposure in ``photons``, every pixel behind ``optics`` where given."""
+    out = []
+    for n in photons:
+        design = FullwaveDesign(
+            RouterDesign(np.eye(2)),
+            wavelengths=list(lams),
+            photons=float(n),
+            read_noise=read_noise,
+            optics=optics,
+        )
+        with torch.no_grad():
+            mse = float(design.image_error(torch.as_tensor(np.asarray(t, dtype=np.float64))))
+        out.append(-10 * math.log10(mse))
+    return out
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("designed", type=Path)
@@ -63,17 +81,7 @@ def main() -> None:
     for path in (args.start, args.designed):
         lams, t = spectra(path)
         bands = band_efficiencies(t, lams)
-        cells = []
-        for n in args.photons:
-            design = FullwaveDesign(
-                RouterDesign(np.eye(2)),
-                wavelengths=lams,
-                photons=n,
-                read_noise=args.read_noise,
-                optics=optics,
-            )
-            mse = float(design.image_error(torch.from_numpy(t)))
-            cells.append(f"{-10 * math.log10(mse):.2f}")
+        cells = [f"{p:.2f}" for p in psnr_at(lams, t, args.photons, args.read_noise, optics)]
         print(
             f"| {path.stem.removesuffix('-spectra')} | {bands['blue']:.3f} / "
             f"{bands['green']:.3f} / {bands['red']:.3f} | " + " | ".join(cells) + " |"

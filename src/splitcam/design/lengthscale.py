@@ -67,11 +67,11 @@ def minimum_length_scale(layer: np.ndarray, limit: int = 64) -> tuple[int, int]:
     """The periodic layer's minimum solid and void length scales, in cells: the widest brush
     that paints every solid (opening leaves the layer as it is), and the same of void
     (closing); at most ``limit`` (or the layer's shorter side), which a phase absent or
-    unbroken measures. A
-    disc of odd width is not a union of the even brush one narrower (their centres sit half a
-    cell apart), so the search goes on past a brush that fails and stops where two widths in
-    a row fail. The measure the binary designs' reports print; imageruler's lets the brush
-    miss single cells along an interface, and measures at least as wide."""
+    unbroken measures. A disc of odd width is not a union of the even brush one narrower
+    (their centres sit half a cell apart), so the search goes on past a brush that fails and
+    stops where two widths in a row fail. The measure the binary designs' reports print;
+    imageruler's lets the brush miss single cells along an interface, and measures at least as
+    wide."""
     layer = np.asarray(layer, dtype=bool)
     if layer.ndim != 2 or min(layer.shape) < 1 or limit < 1:
         raise LengthScaleError(

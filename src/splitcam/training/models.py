@@ -229,11 +229,8 @@ def described(meta: dict[str, Any]) -> str:
     its provenance (the recipe file, or the run where none is recorded, and its steps)."""
     if meta.get("description"):
         return meta["description"]
-    config = meta.get("config") or {}
-    trained_on = config.get("pattern", {}).get("name")
-    pattern = "any pattern" if trained_on == "random" else f"pattern {meta['pattern']['name']}"
-    light = (config.get("data") or {}).get("domain") or SRGB
-    noise = (config.get("noise") or {}).get("model") or "gaussian"
+    pattern, light, noise = _trained_on(meta)
+    pattern = "any pattern" if pattern == "any" else f"pattern {pattern}"
     stages = [
         f"{seg.get('config_file') or seg.get('run', '?')} ({seg.get('steps', '?')} steps)"
         for seg in (meta.get("provenance") or {}).get("segments", [])
@@ -253,6 +250,16 @@ def run_failure(checkpoint: str | os.PathLike) -> str | None:
         return None
     metrics = run_dir / METRICS_NAME
     return failure_of(metrics, last_metrics(metrics), float(loaded_meta.get("lr_scale", 1.0)))
+
+
+def _trained_on(meta: dict[str, Any]) -> tuple[str, str, str]:
+    """A model's pattern (``any`` for a network for any pattern), and the light and noise it
+    was trained on (the paper's ``srgb``, ``gaussian`` where its config names none)."""
+    config = meta.get("config") or {}
+    trained_on = config.get("pattern", {}).get("name")
+    light = (config.get("data") or {}).get("domain") or SRGB
+    noise = (config.get("noise") or {}).get("model") or "gaussian"
+    return ("any" if trained_on == "random" else meta["pattern"]["name"]), light, noise
 
 
 def _batches(segs: list[dict[str, Any]]) -> str:
@@ -305,13 +312,10 @@ def model_summary(name: str, meta: dict[str, Any]) -> dict[str, str]:
     devices."""
     prov = meta.get("provenance", {})
     segs = prov.get("segments", [])
-    config = meta.get("config") or {}
-    trained_on = config.get("pattern", {}).get("name")
-    light = (config.get("data") or {}).get("domain") or SRGB
-    noise = (config.get("noise") or {}).get("model") or "gaussian"
+    pattern, light, noise = _trained_on(meta)
     return {
         "model": name,
-        "pattern": "any" if trained_on == "random" else meta["pattern"]["name"],
+        "pattern": pattern,
         "network": meta["network"]["arch"],
         "trained on": f"{light}, {noise}",
         "steps": str(prov.get("total_steps", "?")),
