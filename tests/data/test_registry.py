@@ -176,3 +176,23 @@ def test_data_by_the_name_of_a_downloaded_dataset(tmp_path, monkeypatch):
     (tmp_path / "train").mkdir()  # a folder of that name here is the folder meant
     assert dataset_folder("train") == Path("train")
     assert dataset_folder("photos") == Path("photos")
+
+
+def test_a_portable_path_is_relative_to_the_data_root_or_the_working_folder(
+    tmp_path, monkeypatch
+):
+    from splitcam.data.registry import dataset_folder, portable_path
+
+    root, work = tmp_path / "data", tmp_path / "work"
+    (root / "train").mkdir(parents=True)
+    (work / "runs" / "a").mkdir(parents=True)
+    monkeypatch.setenv("SPLITCAM_DATA", str(root))
+    monkeypatch.chdir(work)
+    assert portable_path(root / "train") == "train"
+    assert dataset_folder(portable_path(root / "train")) == root / "train"  # resolves again
+    assert portable_path(str(root / "train" / "x.png")) == "train/x.png"
+    assert portable_path(work / "runs" / "a") == "runs/a"
+    assert portable_path(root) == "."
+    assert portable_path(tmp_path / "other" / "photos") == "photos"  # outside both: its name
+    assert portable_path("experiments/a.toml") == "experiments/a.toml"  # relative: as given
+    assert portable_path("") == ""

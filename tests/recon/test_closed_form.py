@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
-from conftest import SHARED_DATA
+from conftest import SHARED_DATA, blocky_images
 
 from splitcam import patterns
 from splitcam.data.imageio import read_image
@@ -69,6 +69,38 @@ def test_statistics_equal_direct_sums() -> None:
     assert stats.count == count
     np.testing.assert_allclose(stats.mean.numpy(), total / count, rtol=1e-12)
     np.testing.assert_allclose(stats.second.numpy(), expected, rtol=1e-10, atol=1e-13)
+
+
+def test_a_mixture_of_statistics_is_the_statistics_of_the_pooled_images() -> None:
+    # Two sets of different sizes: the pooled estimate weighs each by its pixel positions, so
+    # the mixture at weight count_b / (count_a + count_b) must equal it.
+    a, b = _smooth_images(3, 13, 1), _smooth_images(1, 13, 2) ** 2
+    sa, sb = (estimate_image_statistics(x, max_offset=3) for x in (a, b))
+    pooled = estimate_image_statistics(torch.cat([a, b]), max_offset=3)
+    mix = sa.mixed(sb, sb.count / (sa.count + sb.count))
+    torch.testing.assert_close(mix.mean, pooled.mean, rtol=1e-12, atol=1e-15)
+    torch.testing.assert_close(mix.second, pooled.second, rtol=1e-12, atol=1e-15)
+    assert mix.count == pooled.count and mix.domain == sa.domain
+    torch.testing.assert_close(sa.mixed(sb, 0.0).second, sa.second)
+    torch.testing.assert_close(sa.mixed(sb, 1.0).mean, sb.mean)
+    for bad in (-0.1, 1.5, True):
+        with pytest.raises(ValueError, match="weight in"):
+            sa.mixed(sb, bad)
+    with pytest.raises(ValueError, match="cannot mix"):
+        sa.mixed(estimate_image_statistics(b, max_offset=2), 0.5)
+    with pytest.raises(ValueError, match="cannot mix"):
+        sa.mixed(estimate_image_statistics(b, max_offset=3, domain="linear"), 0.5)
+
+
+def test_statistics_of_a_folder_record_it_as_it_is_found_on_any_machine(tmp_path, monkeypatch):
+    """The source of statistics estimated on the training photos is written relative to the
+    data root (``train``), as the shipped ones are, not as this machine's folder."""
+    monkeypatch.setenv("SPLITCAM_DATA", str(tmp_path))
+    folder = blocky_images(tmp_path / "train", 2)
+    stats = estimate_image_statistics(folder, max_offset=2)
+    assert stats.info["source"] == "train" and stats.info["images"] == 2
+    again = estimate_image_statistics(str(folder), max_offset=2)
+    torch.testing.assert_close(again.second, stats.second)
 
 
 def _brute_force_filters(

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+from pathlib import Path
 
 import pytest
 import torch
@@ -145,3 +146,49 @@ def test_every_shipped_model_has_a_description():
 
     empty = [n for n in model_names() if not load_model(n).meta.get("description")]
     assert empty == []
+
+
+def test_a_model_file_names_no_folder_of_the_machine_it_trained_on(
+    trained_run, tmp_path, monkeypatch
+):
+    """The run trained on photos in an absolute folder; under the data root the model records
+    it as the folder's name there (which ``dataset_folder`` resolves anywhere), outside it as
+    the folder's name alone; the run's own settings keep the path (a resume needs it)."""
+    from splitcam.io import checkpoints as ckpt_io
+
+    train_dir = str(ckpt_io.load(ckpt_io.resolve(trained_run)).meta["config"]["data"]["train"])
+    assert train_dir.startswith("/")
+    data = Path(train_dir)
+    monkeypatch.setenv("SPLITCAM_DATA", str(data.parent))
+    config = json.loads(export_model(trained_run, tmp_path / "in").read_text())["config"]
+    assert config["data"]["train"] == data.name
+    assert not str(config["run"]["out"]).startswith("/")
+    monkeypatch.setenv("SPLITCAM_DATA", str(tmp_path / "elsewhere"))
+    monkeypatch.chdir(tmp_path)
+    config = json.loads(export_model(trained_run, tmp_path / "out").read_text())["config"]
+    assert config["data"]["train"] == data.name
+    again = ckpt_io.load(ckpt_io.resolve(trained_run)).meta["config"]["data"]["train"]
+    assert again == train_dir
+
+
+def test_no_shipped_file_names_a_folder_of_the_machine_it_was_made_on():
+    """Every shipped model's settings and every shipped statistics' source are written
+    relative to the data root or a working folder (``portable_path``)."""
+    from splitcam.io.weights import LMMSE_DIR, MODELS_DIR
+    from splitcam.recon.closed_form import SHIPPED_PATHS
+    from splitcam.training.recipe import MACHINE_KEYS
+
+    found = []
+    for path in sorted(Path(MODELS_DIR).glob("*.json")):
+        config = json.loads(path.read_text())["config"]
+        for key in MACHINE_KEYS:
+            section, name = key.split(".")
+            value = config.get(section, {}).get(name)
+            if isinstance(value, str) and value.startswith("/"):
+                found.append(f"{path.name}: {key} = {value}")
+    stats = [Path(p).with_suffix(".json") for p in SHIPPED_PATHS.values()]
+    for path in stats + sorted(Path(LMMSE_DIR).glob("*.json")):
+        source = json.loads(path.read_text()).get("info", {}).get("source", "")
+        if str(source).startswith("/"):
+            found.append(f"{path.name}: source = {source}")
+    assert found == []

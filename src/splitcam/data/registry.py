@@ -32,6 +32,7 @@ __all__ = [
     "dataset_names",
     "datasets",
     "parse_registry",
+    "portable_path",
     "training_folder",
 ]
 
@@ -242,3 +243,23 @@ def data_root(root: str | os.PathLike[str] | None = None) -> Path:
     if root is None:
         root = os.environ.get(DATA_ENV) or DEFAULT_ROOT
     return Path(root).expanduser()
+
+
+def portable_path(path: str | os.PathLike[str]) -> str:
+    """How a data or run path is written into a file that leaves this machine (a shipped
+    model's settings, the source of shipped statistics): relative to the data root where it
+    lies under it (the training photos are ``train``, which :func:`dataset_folder` resolves
+    on any machine), else relative to the working folder where it lies under that, else its
+    last component. Relative paths are kept as given; so are empty ones.
+    """
+    text = str(path)
+    given = Path(text)
+    if not text or not given.is_absolute():
+        return text
+    resolved = given.resolve()
+    for base in (data_root(), Path.cwd()):
+        try:
+            return resolved.relative_to(base.resolve()).as_posix() or "."
+        except ValueError:
+            continue
+    return given.name

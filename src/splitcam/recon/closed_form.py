@@ -38,6 +38,7 @@ import numpy as np
 import torch
 
 from ..data.patches import ImageCache
+from ..data.registry import portable_path
 from ..io.domains import LINEAR, SRGB
 from ..io.tensorfiles import load_pair, save_pair
 from ..io.weights import IMAGE_STATISTICS, IMAGE_STATISTICS_LINEAR
@@ -119,6 +120,36 @@ class ImageStatistics:
     def covariance(self) -> torch.Tensor:
         """``C[c, c', dy + L, dx + L]``: the autocovariance (second moment minus mean product)."""
         return self.second - (self.mean[:, None] * self.mean[None, :])[:, :, None, None]
+
+    def mixed(self, other: ImageStatistics, weight: float) -> ImageStatistics:
+        """The statistics of the mixture ``(1 - weight) self + weight other``: a pixel drawn from
+        ``other``'s images with probability ``weight``. Moments of a mixture are the mixed
+        moments, so the mean and the second moment mix linearly (the autocovariance does not:
+        it is derived from them). E.g. the photos' statistics mixed with those of copies whose
+        chroma was moved, for a prior that holds on saturated colour
+        (``docs/results/colour/lmmse-statistics.md``).
+
+        Raises:
+            ValueError: A weight outside [0, 1], or statistics of another window or light domain.
+        """
+        if isinstance(weight, bool) or not 0.0 <= float(weight) <= 1.0:
+            raise ValueError(f"expected a mixture weight in [0, 1], got {weight!r}")
+        if other.second.shape != self.second.shape or other.domain != self.domain:
+            raise ValueError(
+                f"cannot mix image statistics of window {tuple(self.second.shape)} ({self.domain}) "
+                f"with {tuple(other.second.shape)} ({other.domain})"
+            )
+        w = float(weight)
+        info = {
+            "domain": self.domain,
+            "mixture": {"weight": w, "first": dict(self.info), "second": dict(other.info)},
+        }
+        return ImageStatistics(
+            (1 - w) * self.mean + w * other.mean,
+            (1 - w) * self.second + w * other.second,
+            self.count + other.count,
+            info,
+        )
 
     def save(self, path: str | os.PathLike[str]) -> Path:
         """Write ``<path>.safetensors`` plus ``<path>.json`` (checksum of the tensors); no pickle.
@@ -220,7 +251,8 @@ def estimate_image_statistics(
             else ImageCache(source, min_size=2 * lo + 2, max_images=max_images, progress=progress)
         )
         images = (cache.image(i) for i in range(len(cache)))
-        info = {"source": str(cache.paths[0].parent) if cache.paths else "", "images": len(cache)}
+        folder = portable_path(cache.paths[0].parent) if cache.paths else ""
+        info = {"source": folder, "images": len(cache)}
         if progress:
             from tqdm.auto import tqdm
 

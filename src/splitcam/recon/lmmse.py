@@ -22,6 +22,7 @@ import torch.nn.functional as F
 
 from ..checks import check_raw
 from ..data.patches import ImageCache, PatchSampler
+from ..data.registry import portable_path
 from ..io.domains import SRGB
 from ..io.tensorfiles import load_pair, save_pair
 from ..io.weights import LMMSE_DIR
@@ -383,7 +384,7 @@ def fit_lmmse(
 
             batches = tqdm(batches, total=len(sizes), desc=f"LMMSE {pattern.name}", leave=False)
         info = {
-            "source": str(sampler.cache.paths[0].parent) if sampler.cache.paths else "",
+            "source": portable_path(sampler.cache.paths[0].parent) if sampler.cache.paths else "",
             "images": len(sampler.cache),
             "patches": patches,
             "patch_size": sampler.patch_size,

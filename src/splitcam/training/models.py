@@ -26,11 +26,12 @@ from typing import Any
 
 import torch
 
+from ..data.registry import portable_path
 from ..io import checkpoints as ckpt_io
 from ..io.domains import SRGB
 from ..io.tensorfiles import paired_paths, save_pair
 from ..recon.loading import MODEL_FORMAT, MODEL_VERSION, ModelError, load_network
-from .recipe import replayable
+from .recipe import MACHINE_KEYS, replayable
 from .rundir import METRICS_NAME, changes_rows, failure_of, last_metrics, metrics_rows
 
 __all__ = [
@@ -212,7 +213,7 @@ def export_model(
         "network": loaded.meta["network"],
         "pattern": loaded.meta["pattern"],
         "start_pattern": loaded.meta.get("start_pattern"),
-        "config": loaded.meta["config"],
+        "config": portable_config(loaded.meta["config"]),
         "storage": storage,
         "exported": time.strftime("%Y-%m-%dT%H:%M:%S"),
         "provenance": provenance_of(loaded, run_dir),
@@ -221,6 +222,21 @@ def export_model(
         meta["provenance"]["failure"] = failure
     meta["description"] = described(meta)
     return save_pair(meta_path, tensors, MODEL_FORMAT, MODEL_VERSION, meta)
+
+
+def portable_config(config: dict[str, Any]) -> dict[str, Any]:
+    """A run's settings as a model file records them: the paths of :data:`MACHINE_KEYS`
+    (training photos, run folder, starting point) written by
+    :func:`~splitcam.data.registry.portable_path`, so no file that ships names a folder of the
+    machine it trained on (they are provenance: ``--recipe`` replays a model on data given
+    again)."""
+    out = {section: dict(values) for section, values in config.items()}
+    for key in MACHINE_KEYS:
+        section, name = key.split(".")
+        value = out.get(section, {}).get(name)
+        if isinstance(value, str):
+            out[section][name] = portable_path(value)
+    return out
 
 
 def described(meta: dict[str, Any]) -> str:
