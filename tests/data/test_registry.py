@@ -178,9 +178,7 @@ def test_data_by_the_name_of_a_downloaded_dataset(tmp_path, monkeypatch):
     assert dataset_folder("photos") == Path("photos")
 
 
-def test_a_portable_path_is_relative_to_the_data_root_or_the_working_folder(
-    tmp_path, monkeypatch
-):
+def test_a_portable_path_is_relative_to_the_data_root_or_the_working_folder(tmp_path, monkeypatch):
     from splitcam.data.registry import dataset_folder, portable_path
 
     root, work = tmp_path / "data", tmp_path / "work"
