@@ -38,6 +38,7 @@ __all__ = [
     "described",
     "export_model",
     "model_summary",
+    "portable_config",
     "provenance_of",
     "run_failure",
     "training_budget",
