@@ -275,3 +275,14 @@ def serve():
     yield start
     for server in servers:
         server.close()
+
+
+def load_script(path: Path, name: str | None = None):
+    """A script that is not a package module (a study, ``docs/models.py``), imported from its
+    file under ``name`` (default: its stem)."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location(name or path.stem, path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module

@@ -8,8 +8,8 @@ photos (and described on the test sets).
 The LMMSE is the one reconstruction whose prior is written down: the mean and autocovariance of
 the photos (``src/splitcam/weights/image_statistics``, estimated on the 400 training photos no
 run holds out). Here a copy of each of those photos has its chroma moved as the networks'
-colour lever moves patches (:class:`splitcam.data.colour.ColourMix` at probability 1: channels
-reordered, hue turned, chroma scaled 1-2.2x in the BT.601 opponent space, seed 0), the copies'
+colour lever moves patches (``splitcam.data.colour.chroma_moved_copies``: channels reordered,
+hue turned, chroma scaled 1-2.2x in the BT.601 opponent space, seed 0), the copies'
 statistics are estimated the same way, and the prior becomes the mixture
 ``(1 - w) photos + w copies`` (``ImageStatistics.mixed``: the moments of a mixture are the
 mixed moments; ``w = 0.5`` is about the networks' ``data.colour_statistics``). Every weight is
@@ -37,7 +37,7 @@ from pathlib import Path
 
 import torch
 
-from splitcam.data.colour import ColourMix, colourfulness
+from splitcam.data.colour import chroma_moved_copies, colourfulness
 from splitcam.data.imageio import read_image
 from splitcam.data.patches import list_images
 from splitcam.data.registry import training_folder
@@ -69,14 +69,10 @@ def moved_statistics(data: str, cache: Path, seed: int = 0) -> ImageStatistics:
             f"{data} has {len(photos)} photos outside the held-out {HELD_OUT}; the shipped "
             f"statistics were estimated on {shipped.info.get('images')}"
         )
-    mix = ColourMix(chroma=1.0)
-    generator = torch.Generator().manual_seed(seed)
-    moved = []
-    for path in photos:
-        rgb = torch.from_numpy(read_image(path)).permute(2, 0, 1).float()
-        moved.append(mix(rgb[None], generator)[0])
+    images = [torch.from_numpy(read_image(p)).permute(2, 0, 1).float() for p in photos]
+    moved = chroma_moved_copies(images, torch.Generator().manual_seed(seed))
     stats = estimate_image_statistics(moved, max_offset=shipped.max_offset, progress=True)
-    stats.info.update({"moved": "ColourMix(chroma=1.0)", "seed": seed, "images": len(moved)})
+    stats.info.update({"moved": "chroma_moved_copies", "seed": seed})
     cache.parent.mkdir(parents=True, exist_ok=True)
     stats.save(cache)
     return stats

@@ -223,3 +223,18 @@ def test_sampler_with_colour_resumes_and_inactive_changes_nothing(cache) -> None
     got = base.sample(5)
     assert got.shape == ahead[0].shape and not torch.equal(got, ahead[0])
     assert float(ahead[0].min()) >= 0 and float(ahead[0].max()) <= 1
+
+
+def test_chroma_moved_copies_move_colour_not_grey_and_draw_in_order():
+    from splitcam.data.colour import chroma_moved_copies
+
+    g = torch.Generator().manual_seed(3)
+    grey = torch.rand(1, 9, 11, generator=g).expand(3, 9, 11).clone()
+    colour = torch.rand(3, 8, 13, generator=g)
+    copies = chroma_moved_copies([grey, colour], torch.Generator().manual_seed(0))
+    torch.testing.assert_close(copies[0], grey, rtol=0, atol=1e-6)  # no chroma to move
+    assert copies[1].shape == colour.shape and 0 <= copies[1].min() <= copies[1].max() <= 1
+    assert (copies[1] - colour).abs().max() > 0.05
+    one = torch.Generator().manual_seed(0)  # one image at a time on one generator: the same
+    alone = [chroma_moved_copies([x], one)[0] for x in (grey, colour)]
+    torch.testing.assert_close(alone[1], copies[1], rtol=0, atol=0)

@@ -4,17 +4,15 @@ stages agree with their configuration files is tests/training/test_recipe.py's."
 
 from __future__ import annotations
 
-import importlib.util
 from pathlib import Path
+
+from conftest import load_script
 
 ROOT = Path(__file__).resolve().parents[2]
 
 
 def _page_module():
-    spec = importlib.util.spec_from_file_location("models_page", ROOT / "docs" / "models.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_script(ROOT / "docs" / "models.py", "models_page")
 
 
 def test_the_models_page_is_current():

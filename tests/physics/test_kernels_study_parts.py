@@ -3,20 +3,17 @@ solves its own wavelengths into its own file, and the whole run takes their line
 
 from __future__ import annotations
 
-import importlib.util
 import json
 from pathlib import Path
 
 import pytest
+from conftest import load_script
 
 STUDY = Path(__file__).resolve().parents[2] / "studies" / "fullwave" / "kernels.py"
 
 
 def _study():
-    spec = importlib.util.spec_from_file_location("kernels_study", STUDY)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_script(STUDY, "kernels_study")
 
 
 def test_the_parts_solves_are_taken_in_once_after_a_line_cut_short(tmp_path):

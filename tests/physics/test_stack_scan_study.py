@@ -3,21 +3,18 @@ stopped scan continues without solving a variant twice."""
 
 from __future__ import annotations
 
-import importlib.util
 import json
 from pathlib import Path
 
 import pytest
+from conftest import load_script
 
 STUDY = Path(__file__).resolve().parents[2] / "studies" / "fullwave" / "stack_scan.py"
 BASE = {"stack": [1.0, 0.699, 2.8, "Si3N4", "vacuum", "SiO2"], "terms": 357}
 
 
 def _study():
-    spec = importlib.util.spec_from_file_location("stack_scan_study", STUDY)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_script(STUDY, "stack_scan_study")
 
 
 def test_a_variant_changes_only_what_it_names():

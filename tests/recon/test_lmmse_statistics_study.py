@@ -3,12 +3,11 @@ list, and a network's LMMSE is solved from the statistics it is handed."""
 
 from __future__ import annotations
 
-import importlib.util
 from pathlib import Path
 
 import pytest
 import torch
-from conftest import blocky_images
+from conftest import blocky_images, load_script
 
 from splitcam.recon.closed_form import ImageStatistics, shipped_image_statistics
 
@@ -16,10 +15,7 @@ STUDY = Path(__file__).resolve().parents[2] / "studies" / "colour" / "lmmse_stat
 
 
 def _study():
-    spec = importlib.util.spec_from_file_location("lmmse_statistics_study", STUDY)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_script(STUDY, "lmmse_statistics_study")
 
 
 def test_copies_of_another_list_of_photos_than_the_shipped_statistics_are_refused(tmp_path):

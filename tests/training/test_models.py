@@ -172,7 +172,7 @@ def test_a_model_file_names_no_folder_of_the_machine_it_trained_on(
 
 
 def test_no_shipped_file_names_a_folder_of_the_machine_it_was_made_on():
-    """Every shipped model's settings and every shipped statistics' source are written
+    """Every shipped model's settings and stages and every shipped statistics' source are written
     relative to the data root or a working folder (``portable_path``)."""
     from splitcam.io.weights import LMMSE_DIR, MODELS_DIR
     from splitcam.recon.closed_form import SHIPPED_PATHS
@@ -186,6 +186,9 @@ def test_no_shipped_file_names_a_folder_of_the_machine_it_was_made_on():
             value = config.get(section, {}).get(name)
             if isinstance(value, str) and value.startswith("/"):
                 found.append(f"{path.name}: {key} = {value}")
+        for seg in json.loads(path.read_text())["provenance"]["segments"]:
+            if str((seg.get("data") or {}).get("train", "")).startswith("/"):
+                found.append(f"{path.name}: segment {seg.get('run')} trained on {seg['data']}")
     stats = [Path(p).with_suffix(".json") for p in SHIPPED_PATHS.values()]
     for path in stats + sorted(Path(LMMSE_DIR).glob("*.json")):
         source = json.loads(path.read_text()).get("info", {}).get("source", "")

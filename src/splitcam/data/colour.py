@@ -36,6 +36,7 @@ from ..physics.light import linear_to_srgb, srgb_to_linear
 __all__ = [
     "ColourMix",
     "augment_chroma",
+    "chroma_moved_copies",
     "colourfulness",
     "dead_leaves",
     "opponent_to_rgb",
@@ -266,3 +267,22 @@ class ColourMix:
         if linear:
             values = linear_to_srgb(values).clamp(0.0, 1.0)
         return torch.where(touched.to(dev).view(-1, 1, 1, 1), values, batch)
+
+
+def chroma_moved_copies(
+    images: list[torch.Tensor],
+    generator: torch.Generator,
+    *,
+    chroma_max: float = 2.2,
+    space: str = "srgb",
+) -> list[torch.Tensor]:
+    """A chroma-moved copy of each whole image, as :class:`ColourMix` moves a patch at
+    probability 1 (channels reordered, hue turned, chroma scaled by 1 to ``chroma_max``),
+    drawn in order on ``generator``: e.g. the photos whose statistics give an LMMSE a prior
+    with colour the photos never show.
+
+    Shape:
+        each image: ``(3, H, W)`` display values in [0, 1]; each copy the same.
+    """
+    mix = ColourMix(chroma=1.0, chroma_max=chroma_max, space=space)
+    return [mix(image[None], generator)[0] for image in images]

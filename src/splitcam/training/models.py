@@ -116,7 +116,7 @@ def provenance_of(loaded: ckpt_io.Checkpoint, run_dir: Path | None = None) -> di
         "precision": meta.get("precision", run.get("precision")),
         "world_size": meta.get("world_size", 1),
         "data": {
-            "train": Path(str(data.get("train", ""))).name,
+            "train": portable_path(str(data.get("train", ""))),
             "images": meta.get("train_images"),
             # the sizes each photo was trained at (1: as it is; splitcam.data.downscale)
             "scales": data.get("scales", [1.0]),

@@ -19,7 +19,7 @@ from typing import Any
 import torch
 
 from .. import patterns
-from ..data.colour import ColourMix
+from ..data.colour import ColourMix, chroma_moved_copies
 from ..data.patches import ImageCache, PatchSampler, list_images
 from ..design.kernels import design_pattern
 from ..io import checkpoints as ckpt_io
@@ -176,10 +176,11 @@ def _use_colour_statistics(system: ImagingSystem, cache: ImageCache, config: Tra
             "data.colour_statistics sets the statistics of the LMMSE inside the physics and "
             f"universal networks; the {config.network.arch} network has none"
         )
-    mix = ColourMix(chroma=1.0, chroma_max=config.data.colour_chroma_max, space=config.data.domain)
     generator = torch.Generator().manual_seed(seeds.global_seed(config))
     photos = [cache.image(i) for i in range(len(cache))]
-    moved = [mix(image[None], generator)[0] for image in photos]
+    moved = chroma_moved_copies(
+        photos, generator, chroma_max=config.data.colour_chroma_max, space=config.data.domain
+    )
     stats = estimate_image_statistics(
         photos + moved,
         max_offset=system.network.stat_second.shape[-1] // 2,
