@@ -12,6 +12,10 @@ opponent space and clipped to the gamut (:func:`splitcam.data.colour.augment_chr
 turned): photos as colourful as McMaster's, built from held-out photos alone. (That set is
 of the same family of transforms as the chroma augmentation, so it measures holding on
 saturated colour, and favours that lever by construction; the colourful set does not.)
+All 32 also go to ``OUT/half`` at half their size (:func:`splitcam.data.patches.downscale`, as
+``data.scales`` makes them): the photos are JPEGs with their chroma stored at half resolution,
+so only at half size is their colour detail as fine as their luma's
+(``studies/colour/chroma_detail.py``).
 The table ``OUT/colourfulness.md`` lists every held-out photo with its score, and the mean
 score of each test set beside them as a description of what the test sets hold (they choose
 nothing). Then, for example:
@@ -33,7 +37,7 @@ from PIL import Image
 
 from splitcam.data.colour import augment_chroma, colourfulness
 from splitcam.data.imageio import read_image
-from splitcam.data.patches import list_images
+from splitcam.data.patches import downscale, list_images
 from splitcam.data.registry import dataset_folder, training_folder
 
 HELD_OUT = 32
@@ -57,6 +61,11 @@ def main() -> None:
         (out / sub).mkdir(parents=True, exist_ok=True)
         for _, path in chosen:
             shutil.copyfile(path, out / sub / path.name)
+    (out / "half").mkdir(parents=True, exist_ok=True)
+    for _, path in ranked:
+        pixels = np.asarray(Image.open(path).convert("RGB")).transpose(2, 0, 1)
+        small = downscale(np.ascontiguousarray(pixels), 0.5).transpose(1, 2, 0)
+        Image.fromarray(np.ascontiguousarray(small)).save(out / "half" / f"{path.stem}.png")
     (out / "saturated").mkdir(parents=True, exist_ok=True)
     saturated = []
     for _, path in ranked:

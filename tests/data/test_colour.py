@@ -14,6 +14,7 @@ from splitcam.data.colour import (
     PERMUTATIONS,
     ColourMix,
     augment_chroma,
+    chroma_detail,
     dead_leaves,
     disc_count,
     opponent_to_rgb,
@@ -238,3 +239,52 @@ def test_chroma_moved_copies_move_colour_not_grey_and_draw_in_order():
     one = torch.Generator().manual_seed(0)  # one image at a time on one generator: the same
     alone = [chroma_moved_copies([x], one)[0] for x in (grey, colour)]
     torch.testing.assert_close(alone[1], copies[1], rtol=0, atol=0)
+
+
+def _naive_chroma_detail(rgb: np.ndarray) -> float:
+    """The detail energies block by block, pixel by pixel, with the standard's colour
+    differences (a trailing odd row or column left out)."""
+    height, width = rgb.shape[1] // 2 * 2, rgb.shape[2] // 2 * 2
+    energy = np.zeros(3)
+    for i in range(0, height, 2):
+        for j in range(0, width, 2):
+            block = [_naive_ycc(*rgb[:, i + a, j + b]) for a in (0, 1) for b in (0, 1)]
+            mean = np.mean(block, axis=0)
+            energy += np.sum((np.array(block) - mean) ** 2, axis=0)
+    return (energy[1] + energy[2]) / energy[0]
+
+
+def test_chroma_detail_matches_a_block_by_block_reference_on_odd_sides():
+    rgb = np.random.default_rng(3).random((3, 9, 7))
+    got = chroma_detail(torch.from_numpy(rgb))
+    assert got == pytest.approx(_naive_chroma_detail(rgb), rel=1e-10)
+
+
+def test_chroma_detail_of_grey_flat_and_colour_only_images():
+    grey = torch.rand(1, 6, 8, generator=torch.Generator().manual_seed(0)).expand(3, 6, 8)
+    assert chroma_detail(grey) == pytest.approx(0.0, abs=1e-20)
+    assert chroma_detail(torch.full((3, 4, 4), 0.5)) == 0.0
+    stripes = 0.1 * (-1.0) ** torch.arange(4.0)  # Cb alternating along each row, luma flat
+    ycc = torch.stack([torch.full((4, 4), 0.5), stripes.expand(4, 4), torch.zeros(4, 4)])
+    assert chroma_detail(opponent_to_rgb(ycc)) > 1e10
+    with pytest.raises(ValueError, match="at least 2x2"):
+        chroma_detail(torch.rand(3, 1, 5))
+
+
+def test_a_jpeg_with_half_resolution_chroma_loses_its_colour_detail(tmp_path):
+    """The property the training photos show: 4:2:0 JPEG keeps the luma's detail and drops the
+    chroma's, where 4:4:4 at the same quality keeps both."""
+    from PIL import Image
+
+    rng = np.random.default_rng(0)
+    colours = rng.integers(0, 256, (12, 12, 3), dtype=np.uint8)
+    image = np.kron(colours, np.ones((3, 3, 1), dtype=np.uint8))  # colour edges every 3 pixels
+    ratios = {}
+    for sampling in (0, 2):
+        path = tmp_path / f"s{sampling}.jpg"
+        Image.fromarray(image).save(path, quality=95, subsampling=sampling)
+        back = np.asarray(Image.open(path).convert("RGB"), dtype=np.float64) / 255
+        ratios[sampling] = chroma_detail(torch.from_numpy(back).permute(2, 0, 1))
+    original = chroma_detail(torch.from_numpy(image / 255.0).permute(2, 0, 1))
+    assert ratios[0] == pytest.approx(original, rel=0.1)
+    assert ratios[2] < 0.5 * ratios[0]

@@ -36,6 +36,7 @@ from ..physics.light import linear_to_srgb, srgb_to_linear
 __all__ = [
     "ColourMix",
     "augment_chroma",
+    "chroma_detail",
     "chroma_moved_copies",
     "colourfulness",
     "dead_leaves",
@@ -88,6 +89,30 @@ def colourfulness(rgb: torch.Tensor) -> float:
     rg, yb = r - g, 0.5 * (r + g) - b
     spread = math.hypot(float(rg.std(unbiased=False)), float(yb.std(unbiased=False)))
     return spread + 0.3 * math.hypot(float(rg.mean()), float(yb.mean()))
+
+
+def chroma_detail(rgb: torch.Tensor) -> float:
+    """How much of an image's finest detail is colour: the energy of the chroma's detail at the
+    scale of two pixels over the luma's.
+
+    Each plane's detail is what is left of it after its mean over each 2x2 block (a trailing odd
+    row or column left out), in the opponent space of :func:`rgb_to_opponent`; the ratio is
+    ``(E[dCb^2] + E[dCr^2]) / E[dY^2]``. A JPEG that stores its chroma at half resolution (4:2:0,
+    as every BSD photo is) has almost none: the decoder's interpolation is all that is left.
+    Grey images give 0; a flat image (no luma detail) gives ``inf`` unless it is flat in colour
+    too (then 0).
+
+    Args:
+        rgb: ``(3, H, W)`` values in [0, 1], both sides at least 2.
+    """
+    height, width = (side - side % 2 for side in rgb.shape[-2:])
+    if height == 0 or width == 0:
+        raise ValueError(f"chroma_detail needs an image of at least 2x2, got {tuple(rgb.shape)}")
+    planes = rgb_to_opponent(rgb.double()[:, :height, :width])
+    blocks = planes.reshape(3, height // 2, 2, width // 2, 2)
+    energy = (blocks - blocks.mean(dim=(2, 4), keepdim=True)).square().mean(dim=(1, 2, 3, 4))
+    colour = float(energy[1] + energy[2])
+    return colour / float(energy[0]) if energy[0] > 0 else (math.inf if colour > 0 else 0.0)
 
 
 def augment_chroma(
