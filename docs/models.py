@@ -8,8 +8,9 @@ Pattern, noise model and light domain, and budget come from each model's JSON he
 over the 42 whole images at σ 0 and 15, PSNR dB) from the committed evaluation of
 ``splitcam reproduce`` (docs/results/reproduce/evaluation/table.md), beside the paper's Table 1-3
 numbers (:data:`splitcam.evaluation.report.PAPER`); each model's mean on the held-out training
-photos the gate scores (the run's validation photos and the last 12 of the folder, whole, at the
-model's cleanest and noisiest validation level; :func:`splitcam.training.gate.held_out_score`),
+photos the gate scores (the run's validation photos and the last 12 of the folder, at half
+size, at the model's cleanest and noisiest validation level;
+:func:`splitcam.training.gate.held_out_score`),
 kept in docs/results/heldout/scores.json; the number of stages of the recipe that
 trains each again (its own header; splitcam.training.recipe). A score measured on other weights
 than the model ships now (its fingerprint in the evaluation's ``evaluation.json`` differs) is
@@ -91,7 +92,7 @@ def score_heldout(data: Path) -> None:
 
     scores = json.loads(HELDOUT.read_text()) if HELDOUT.exists() else {}
     for name in model_names():
-        if scores.get(name, {}).get("sha256") == load_model(name).meta.get("sha256"):
+        if _current(scores.get(name, {}), load_model(name).meta):
             continue
         scores[name] = held_out_score(name, data)
         HELDOUT.parent.mkdir(parents=True, exist_ok=True)
@@ -99,16 +100,23 @@ def score_heldout(data: Path) -> None:
         print(name, scores[name]["levels"], [round(v, 2) for v in scores[name]["psnr"]])
 
 
+def _current(entry: dict, meta: dict) -> bool:
+    """Whether a held-out score is of the weights the header ``meta`` names, at the size the
+    gate scores photos at now (scores before the size was recorded are of whole photos)."""
+    from splitcam.training.gate import SCALE
+
+    return entry.get("sha256") == meta.get("sha256") and entry.get("scale", 1.0) == SCALE
+
+
 def heldout_cell(name: str, meta: dict, scores: dict) -> str:
     """A model's held-out mean at its cleanest and noisiest level, marked where it was measured
-    on other weights than its header ``meta`` names."""
+    on other weights than its header ``meta`` names or under the gate's earlier rule."""
     entry = scores.get(name)
     if entry is None:
         return "–"
     cells = " / ".join(f"{v:.2f}" for v in entry["psnr"])
     levels = " / ".join(entry["levels"])
-    stale = entry.get("sha256") != meta.get("sha256")
-    return f"{cells} ({levels})" + (" *earlier weights*" if stale else "")
+    return f"{cells} ({levels})" + ("" if _current(entry, meta) else " *earlier weights or rule*")
 
 
 def render() -> str:
@@ -132,11 +140,12 @@ def render() -> str:
         "column is each set's own mean at σ 0 and Kodak24 minus McMaster: how much a network "
         "loses on saturated colour (demosaicnet, a GPU-trained Bayer network, on the same whole "
         "images: 41.84 / 39.14, 2.70; [colour](results/colour/README.md)). Held-out photos: the "
-        "mean PSNR on the 20 training photos the gate scores, which no run trains on (whole, "
-        "odd sides; `splitcam models gate`), at the model's cleanest / noisiest validation "
-        "level (σ, or N photo-electrons in linear light; `python docs/models.py --heldout DIR` "
-        "scores them). A score marked *earlier weights* was measured before the model's last "
-        "stage shipped: run `splitcam reproduce` (or `--heldout`) again and this page after it.",
+        "mean PSNR on the 20 training photos the gate scores, which no run trains on (at half "
+        "size, where their chroma is as fine as their luma, odd sides; `splitcam models gate`), "
+        "at the model's cleanest / noisiest validation level (σ, or N photo-electrons in "
+        "linear light; `python docs/models.py --heldout DIR` scores them). A score marked "
+        "*earlier weights or rule* was measured before the model's last stage shipped or on "
+        "whole photos: run `splitcam reproduce` (or `--heldout`) again and this page after it.",
         "",
         "| model | pattern | trained on | steps | batch | training | stages | σ 0 / 15 | paper "
         "| σ 0 Kodak24 / McMaster (drop) | held-out photos |",

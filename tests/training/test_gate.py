@@ -1,5 +1,5 @@
 """The gate (splitcam.training.gate, ``splitcam models gate``): a candidate is scored against the
-shipped model of its name on held-out photos whole, ships exactly when the rule holds on the
+shipped model of its name on held-out photos at half size, ships exactly when the rule holds on the
 numbers its table prints, a copy of the shipped model does not ship (no rise), a worse one does
 not, a candidate that is no continuation of its namesake is refused with its reason, and bad
 input gets one line."""
@@ -118,3 +118,23 @@ def test_cli_gate_is_dry_unless_told_and_refuses_bad_input(photos, tmp_path, cap
         assert main(argv) != 0
         err = capsys.readouterr().err.strip()
         assert message in err and len(err.splitlines()) == 1
+
+
+def test_the_gate_scores_each_photo_at_half_size_with_odd_sides() -> None:
+    """A 2x2 block mean is what a half-size photo holds (a smooth photo: the antialiased bicubic
+    filter then agrees with it to within a few 8-bit levels), and the sides stay odd."""
+    from splitcam.training.gate import SCALE, gate_size
+
+    assert SCALE == 0.5
+    y, x = torch.meshgrid(torch.arange(41.0), torch.arange(31.0), indexing="ij")
+    waves = [0.5 + 0.4 * torch.sin(y / 9 + c) * torch.cos(x / 7) for c in range(3)]
+    image = (torch.stack(waves, -1).numpy() * 255).round().astype("uint8")
+    assert tuple(gate_size(image).shape) == (3, 19, 15)  # 41x31 -> 20x16 (rounded), less one each
+    even = image[:40, :30]
+    got = gate_size(even)
+    assert got.dtype == torch.float32 and tuple(got.shape) == (3, 19, 15)  # 20x15, less a row
+    pixels = torch.from_numpy(even.astype("float32") / 255).permute(2, 0, 1)
+    means = pixels.reshape(3, 20, 2, 15, 2).mean(dim=(2, 4))[:, :19]
+    assert (got - means).abs().max() < 4 / 255
+    sixteen = even.astype("uint16") * 257
+    assert torch.allclose(gate_size(sixteen), got, atol=1 / 255)

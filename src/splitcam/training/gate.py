@@ -1,14 +1,21 @@
 """The gate a candidate network passes before it replaces the shipped model of its name.
 
 One rule for every way a candidate is made (a GPU relay's segment, a colour stage on a CPU, any
-fine-tuning): score the candidate and the shipped model on held-out photos, whole (481x321 or
-321x481 in the training set: odd sides, ending part-way through periods), at the model's own
+fine-tuning): score the candidate and the shipped model on held-out photos at the model's own
 validation levels, cleanest first (σ 0 and 15 for the Gaussian models; photo-electrons for the
 photon ones), and on the patterns its validation uses for a network of any pattern. The photos
-are the run's validation photos (the first ``VAL_FIRST`` of those every run holds out, whole
-rather than cropped) and the last ``LAST_UNUSED`` of the folder, which no training or choice
-uses. A candidate ships when the mean PSNR rises at the cleanest level and falls by no more than
-``FALL_DB`` at the noisiest.
+are the run's validation photos (the first ``VAL_FIRST`` of those every run holds out) and the
+last ``LAST_UNUSED`` of the folder, which no training or choice uses. Each is scored whole at
+half its size (:data:`SCALE`), one row or column fewer where a side comes out even, so that both
+sides stay odd and end part-way through every period (240x160 from a 481x321 photo, scored as
+239x159). A candidate ships when the mean PSNR rises at the cleanest level and falls by no more
+than ``FALL_DB`` at the noisiest.
+
+Why half size: the training photos are JPEGs that store their chroma at half resolution (4:2:0).
+Whole, their colour finer than two pixels is the decoder's interpolation, not the scene's, and a
+network that learns to reproduce it scores well on them and poorly where colour edges are sharp;
+at half size their chroma is as fine as their luma (``studies/colour/chroma_detail.py``,
+docs/results/colour/README.md). Gates run before this rule scored the photos whole.
 
 A candidate that is not a continuation of the shipped model of its name (another pattern to
 start from, or a network of other patterns) is not gated, and its reason is kept. A model that
@@ -29,6 +36,8 @@ RISE_DB = 0.0
 FALL_DB = 0.05
 VAL_FIRST = 8
 LAST_UNUSED = 12
+#: The size the held-out photos are scored at, a fraction of their own.
+SCALE = 0.5
 
 
 class GateError(ValueError):
@@ -61,10 +70,8 @@ class Verdict:
 
 def held_out_photos(config: dict, data: Path) -> list[tuple[str, object]]:
     """The run's validation photos (the first ``VAL_FIRST`` it holds out) and the last
-    ``LAST_UNUSED`` of the folder, whole."""
-    import torch
-
-    from ..data.imageio import read_image
+    ``LAST_UNUSED`` of the folder, each at :func:`gate_size`."""
+    from ..data.imageio import decode_image
     from ..data.patches import list_images
     from .config import TrainConfig
     from .validation import held_out
@@ -72,7 +79,23 @@ def held_out_photos(config: dict, data: Path) -> list[tuple[str, object]]:
     settings = TrainConfig.from_saved(config).override({"data.train": str(data), "data.val": None})
     validation = held_out(settings)[: settings.data.val_max_images or VAL_FIRST]
     chosen = list(dict.fromkeys([*validation, *list_images(data)[-LAST_UNUSED:]]))
-    return [(p.stem, torch.from_numpy(read_image(p)).permute(2, 0, 1).contiguous()) for p in chosen]
+    return [(p.stem, gate_size(decode_image(p))) for p in chosen]
+
+
+def gate_size(image) -> object:
+    """A photo as the gate scores it: its ``(H, W, 3)`` 8- or 16-bit values → a ``(3, h, w)``
+    float tensor in [0, 1] at :data:`SCALE` of its size
+    (:func:`~splitcam.data.patches.downscale`), less its last row or column where that side
+    comes out even."""
+    import numpy as np
+    import torch
+
+    from ..data.patches import downscale
+
+    top = float(np.iinfo(image.dtype).max)
+    small = downscale(np.ascontiguousarray(image.transpose(2, 0, 1)), SCALE)
+    height, width = (side - 1 + side % 2 for side in small.shape[1:])
+    return torch.from_numpy(small[:, :height, :width].astype(np.float32) / top).contiguous()
 
 
 def gate_levels(config: dict) -> list:
@@ -127,8 +150,8 @@ def mean_scores(spec, config: dict, photos, levels) -> list[float]:
 
 def held_out_score(spec: str | Path, data: Path) -> dict:
     """A model's (a shipped name or a model file) mean PSNR on the gate's held-out photos of
-    ``data`` at its validation levels: ``{"photos", "levels" (labels), "psnr", "sha256"}``, the
-    last the checksum of the weights scored."""
+    ``data`` at its validation levels: ``{"photos", "scale", "levels" (labels), "psnr",
+    "sha256"}``: the photos' size (:data:`SCALE`) and the checksum of the weights scored."""
     from ..physics.noise import level_label
     from ..recon.loading import load_model
 
@@ -138,6 +161,7 @@ def held_out_score(spec: str | Path, data: Path) -> dict:
     levels = gate_levels(config)
     return {
         "photos": len(photos),
+        "scale": SCALE,
         "levels": [level_label(level) for level in levels],
         "psnr": mean_scores(str(spec), config, photos, levels),
         "sha256": meta.get("sha256"),
