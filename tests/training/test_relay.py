@@ -177,3 +177,20 @@ def test_colour_relay_appends_the_colour_stage_and_its_cooldown(photos, tmp_path
     assert colour.data.colour_swap == 0.25 and cool.data.colour_swap == 0
     assert cool.optim.lr == pytest.approx(colour.optim.lr / 2)
     assert relay.write_stage_files(out / "candidates" / "D.json", root) == []  # there already
+
+
+def test_half_size_relay_trains_every_run_on_the_photos_at_half_size(photos, tmp_path) -> None:
+    relay = _relay()
+    argv = ["--minutes", "1", "--data", str(photos), "--queue", "D", "--device", "cpu"]
+    runs = {}
+    for flags in ([], ["--half-size"]):
+        out = tmp_path / ("half" if flags else "whole")
+        args = relay.parse([*argv, "--out", str(out), "--colour", *flags])
+        relay.start_folder(out, args)
+        runs[bool(flags)] = relay.relay_configs("D", args, out, 1.0)
+        assert json.loads((out / "relay.json").read_text())["half_size"] is bool(flags)
+    from splitcam.recon.loading import load_model
+
+    shipped = load_model("D").meta["config"]["data"]["scales"]
+    assert [run.data.scales for run in runs[False]] == [shipped, shipped]
+    assert [run.data.scales for run in runs[True]] == [[0.5], [0.5]]

@@ -24,8 +24,8 @@ within ``--minutes`` of wall time. The training photos are decoded once and held
   ``DIR/relay.md`` tables the validation PSNR at the start and the end of every run.
 
 **The gate** (``--gate DIR``, on a CPU) scores the candidates by the rule every shipped model
-passes (``splitcam.training.gate``, also ``splitcam models gate``): held-out photos, whole, at
-the model's own validation levels; a candidate ships when the cleanest level rises and the
+passes (``splitcam.training.gate``, also ``splitcam models gate``): held-out photos at half
+size, at the model's own validation levels; a candidate ships when the cleanest level rises and the
 noisiest falls by no more than 0.05 dB. ``DIR/gate.md`` holds the table; ``--dry-run`` prints
 what would ship and writes nothing.
 
@@ -34,6 +34,10 @@ becomes the stage ``bayer`` shipped with, scaled to the GPU: two thirds of it wi
 the patches taking another patch's chroma and a quarter chroma-moved (``COLOUR_STAGE``), then a
 third on the photos alone at half the rate, continued from the first (``runs/NAME-colour``, then
 ``runs/NAME``); the candidate is the second, its provenance holding both segments.
+
+**Half size** (``--half-size``): every run trains on the photos at half their size
+(``data.scales = [0.5]``), where the JPEG photos' chroma is as fine as their luma
+(``docs/results/colour``, "The photos' own chroma").
 
 **Recipes**: every run records its stage file, ``experiments/gpu/relay/DATE/RUN.toml`` (the
 relay's start date, the run's folder name), as ``run.config_file``; shipping a candidate writes
@@ -68,6 +72,8 @@ COLOUR_STAGE = {"data.colour_swap": 0.25, "data.colour_chroma": 0.25}
 #: Of a ``--colour`` slot: the share the cool-down on the photos alone takes, and its rate
 #: relative to the recipe's
 COOLDOWN_SHARE, COOLDOWN_LR = 1 / 3, 0.5
+#: The photos' sizes under ``--half-size``
+HALF_SIZE = (0.5,)
 
 
 class RelayError(ValueError):
@@ -210,6 +216,7 @@ def relay_config(name: str, args: argparse.Namespace, out: Path, minutes: float)
             "run.threads": None,
             "run.precision": args.precision,
             "run.compile": args.compile,
+            **({"data.scales": list(HALF_SIZE)} if args.half_size else {}),
         }
     )
 
@@ -230,6 +237,7 @@ def start_folder(out: Path, args: argparse.Namespace) -> None:
         "device": args.device,
         "data": str(args.data),
         "colour": args.colour,
+        "half_size": args.half_size,
     }
     marker.write_text(json.dumps(record, indent=1) + "\n")
 
@@ -413,6 +421,11 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
         action="store_true",
         help="each slot a colour stage (a quarter of the patches chroma-swapped, a quarter "
         "chroma-moved), then a third on the photos alone at half the rate",
+    )
+    parser.add_argument(
+        "--half-size",
+        action="store_true",
+        help="train on the photos at half size, where their JPEG chroma is as fine as their luma",
     )
     parser.add_argument("--device", default="cuda", help="cuda, cuda:N or cpu")
     parser.add_argument("--precision", default="auto", help="auto, fp32 or bf16")
