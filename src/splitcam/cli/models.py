@@ -18,9 +18,10 @@ def register(sub: argparse._SubParsersAction) -> None:
         "into ./models (or --out DIR; --ship: the package's shipped models); an existing model "
         "is replaced only with --force. Use it with --model DIR/NAME.json. `splitcam models gate "
         "NAME.json ... --data DIR` scores exported candidates against the shipped models of "
-        "their names on held-out photos of DIR, whole, and says which pass (the cleanest "
-        "level rises, the noisiest falls by no more than 0.05 dB; splitcam.training.gate); "
-        "--ship copies those that pass into the package's shipped models (--out DIR: there).",
+        "their names on held-out photos of DIR, whole at half size, and says which pass (the "
+        "cleanest level rises, the noisiest falls by no more than 0.05 dB; "
+        "splitcam.training.gate); --ship copies those that pass into the package's shipped "
+        "models (--out DIR: there).",
     )
     p.add_argument("action", nargs="?", choices=["list", "export", "gate"], default="list")
     p.add_argument(

@@ -229,8 +229,8 @@ def gate_table(verdicts: Sequence[Verdict]) -> str:
         )
     header = ["model", "photos", "levels", "shipped", "candidate", "change", "ships"]
     heading = (
-        "# Gate: the validation photos and the last 12, whole; ship when the cleanest level "
-        f"rises and the noisiest falls by no more than {FALL_DB} dB"
+        "# Gate: the validation photos and the last 12, whole at half size; ship when the "
+        f"cleanest level rises and the noisiest falls by no more than {FALL_DB} dB"
     )
     return "\n".join([heading, "", *markdown_table(header, rows)]) + "\n"
 
