@@ -139,7 +139,7 @@ def render() -> str:
         "records. The last "
         "column is each set's own mean at σ 0 and Kodak24 minus McMaster: how much a network "
         "loses on saturated colour (demosaicnet, a GPU-trained Bayer network, on the same whole "
-        "images: 42.11 / 39.14, 2.97; [colour](results/colour/half-size.md)). Held-out photos: the "
+        "images: 41.84 / 39.14, 2.70; [colour](results/colour/half-size.md)). Held-out photos: the "
         "mean PSNR on the 20 training photos the gate scores, which no run trains on (at half "
         "size, where their chroma is as fine as their luma, odd sides; `splitcam models gate`), "
         "at the model's cleanest / noisiest validation level (σ, or N photo-electrons in "
