@@ -36,7 +36,7 @@ import torch
 from PIL import Image
 
 from splitcam.data.colour import augment_chroma, colourfulness
-from splitcam.data.imageio import read_image
+from splitcam.data.imageio import decode_image, read_image
 from splitcam.data.patches import downscale, list_images
 from splitcam.data.registry import dataset_folder, training_folder
 
@@ -63,7 +63,7 @@ def main() -> None:
             shutil.copyfile(path, out / sub / path.name)
     (out / "half").mkdir(parents=True, exist_ok=True)
     for _, path in ranked:
-        pixels = np.asarray(Image.open(path).convert("RGB")).transpose(2, 0, 1)
+        pixels = decode_image(path).transpose(2, 0, 1)
         small = downscale(np.ascontiguousarray(pixels), 0.5).transpose(1, 2, 0)
         Image.fromarray(np.ascontiguousarray(small)).save(out / "half" / f"{path.stem}.png")
     (out / "saturated").mkdir(parents=True, exist_ok=True)
