@@ -22,8 +22,9 @@ def _relay():
 
 @pytest.fixture(scope="module")
 def photos(tmp_path_factory) -> Path:
-    """14 smooth photos of odd sizes (so the held-out ones end part-way through periods)."""
-    return odd_photos(tmp_path_factory.mktemp("photos"), 14, (67, 81), seed=0)
+    """14 smooth photos of odd sizes (so the held-out ones end part-way through periods), large
+    enough for a 64-pixel patch at half size (the shipped D trains on the photos at half size)."""
+    return odd_photos(tmp_path_factory.mktemp("photos"), 14, (135, 163), seed=0)
 
 
 @pytest.fixture(scope="module")
