@@ -13,6 +13,8 @@ from pathlib import Path
 import pytest
 from conftest import odd_photos
 
+from splitcam.training.gate import SCALE
+
 
 def _relay():
     from splitcam.training import relay
@@ -195,3 +197,6 @@ def test_half_size_relay_trains_every_run_on_the_photos_at_half_size(photos, tmp
     shipped = load_model("D").meta["config"]["data"]["scales"]
     assert [run.data.scales for run in runs[False]] == [shipped, shipped]
     assert [run.data.scales for run in runs[True]] == [[0.5], [0.5]]
+    # Validated at the gate's size where the runs train at half size, on whole photos elsewhere.
+    assert [run.data.val_scale for run in runs[True]] == [SCALE, SCALE]
+    assert [run.data.val_scale for run in runs[False]] == [1.0, 1.0]

@@ -13,6 +13,7 @@ from PIL import Image
 
 from splitcam.cli import main
 from splitcam.training import TrainConfig, train
+from splitcam.training.config import ConfigError
 
 
 def test_validation_psnr_equals_what_evaluate_reports(tmp_path):
@@ -64,6 +65,47 @@ def test_validation_psnr_equals_what_evaluate_reports(tmp_path):
     summary = json.loads((tmp_path / "ev/summary.json").read_text())["run"]["all"]
     assert summary["0"]["psnr"] == pytest.approx(last["val_psnr_0"], abs=1e-9)
     assert summary["15"]["psnr"] == pytest.approx(last["val_psnr_15"], abs=1e-9)
+
+
+def test_validation_at_half_size_scores_the_halved_photos(tmp_path):
+    """data.val_scale 0.5 (the ship gate's size): the PSNR a run logs is what evaluate reports on
+    the validation photos halved by Pillow's antialiased bicubic (odd sides: 73x81 -> 36x40)."""
+    train_dir, val_dir, halved = tmp_path / "train", tmp_path / "val", tmp_path / "halved"
+    write_photos(train_dir, n=3, size=(32, 32))
+    write_photos(val_dir, n=2, size=(73, 81))
+    halved.mkdir()
+    for path in sorted(val_dir.iterdir()):
+        with Image.open(path) as im:
+            small = im.resize((round(im.width / 2), round(im.height / 2)), Image.BICUBIC)
+            small.save(halved / path.name)
+    settings = {
+        "data.train": str(train_dir),
+        "data.val": str(val_dir),
+        "data.val_crop": None,
+        "data.val_scale": 0.5,
+        "data.val_sigmas": [0.0],
+        "data.patch_size": 16,
+        "data.batch_size": 2,
+        "network.features": 4,
+        "network.blocks": 1,
+        "optim.steps": 2,
+        "run.val_every": 2,
+        "run.out": str(tmp_path / "run"),
+        "run.threads": 1,
+    }
+    train(TrainConfig().override(settings), progress=False)
+    logged = [
+        json.loads(line) for line in (tmp_path / "run/metrics.jsonl").read_text().splitlines()
+    ]
+    last = [r for r in logged if "val_psnr_0" in r][-1]
+    out = tmp_path / "ev"
+    args = ["evaluate", "--checkpoint", str(tmp_path / "run"), "--datasets", str(halved)]
+    assert main([*args, "--sigmas", "0", "--out", str(out), "--quiet"]) == 0
+    summary = json.loads((out / "summary.json").read_text())["run"]["all"]
+    # Pillow and torch's antialiased bicubic may round a few values apart.
+    assert summary["0"]["psnr"] == pytest.approx(last["val_psnr_0"], abs=0.05)
+    with pytest.raises(ConfigError, match="val_scale must be in"):
+        TrainConfig().override({"data.val_scale": 0.0}).validate()
 
 
 def test_validation_is_on_by_default_on_a_held_out_split(image_folder, tmp_path):

@@ -161,6 +161,12 @@ class DataConfig:
     val_crop: int | None = _opt(
         256, "centre-crop validation images to this size (bounds validation time)"
     )
+    val_scale: float = _opt(
+        1.0,
+        "validate on the images at this fraction of their size (in (0, 1], antialiased, before "
+        "the crop); 0.5 scores as the ship gate does (splitcam.training.gate: the JPEG photos' "
+        "chroma is stored at half resolution), the setting for runs that train at half size",
+    )
     val_sigmas: list[float] = _opt([0.0, 15.0], "validation noise levels")
     patch_size: int = _opt(64, "training patch size")
     partial_periods: float = _opt(
@@ -275,6 +281,10 @@ class DataConfig:
             (
                 valid_scales(self.scales),
                 f"data.scales must be distinct factors in (0, 1], got {self.scales}",
+            ),
+            (
+                0 < self.val_scale <= 1,
+                f"data.val_scale must be in (0, 1], got {self.val_scale}",
             ),
             (
                 0 <= self.partial_periods <= 1,

@@ -37,7 +37,8 @@ third on the photos alone at half the rate, continued from the first (``runs/NAM
 
 **Half size** (``--half-size``): every run trains on the photos at half their size
 (``data.scales = [0.5]``), where the JPEG photos' chroma is as fine as their luma
-(``docs/results/colour``, "The photos' own chroma").
+(``docs/results/colour``, "The photos' own chroma"), and validates on them at half size
+(``data.val_scale``), as the gate scores.
 
 **Recipes**: every run records its stage file, ``experiments/gpu/relay/DATE/RUN.toml`` (the
 relay's start date, the run's folder name), as ``run.config_file``; shipping a candidate writes
@@ -59,6 +60,8 @@ import sys
 import time
 from pathlib import Path
 
+from .gate import SCALE
+
 QUEUE = ["universal", "universal-photon", "A", "D", "D-opt", "B", "A-opt"]
 SHARES = {"universal": 3, "universal-photon": 2}
 FIRST_OVERHEAD_S = 30.0
@@ -72,8 +75,8 @@ COLOUR_STAGE = {"data.colour_swap": 0.25, "data.colour_chroma": 0.25}
 #: Of a ``--colour`` slot: the share the cool-down on the photos alone takes, and its rate
 #: relative to the recipe's
 COOLDOWN_SHARE, COOLDOWN_LR = 1 / 3, 0.5
-#: The photos' sizes under ``--half-size``
-HALF_SIZE = (0.5,)
+#: The photos' sizes under ``--half-size``: the gate's
+HALF_SIZE = (SCALE,)
 
 
 class RelayError(ValueError):
@@ -216,7 +219,11 @@ def relay_config(name: str, args: argparse.Namespace, out: Path, minutes: float)
             "run.threads": None,
             "run.precision": args.precision,
             "run.compile": args.compile,
-            **({"data.scales": list(HALF_SIZE)} if args.half_size else {}),
+            **(
+                {"data.scales": list(HALF_SIZE), "data.val_scale": HALF_SIZE[0]}
+                if args.half_size
+                else {}
+            ),
         }
     )
 

@@ -86,7 +86,8 @@ def train_source(config: TrainConfig) -> Any:
 
 
 def val_images(config: TrainConfig) -> list[tuple[str, torch.Tensor]]:
-    """Validation images: the held-out split or the --val folder, centre-cropped."""
+    """Validation images: the held-out split or the --val folder, at ``data.val_scale`` of
+    their size (:func:`~splitcam.data.patches.downscale`), centre-cropped."""
     data = config.data
     if data.val:
         source: Any = data.val
@@ -94,7 +95,13 @@ def val_images(config: TrainConfig) -> list[tuple[str, torch.Tensor]]:
         source = held_out(config)
     else:
         return []
-    cache = ImageCache(source, min_size=1, max_images=data.val_max_images, progress=False)
+    cache = ImageCache(
+        source,
+        min_size=1,
+        max_images=data.val_max_images,
+        progress=False,
+        scales=(data.val_scale,),
+    )
     images = []
     for i, name in enumerate(cache.names):
         img = cache.image(i)
