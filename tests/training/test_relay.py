@@ -200,3 +200,28 @@ def test_half_size_relay_trains_every_run_on_the_photos_at_half_size(photos, tmp
     # Validated at the gate's size where the runs train at half size, on whole photos elsewhere.
     assert [run.data.val_scale for run in runs[True]] == [SCALE, SCALE]
     assert [run.data.val_scale for run in runs[False]] == [1.0, 1.0]
+
+
+def test_stage_files_of_segments_recorded_before_a_setting_was_added(tmp_path) -> None:
+    """A shipped model's relay segment recorded before a setting existed (here data.val_scale,
+    popped from the record) is written out with the value that reproduces it, and reads back
+    as the record does under TrainConfig.from_saved (it once refused: "does not read back")."""
+    from splitcam.io.weights import MODELS_DIR
+    from splitcam.training import TrainConfig
+
+    meta = json.loads((MODELS_DIR / "D.json").read_text())
+    relayed = [s for s in meta["provenance"]["segments"] if "/relay/" in s.get("config_file", "")]
+    assert relayed, "the shipped D has a stage trained by the relay"
+    for segment in meta["provenance"]["segments"]:
+        segment["settings"]["data"].pop("val_scale", None)
+    candidate = tmp_path / "D.json"
+    candidate.write_text(json.dumps(meta))
+    written = _relay().write_stage_files(candidate, tmp_path / "repo")
+    assert [p.relative_to(tmp_path / "repo").as_posix() for p in written] == [
+        s["config_file"] for s in relayed
+    ]
+    for path, segment in zip(written, relayed, strict=True):
+        read = TrainConfig.from_file(path)
+        assert read.data.val_scale == 1.0
+        assert read.data.scales == segment["settings"]["data"]["scales"]
+        assert read.optim.steps == segment["settings"]["optim"]["steps"]

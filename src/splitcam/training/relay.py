@@ -143,7 +143,8 @@ def write_stage_files(candidate: Path, root: Path) -> list[Path]:
     """Write, under ``root``, the stage file of every segment of the model ``candidate`` (its
     JSON) that names one under :data:`STAGE_DIR` not yet there: the settings the segment
     recorded, as TOML (unset values left to their defaults), checked to read back as those
-    settings. Returns the files written."""
+    settings (a setting added since they were recorded at the value that reproduces them).
+    Returns the files written."""
     import tomli_w
 
     from .config import TrainConfig
@@ -156,7 +157,9 @@ def write_stage_files(candidate: Path, root: Path) -> list[Path]:
         path = root / file
         if not file.startswith(STAGE_DIR + "/") or path.exists():
             continue
-        settings = segment["settings"]
+        # As a saved run reads them: a setting added since the segment trained takes the value
+        # that reproduces it (TrainConfig.from_saved).
+        settings = replayable(TrainConfig.from_saved(segment["settings"]).to_dict())
         body = {
             sec: {k: v for k, v in vals.items() if v is not None} for sec, vals in settings.items()
         }
