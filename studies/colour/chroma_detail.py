@@ -17,13 +17,12 @@ import statistics
 from collections import Counter
 from pathlib import Path
 
-import numpy as np
 import torch
 from PIL import Image, JpegImagePlugin
 
 from splitcam.data.colour import chroma_detail
 from splitcam.data.imageio import decode_image
-from splitcam.data.patches import downscale, list_images
+from splitcam.data.patches import downscaled, list_images
 from splitcam.data.registry import training_folder
 from splitcam.data.testsets import load_datasets
 
@@ -31,9 +30,7 @@ SAMPLING = {0: "4:4:4", 1: "4:2:2", 2: "4:2:0"}
 
 
 def _photo(path: Path, factor: float) -> torch.Tensor:
-    pixels = np.ascontiguousarray(decode_image(path).transpose(2, 0, 1))
-    top = float(np.iinfo(pixels.dtype).max)
-    return torch.from_numpy(downscale(pixels, factor).astype(np.float64) / top)
+    return downscaled(decode_image(path), factor).double()
 
 
 def _row(name: str, values: list[float]) -> str:

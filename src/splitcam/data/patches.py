@@ -280,6 +280,15 @@ def downscale(image: np.ndarray, factor: float) -> np.ndarray:
     return np.ascontiguousarray(y.round().clamp(0, top).numpy().astype(image.dtype))
 
 
+def downscaled(image: np.ndarray, factor: float) -> torch.Tensor:
+    """A decoded photo, ``(H, W, 3)`` 8- or 16-bit, at ``factor`` of its size
+    (:func:`downscale`) as a ``(3, h, w)`` float32 tensor in [0, 1] (divided by its dtype's
+    largest value): what the gate and the colour studies score."""
+    top = float(np.iinfo(image.dtype).max)
+    small = downscale(np.ascontiguousarray(image.transpose(2, 0, 1)), factor)
+    return torch.from_numpy(small.astype(np.float32) / np.float32(top))
+
+
 def dihedral(patch: np.ndarray, code: int) -> np.ndarray:
     """A view of ``patch`` in dihedral orientation ``code`` (0-7).
 

@@ -85,17 +85,13 @@ def held_out_photos(config: dict, data: Path) -> list[tuple[str, object]]:
 def gate_size(image) -> object:
     """A photo as the gate scores it: its ``(H, W, 3)`` 8- or 16-bit values → a ``(3, h, w)``
     float tensor in [0, 1] at :data:`SCALE` of its size
-    (:func:`~splitcam.data.patches.downscale`), less its last row or column where that side
+    (:func:`~splitcam.data.patches.downscaled`), less its last row or column where that side
     comes out even."""
-    import numpy as np
-    import torch
+    from ..data.patches import downscaled
 
-    from ..data.patches import downscale
-
-    top = float(np.iinfo(image.dtype).max)
-    small = downscale(np.ascontiguousarray(image.transpose(2, 0, 1)), SCALE)
+    small = downscaled(image, SCALE)
     height, width = (side - 1 + side % 2 for side in small.shape[1:])
-    return torch.from_numpy(small[:, :height, :width].astype(np.float32) / top).contiguous()
+    return small[:, :height, :width].contiguous()
 
 
 def gate_levels(config: dict) -> list:
