@@ -166,6 +166,31 @@ def test_the_run_lock_is_an_os_lock_and_a_refusal_is_one_line(image_folder, tmp_
     assert train(tiny_config(image_folder, out, **{"optim.steps": 1}), progress=False).step == 1
 
 
+def test_a_resume_that_changes_the_validation_starts_the_best_again(image_folder, tmp_path, caplog):
+    """A best scored at another validation is not comparable: the first validation after a
+    resume that changed it becomes the best, even when it scores less (here: noise added)."""
+    caplog.set_level(logging.INFO, logger="splitcam")
+    out = tmp_path / "revalidated"
+    fixed = {"optim.schedule": "constant", "optim.warmup_steps": 0, "data.val_sigmas": [0.0]}
+    train(tiny_config(image_folder, out, **{**fixed, "optim.steps": 3}), progress=False)
+    before = json.loads((out / "best.json").read_text())
+    assert before["step"] == 3
+    noisy = {**fixed, "data.val_sigmas": [50.0], "optim.steps": 6}
+    train(tiny_config(image_folder, out, **noisy), resume=True, progress=False)
+    rows = [json.loads(x) for x in (out / "metrics.jsonl").read_text().splitlines()]
+    val = {r["step"]: r["val_psnr"] for r in rows if "val_psnr" in r}
+    assert val[6] < val[3] - 1  # sigma 50 scores below sigma 0
+    after = json.loads((out / "best.json").read_text())
+    assert after["step"] == 6 and after["best_val"] == pytest.approx(val[6])
+    said = [r.getMessage() for r in caplog.records if r.name.startswith("splitcam.training")]
+    assert any("resume changed data.val_sigmas: the best so far" in m for m in said)
+    # A resume that leaves the validation as it was keeps comparing with the best.
+    train(
+        tiny_config(image_folder, out, **{**noisy, "optim.steps": 9}), resume=True, progress=False
+    )
+    assert json.loads((out / "best.json").read_text())["best_val"] >= after["best_val"]
+
+
 def test_settings_changed_on_resume_apply_and_are_recorded(image_folder, tmp_path, capsys, caplog):
     caplog.set_level(logging.INFO, logger="splitcam")
     out = tmp_path / "changed"

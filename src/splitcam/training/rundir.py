@@ -47,6 +47,19 @@ FIXED_ON_RESUME = (
     "run.out",
 )
 
+#: Settings that choose what validation scores. Changed on resume, the best score so far was
+#: measured on something else, so the run's best starts again at its next validation.
+VALIDATION_SETTINGS = (
+    "data.val",
+    "data.val_split",
+    "data.val_max_images",
+    "data.val_crop",
+    "data.val_scale",
+    "data.val_sigmas",
+    "noise.val_photons",
+    "pattern.val_patterns",
+)
+
 
 def lock_run(run_dir: Path) -> Any:
     """Hold an exclusive OS lock on the run folder for the whole run: a second run on the same

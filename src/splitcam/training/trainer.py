@@ -40,6 +40,7 @@ from .rundir import (
     LOCK_NAME,
     METRICS_NAME,
     RunLog,
+    VALIDATION_SETTINGS,
     RunStart,
     failure_of,
     last_metrics,
@@ -124,6 +125,7 @@ def _train(config: TrainConfig, run_dir: Path, resume: bool, progress: bool) -> 
         # The run's record (config, changes, checkpoint) stays as it is, so a changed setting
         # is never recorded for steps that did not run under it.
         return TrainResult(run_dir, state.step, False, last_metrics(run_dir / METRICS_NAME))
+    _restart_best(state, run, start.changes)
     model = wrap_model(state.system, run.device, run.dist)
     log = _open_log(run, state, start)
     bar = _progress_bar(run, state) if progress and run.dist.is_main else None
@@ -162,6 +164,20 @@ def _nothing_to_train(state: TrainState, run: Run) -> bool:
                 f"steps): nothing to train; resume with more --steps to continue"
             )
     return True
+
+
+def _restart_best(state: TrainState, run: Run, changes: dict[str, list[Any]]) -> None:
+    """A resume that changed what validation scores (``VALIDATION_SETTINGS``) drops the best
+    score so far, measured on something else: the next validation's weights become the best."""
+    changed = [key for key in VALIDATION_SETTINGS if key in changes]
+    if not changed or state.best_val == float("-inf"):
+        return
+    state.best_val = float("-inf")
+    if run.dist.is_main:
+        logger.info(
+            f"resume changed {', '.join(changed)}: the best so far was scored on another "
+            f"validation, so best.safetensors is replaced at the next validation"
+        )
 
 
 def _open_log(run: Run, state: TrainState, start: RunStart) -> RunLog | None:
