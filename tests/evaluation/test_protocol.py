@@ -174,6 +174,38 @@ def test_interrupted_evaluation_keeps_its_rows_and_resumes(tmp_path):
     assert len(d.seen) == 3
 
 
+class _Intruder(Spy):
+    """A method that, at its second image, starts a second evaluation into the same folder."""
+
+    def __init__(self, out, images) -> None:
+        super().__init__("a")
+        self.out, self.images, self.refusal = out, images, None
+
+    def reconstruct(self, raw, sigma: float):
+        if len(self.seen) == 1:
+            second = Spy("b")
+            with pytest.raises(ValueError) as refused:
+                evaluate([second], [("set", self.images)], [0], self.out, progress=False)
+            self.refusal = (str(refused.value), len(second.seen))
+        return super().reconstruct(raw, sigma)
+
+
+def test_a_second_evaluation_into_a_folder_in_use_is_refused(tmp_path):
+    """Both would continue its per_image.csv and write over each other's rows."""
+    images = random_images(3)
+    out = tmp_path / "busy"
+    first = _Intruder(out, images)
+    rows = evaluate([first], [("set", images)], [0], out, progress=False)
+    message, computed = first.refusal
+    assert message.startswith(f"another evaluation is using {str(out)!r}") and computed == 0
+    assert len(rows) == 3 and len(read_rows(out / "per_image.csv")) == 3
+    assert not (out / ".lock").exists()  # a results folder keeps only results
+    # Released at the end: the next evaluation continues the folder.
+    later = Spy("b")
+    evaluate([later], [("set", images)], [0], out, progress=False)
+    assert len(later.seen) == 3 and len(read_rows(out / "per_image.csv")) == 6
+
+
 def test_zoom_arguments_are_checked_before_any_work(tmp_path):
     images = random_images(2)
     spy = Spy("a")

@@ -37,6 +37,7 @@ import torch
 from ..data.imageio import write_image
 from ..io import write_text
 from ..io.domains import SRGB
+from ..io.locks import folder_held
 from ..patterns import Pattern, save
 from ..physics.light import check_domain, decode_scene, encode_estimate
 from ..physics.noise import NoiseModel, as_noise, check_level, level_heading, level_label
@@ -296,7 +297,7 @@ def evaluate(
         result_label(m.name, domain): method_fingerprint(m, crop, domain) for m in methods
     }
     out_dir = Path(out) if out is not None else None
-    with _no_empty_folder(out_dir):
+    with _results_folder(out_dir):
         done: dict[tuple, EvalRow] = {}
         others: list[EvalRow] = []
         if out_dir is not None:
@@ -344,12 +345,18 @@ def evaluate(
 
 
 @contextlib.contextmanager
-def _no_empty_folder(out_dir: Path | None) -> Iterator[None]:
-    """A results folder that the evaluation inside creates, and that holds no result when it
-    fails (a crash or a refusal), is removed: nothing half-made is left behind."""
+def _results_folder(out_dir: Path | None) -> Iterator[None]:
+    """The results folder, held by this evaluation alone while it writes there (a second
+    evaluation into it is refused at once: both would continue its ``per_image.csv``). A folder
+    that the evaluation creates, and that holds no result when it fails (a crash or a refusal),
+    is removed: nothing half-made is left behind."""
     created = out_dir is not None and not out_dir.exists()
     try:
-        yield
+        if out_dir is None:
+            yield
+        else:
+            with folder_held(out_dir, "evaluation"):
+                yield
     except BaseException:
         csv_path = out_dir / CSV_NAME if out_dir is not None else None
         if created and out_dir.is_dir() and not (csv_path.is_file() and read_rows(csv_path)):

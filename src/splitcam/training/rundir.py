@@ -19,6 +19,7 @@ from typing import Any
 
 from ..io import appending, read_json_lines, stale_temporaries, write_text
 from ..io import checkpoints as ckpt_io
+from ..io.locks import FolderBusy, lock_folder
 from .config import ConfigError, TrainConfig, dotted, read_config_file
 
 logger = logging.getLogger(__name__)
@@ -26,7 +27,6 @@ logger = logging.getLogger(__name__)
 METRICS_NAME = "metrics.jsonl"
 CHANGES_NAME = "changes.jsonl"
 CONFIG_NAME = "config.json"
-LOCK_NAME = ".lock"
 
 #: The divergence guard gives up once it has halved the learning rate this many times.
 GUARD_GIVES_UP = 10
@@ -62,28 +62,16 @@ VALIDATION_SETTINGS = (
 
 
 def lock_run(run_dir: Path) -> Any:
-    """Hold an exclusive OS lock on the run folder for the whole run: a second run on the same
-    folder is refused at once. The OS drops the lock when the process ends, however it ends, so
-    a killed run never leaves the folder locked. Without ``fcntl`` (Windows) there is no lock.
+    """Hold the run folder's lock (:func:`splitcam.io.locks.lock_folder`) for the whole run: a
+    second run on the same folder is refused at once (:class:`ConfigError`).
 
     Returns:
         The open lock file (close it to release the lock), or None.
     """
     try:
-        import fcntl
-    except ImportError:  # pragma: no cover
-        return None
-    run_dir.mkdir(parents=True, exist_ok=True)
-    handle = open(run_dir / LOCK_NAME, "a+")  # noqa: SIM115 (held until the run ends)
-    try:
-        fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
-    except OSError:
-        handle.close()
-        raise ConfigError(
-            f"another training run is using {str(run_dir)!r} (its lock is held); wait for it "
-            f"to end or choose another --out"
-        ) from None
-    return handle
+        return lock_folder(run_dir, "training run")
+    except FolderBusy as exc:
+        raise ConfigError(str(exc)) from None
 
 
 def resumable(run_dir: Path) -> None:

@@ -25,6 +25,7 @@ from typing import Any
 import torch
 import torch.nn.functional as F
 
+from ..io.locks import LOCK_NAME
 from ..physics.light import decode_scene
 from .config import TrainConfig
 from .distributed import (
@@ -37,10 +38,9 @@ from .distributed import (
 )
 from .rundir import (
     GUARD_GIVES_UP,
-    LOCK_NAME,
     METRICS_NAME,
-    RunLog,
     VALIDATION_SETTINGS,
+    RunLog,
     RunStart,
     failure_of,
     last_metrics,
