@@ -22,7 +22,7 @@ class FolderBusy(ValueError):
     """Another process holds the folder's lock."""
 
 
-def lock_folder(folder: Path, user: str, *, hint: str = "choose another --out") -> IO | None:
+def lock_folder(folder: Path, user: str) -> IO | None:
     """Take the folder's lock (creating the folder) for ``user`` (what writes there: "training
     run", "evaluation"), or raise :class:`FolderBusy` with one line naming the folder.
 
@@ -42,16 +42,16 @@ def lock_folder(folder: Path, user: str, *, hint: str = "choose another --out") 
         handle.close()
         raise FolderBusy(
             f"another {user} is using {str(folder)!r} (its lock is held); wait for it to end "
-            f"or {hint}"
+            "or choose another --out"
         ) from None
     return handle
 
 
 @contextmanager
-def folder_held(folder: Path, user: str, *, hint: str = "choose another --out") -> Iterator[None]:
+def folder_held(folder: Path, user: str) -> Iterator[None]:
     """:func:`lock_folder` for the block; the lock file is removed at the end, so a results
     folder keeps only results."""
-    handle = lock_folder(folder, user, hint=hint)
+    handle = lock_folder(folder, user)
     try:
         yield
     finally:
