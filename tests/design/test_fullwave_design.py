@@ -490,6 +490,7 @@ def test_bad_design_settings_are_one_line_and_write_nothing(tmp_path, capsys, ex
     assert message in capsys.readouterr().err and not out.exists()
 
 
+@pytest.mark.slow  # about 15 s: fmmax's solve and its gradient, direction by direction
 def test_a_gradient_holds_one_solve_at_a_time_and_equals_the_solves_held_together(monkeypatch):
     """Behind a cone (several directions) the design's gradient is taken solve by solve: the
     forward pass keeps no solve's intermediates (each solve is run again in the backward), and

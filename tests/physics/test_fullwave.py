@@ -446,6 +446,7 @@ def test_fmmax_conserves_light_at_an_angle_and_agrees_with_torcwa():
     assert out["transmission"].std() > 0.01  # the layer sorts light
 
 
+@pytest.mark.slow  # about 20 s: fmmax's interior solution compiled layer by layer
 def test_fmmax_outer_amplitudes_are_those_of_the_interior_solution():
     """The periodic solve takes the reflected and the arriving amplitudes from the stack's one
     scattering matrix; fmmax's own interior solution (every layer's matrices, then the

@@ -30,6 +30,15 @@ def _photon_models() -> list[str]:
     return [name for name in model_names() if model_domain(name) == "linear"]
 
 
+def _photon_cases() -> list:
+    """:func:`_photon_models`, a network for any sensor marked slow: it is checked on every
+    sensor it trained on, several times one sensor's cost."""
+    return [
+        pytest.param(name, marks=pytest.mark.slow) if model_serves_any_pattern(name) else name
+        for name in _photon_models()
+    ]
+
+
 @pytest.mark.parametrize("name", _one_pattern_models())
 def test_every_shipped_model_loads_matches_its_json_and_beats_its_lmmse(name, shared_data):
     """The models inside the package itself (not a fixture's): at most 2 MB, the JSON's pattern
@@ -165,7 +174,7 @@ def test_every_shipped_model_is_right_at_every_image_border(name, shared_data):
 PHOTON_LEAD = 1.0
 
 
-@pytest.mark.parametrize("name", _photon_models())
+@pytest.mark.parametrize("name", _photon_cases())
 def test_every_shipped_photon_network_loads_by_name_and_beats_the_linear_lmmse(name, shared_data):
     """A network trained under the photon model in linear light loads by its name, says so
     (linear domain, photon noise in its config), and on held-out crops with odd sides beats the
