@@ -351,12 +351,10 @@ def _results_folder(out_dir: Path | None) -> Iterator[None]:
     that the evaluation creates, and that holds no result when it fails (a crash or a refusal),
     is removed: nothing half-made is left behind."""
     created = out_dir is not None and not out_dir.exists()
+    held = folder_held(out_dir, "evaluation") if out_dir is not None else contextlib.nullcontext()
     try:
-        if out_dir is None:
+        with held:
             yield
-        else:
-            with folder_held(out_dir, "evaluation"):
-                yield
     except BaseException:
         csv_path = out_dir / CSV_NAME if out_dir is not None else None
         if created and out_dir.is_dir() and not (csv_path.is_file() and read_rows(csv_path)):
