@@ -119,6 +119,15 @@ def heldout_cell(name: str, meta: dict, scores: dict) -> str:
     return f"{cells} ({levels})" + ("" if _current(entry, meta) else " *earlier weights or rule*")
 
 
+def unscored_cell(trained_on: str) -> str:
+    """The score cell of a model with no row of its own in the evaluation: a network of linear
+    light is scored by the exposure study; any other has not been evaluated yet (or is being
+    evaluated now), which the cell says rather than passing for a score kept elsewhere."""
+    if trained_on.startswith("linear"):
+        return "photons, linear light: [exposure](results/exposure/README.md)"
+    return "*not in the evaluation: run `splitcam reproduce`*"
+
+
 def render() -> str:
     """The page's text."""
     ours, per_set = scores()
@@ -159,9 +168,7 @@ def render() -> str:
         if name in ours:
             score = "{:.2f} / {:.2f}".format(*ours[name]) + note
         else:
-            score = ELSEWHERE.get(
-                name, "photons, linear light: [exposure](results/exposure/README.md)"
-            )
+            score = ELSEWHERE.get(name) or unscored_cell(row["trained on"])
         ref = paper.get(name)
         ref_text = f"{ref[0][0]:.2f} / {ref[3][0]:.2f}" if ref else "–"
         sets = per_set.get(name, {})
