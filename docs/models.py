@@ -27,7 +27,9 @@ from pathlib import Path
 
 from splitcam.evaluation.protocol import method_fingerprint
 from splitcam.evaluation.report import PAPER, PAPER_DATASETS, PAPER_MODELS
+from splitcam.io.domains import LINEAR
 from splitcam.recon.loading import load_model, model_names
+from splitcam.recon.registry import trained_domain
 from splitcam.training.models import model_summary
 from splitcam.training.recipe import read_recipe
 
@@ -119,11 +121,12 @@ def heldout_cell(name: str, meta: dict, scores: dict) -> str:
     return f"{cells} ({levels})" + ("" if _current(entry, meta) else " *earlier weights or rule*")
 
 
-def unscored_cell(trained_on: str) -> str:
-    """The score cell of a model with no row of its own in the evaluation: a network of linear
-    light is scored by the exposure study; any other has not been evaluated yet (or is being
-    evaluated now), which the cell says rather than passing for a score kept elsewhere."""
-    if trained_on.startswith("linear"):
+def unscored_cell(meta: dict) -> str:
+    """The score cell of a model (header ``meta``) with no row of its own in the evaluation: a
+    network of linear light is scored by the exposure study; any other has not been evaluated
+    yet (or is being evaluated now), which the cell says rather than passing for a score kept
+    elsewhere."""
+    if trained_domain(meta.get("config")) == LINEAR:
         return "photons, linear light: [exposure](results/exposure/README.md)"
     return "*not in the evaluation: run `splitcam reproduce`*"
 
@@ -168,7 +171,7 @@ def render() -> str:
         if name in ours:
             score = "{:.2f} / {:.2f}".format(*ours[name]) + note
         else:
-            score = ELSEWHERE.get(name) or unscored_cell(row["trained on"])
+            score = ELSEWHERE.get(name) or unscored_cell(meta)
         ref = paper.get(name)
         ref_text = f"{ref[0][0]:.2f} / {ref[3][0]:.2f}" if ref else "–"
         sets = per_set.get(name, {})
