@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # Gate the colour stage of each shipped network named (after studies/colour/stages.sh): export
 # its cool-down as a candidate, score it against the shipped model by the gate every model
-# passes (splitcam models gate: held-out photos, whole, at the model's validation levels), and
-# describe both on the colourful held-out photos and the skimage photos (they choose nothing).
+# passes (splitcam models gate: held-out photos at half size, at the model's validation
+# levels), and describe both on the colourful held-out photos and the skimage photos (they
+# choose nothing).
 # Ships nothing: `splitcam models gate runs/colour/candidates/NAME/MODEL.json --ship` does.
 # A stage named other than its model (an arm such as D-b32long) is given as STAGE:MODEL.
 #   SPLITCAM_DATA=DIR bash studies/colour/gate_stages.sh D A D-b32long:D ...
