@@ -312,6 +312,32 @@ def test_evaluate_keeps_earlier_results_of_other_methods(tmp_path, capsys):
     assert len(read_rows(out / CSV_NAME)) == len(rows)
 
 
+def test_evaluate_update_scores_again_a_method_of_other_weights(tmp_path, capsys):
+    """A folder holding a method's results made with other weights (a model shipped since) is
+    refused, naming --update; with it that method is scored again and the others kept."""
+    import json
+
+    from splitcam.evaluation.tables import CSV_NAME
+
+    data = blocky_images(tmp_path / "img", 1)
+    out = tmp_path / "ev"
+    args = ["evaluate", "--datasets", str(data), "--out", str(out), "--quiet", "--sigmas", "0"]
+    args += ["--method", "lmmse", "--patterns", "D,A"]
+    assert main(args) == 0
+    first = {r.method: r.psnr for r in read_rows(out / CSV_NAME)}
+    meta = out / "evaluation.json"
+    saved = json.loads(meta.read_text())
+    now = dict(saved["fingerprints"])
+    saved["fingerprints"]["lmmse-D"] = "0" * 16
+    meta.write_text(json.dumps(saved))
+    capsys.readouterr()
+    assert main(args) == 1
+    assert "--update" in capsys.readouterr().err
+    assert main([*args, "--update"]) == 0
+    assert json.loads(meta.read_text())["fingerprints"] == now
+    assert {r.method: r.psnr for r in read_rows(out / CSV_NAME)} == pytest.approx(first)
+
+
 def test_a_tiny_image_in_an_evaluation_folder_is_named(tmp_path, capsys):
     data = blocky_images(tmp_path / "img", 2)
     Image.fromarray(np.zeros((6, 6, 3), np.uint8)).save(data / "tiny.png")

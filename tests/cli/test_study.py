@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+import csv
 import json
 
 import numpy as np
+import pytest
 
 from splitcam.cli import main
+from splitcam.evaluation.tables import CSV_NAME, read_rows
 
 
 def test_study_exposure_is_in_linear_light_by_default(tmp_path) -> None:
@@ -151,3 +154,45 @@ def test_study_exposure_restart_discards_scores_of_other_weights(tmp_path, capsy
     assert json.loads(meta.read_text())["fingerprints"] != saved["fingerprints"]
     assert main(["study", "breakeven", "--restart", "--out", str(tmp_path / "b")]) == 1
     assert "--restart is for study exposure" in capsys.readouterr().err
+
+
+def test_study_exposure_update_scores_again_only_the_changed_method(tmp_path, capsys) -> None:
+    """--update: the method whose weights changed since (here its fingerprint, as a model
+    shipped since) is scored again, every other method's scores are kept as they are (one of
+    them marked, to show it was not recomputed); without it the folder is refused, naming
+    --update."""
+    args = ["study", "exposure", "--max-images", "1", "--crop", "32", "--photons", "30", "300"]
+    args += ["--patterns", "D,A", "--quiet", "--out", str(tmp_path)]
+    assert main(args) == 0
+    folder = tmp_path / "evaluation"
+    first = {(r.method, r.level): r.psnr for r in read_rows(folder / CSV_NAME)}
+    meta = folder / "evaluation.json"
+    saved = json.loads(meta.read_text())
+    changed = next(k for k in saved["fingerprints"] if "lmmse-D" in k)
+    now = saved["fingerprints"][changed]
+    saved["fingerprints"][changed] = "0" * 16  # "other weights" under lmmse-D's name
+    meta.write_text(json.dumps(saved))
+    table = folder / CSV_NAME
+    with table.open(newline="") as f:
+        rows = list(csv.DictReader(f))
+    for row in rows:  # lmmse-A's scores marked: kept rows keep the mark
+        if row["method"] == "lmmse-A":
+            row["psnr"] = "99.0"
+    with table.open("w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
+    capsys.readouterr()
+    assert main(args) == 1
+    assert "--update" in capsys.readouterr().err
+    assert main([*args, "--update"]) == 0
+    after = {(r.method, r.level): r.psnr for r in read_rows(table)}
+    assert set(after) == set(first)
+    for (name, level), psnr in after.items():
+        if name == "lmmse-A":
+            assert psnr == 99.0  # kept, not scored again
+        else:
+            assert psnr == pytest.approx(first[name, level], abs=1e-6)  # scored again
+    assert json.loads(meta.read_text())["fingerprints"][changed] == now
+    assert main(["study", "breakeven", "--update", "--out", str(tmp_path / "b")]) == 1
+    assert "--update is for study exposure" in capsys.readouterr().err

@@ -62,6 +62,12 @@ def register(sub: argparse._SubParsersAction) -> None:
         action="store_true",
         help="recompute everything instead of continuing the results in --out",
     )
+    p.add_argument(
+        "--update",
+        action="store_true",
+        help="score again the methods whose weights, pattern or precision changed since the "
+        "folder's results (a model shipped since), keeping every other row",
+    )
     p.add_argument("--quiet", action="store_true")
     p.set_defaults(handler=run)
 
@@ -253,6 +259,7 @@ def run(args: argparse.Namespace) -> int:
             crop=args.crop,
             progress=not args.quiet,
             resume=not args.restart,
+            rescore_changed=args.update,
             # the main job (no method named) also draws the zoomed side-by-side crops
             zoom_only=not chosen and not args.save_images,
             domain=args.domain,

@@ -47,6 +47,12 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="exposure: discard the scores OUT/evaluation holds (a study of other weights) "
         "instead of continuing them",
     )
+    p.add_argument(
+        "--update",
+        action="store_true",
+        help="exposure: score again the methods whose weights or pattern changed since the "
+        "scores OUT/evaluation holds (a model shipped since), keeping every other method's",
+    )
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.set_defaults(handler=run)
 
@@ -169,8 +175,9 @@ def run(args: argparse.Namespace) -> int:
         )
     if args.stack and args.study == "breakeven":
         raise ValueError("--stack is for study exposure; study breakeven takes none")
-    if args.restart and args.study == "breakeven":
-        raise ValueError("--restart is for study exposure; study breakeven keeps no scores")
+    for flag in ("restart", "update"):
+        if getattr(args, flag) and args.study == "breakeven":
+            raise ValueError(f"--{flag} is for study exposure; study breakeven keeps no scores")
     stack = args.optical_stack = _stack(args.stack, args.illuminant, args.study)
     white = stack.light.white_share() if stack is not None and stack.light else 1.0
     qe = SiliconQE(args.silicon_depth) if args.silicon_depth is not None else None
@@ -291,6 +298,7 @@ def _run_exposure(args: argparse.Namespace, images: list, names: str, photons: l
         out=Path(out) / "evaluation",
         scene_sets=args.scene_sets,
         restart=args.restart,
+        update=args.update,
     )
     snr = (
         raw_snr_check(images, patterns=loaded, domain=args.domain)

@@ -81,6 +81,7 @@ def exposure_study(
     out: str | os.PathLike[str] | None = None,
     scene_sets: dict[str, str] | None = None,
     restart: bool = False,
+    update: bool = False,
     **settings: Any,
 ) -> dict[str, dict[float, dict[str, float]]]:
     """``{label: {photons: {"psnr", "ssim", "ciede2000"}}}``: the closed-form LMMSE of each
@@ -94,7 +95,9 @@ def exposure_study(
     the numbers are the protocol's; with ``out``, its files are written there as each image is
     scored, and a run interrupted and started again with the same ``out`` continues where it
     stopped (results of the same method, image, exposure and sensor are reused); ``restart``
-    discards the results ``out`` holds instead (for instance those of other weights).
+    discards the results ``out`` holds instead (for instance those of other weights), and
+    ``update`` scores again only the methods whose weights or pattern changed since (a model
+    shipped since), keeping the others' results.
     ``scene_sets``: ``{image name: scene set}`` (Kodak24, McMaster, ...), so that crossovers
     are also given per set (:func:`write_study`); the images are scored as one set either way.
 
@@ -120,6 +123,7 @@ def exposure_study(
         progress=progress,
         domain=domain,
         resume=not restart,
+        rescore_changed=update,
     )
     results: dict[str, dict[float, dict[str, Any]]] = {}
     for method in todo:

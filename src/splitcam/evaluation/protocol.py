@@ -616,9 +616,10 @@ def _previous_rows(
     if changed and not rescore_changed:
         raise ValueError(
             f"{out_dir} holds results of {', '.join(changed)} made with other weights, another "
-            f"pattern or another precision: evaluate this one under another name (a model file "
-            f"or run folder of another name) or into another --out, or --restart to discard "
-            f"the folder's results"
+            f"pattern or another precision: --update to score it again (the other methods' "
+            f"results kept), evaluate this one under another name (a model file or run folder "
+            f"of another name) or into another --out, or --restart to discard the folder's "
+            f"results"
         )
     others = [row for row in rows if row.label not in fingerprints]
     if not same_sensor and any(r.photons for r in others):
