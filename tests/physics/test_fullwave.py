@@ -409,6 +409,123 @@ def test_a_wavelength_where_an_order_grazes_is_solved():
     )
 
 
+# --- layers stacked --------------------------------------------------------------------------
+
+
+def _films(indices, thicknesses, n_sub: float, lam: float) -> float:
+    """Transmittance of films stacked on a substrate at normal incidence from vacuum, the first
+    film on top: the product of their characteristic matrices."""
+    m = np.eye(2, dtype=complex)
+    for n_film, thickness in zip(indices, thicknesses, strict=True):
+        delta = 2 * math.pi * n_film * thickness / lam
+        m = m @ np.array(
+            [
+                [math.cos(delta), 1j * math.sin(delta) / n_film],
+                [1j * n_film * math.sin(delta), math.cos(delta)],
+            ]
+        )
+    b, c = m @ np.array([1.0, n_sub])
+    return float(4 * n_sub / abs(b + c) ** 2)
+
+
+@pytest.mark.parametrize("solver", ["torcwa", "fmmax-fft"])
+def test_uniform_layers_stacked_transmit_what_films_stacked_do(solver):
+    """Two uniform layers of different densities and thicknesses, a spacer of the background
+    between them: the transmittance of the three films (layer, vacuum, layer) on silica."""
+    if solver != "torcwa":
+        _fmmax()
+    lam = 530.0
+    grid = np.stack([np.full((4, 4), 1.0), np.full((4, 4), 0.4)])
+    design = RouterDesign(grid, thickness=(0.31, 0.22), depth=0.7, spacer=0.15)
+    out = quadrant_spectra(design, [lam], order=1, samples=8, solver=solver)
+    eps_p = float(MATERIALS["Si3N4"](lam / 1000)) ** 2
+    n1, n2 = math.sqrt(eps_p), math.sqrt(1 + 0.4 * (eps_p - 1))
+    um = lam / 1000
+    expect = _films([n1, 1.0, n2], [0.31, 0.15, 0.22], float(MATERIALS["SiO2"](um)), um)
+    assert expect != pytest.approx(_films([n1, n2], [0.31, 0.22], 1.46, um), abs=1e-3)
+    np.testing.assert_allclose(out["transmission"][:, :, 0], expect / 4, rtol=1e-6)
+    assert out["reflection"][0] == pytest.approx(1 - expect, abs=1e-6)
+
+
+@pytest.mark.parametrize("solver", ["torcwa", "fmmax-fft"])
+def test_a_layer_cut_in_two_touching_halves_is_the_layer(solver):
+    """A patterned layer is the same two halves stacked with no spacer: every quadrant and the
+    reflection at an angle, to the solver's precision; a spacer between them changes both."""
+    if solver != "torcwa":
+        _fmmax()
+    rng = np.random.default_rng(3)
+    grid = (rng.random((6, 6)) > 0.5).astype(float)
+    direction = [cone_directions(2.0)[2]]
+    settings = {"order": 3, "samples": 12, "directions": direction, "solver": solver}
+    whole = quadrant_spectra(RouterDesign(grid, thickness=0.5, depth=1.0), [560.0], **settings)
+    halves = RouterDesign(np.stack([grid, grid]), thickness=0.25, depth=1.0)
+    cut = quadrant_spectra(halves, [560.0], **settings)
+    np.testing.assert_allclose(cut["by_polarisation"], whole["by_polarisation"], atol=1e-9)
+    np.testing.assert_allclose(cut["reflection"], whole["reflection"], atol=1e-9)
+    apart = RouterDesign(np.stack([grid, grid]), thickness=0.25, depth=1.0, spacer=0.2)
+    moved = quadrant_spectra(apart, [560.0], **settings)
+    assert np.abs(moved["transmission"] - whole["transmission"]).max() > 1e-3
+    total = moved["transmission"].sum() + moved["reflection"][0]
+    assert total == pytest.approx(1.0, abs=1e-6)  # light is conserved through both layers
+
+
+def test_the_layers_solve_alike_in_both_solvers_and_differentiate_in_each_layer():
+    """Two different patterned layers apart: fmmax near torcwa at the same order, and torcwa's
+    gradient with respect to cells of either layer the central difference."""
+    import torch
+
+    from splitcam.physics.fullwave import torcwa_quadrants
+
+    rng = np.random.default_rng(5)
+    grid = rng.uniform(0.2, 0.8, (2, 4, 4))
+    design = RouterDesign(grid, thickness=(0.3, 0.2), depth=0.8, spacer=0.1)
+    x = torch.tensor(grid, requires_grad=True)
+    quads, reflected = torcwa_quadrants(design, x, 550.0, 0.1, 0.3, order=2, samples=8)
+    (quads[0, 0, 1] - 0.5 * quads[1, 1, 0] + 0.3 * reflected).backward()
+
+    def scalar(v):
+        with torch.no_grad():
+            q, r = torcwa_quadrants(design, torch.tensor(v), 550.0, 0.1, 0.3, order=2, samples=8)
+        return float(q[0, 0, 1] - 0.5 * q[1, 1, 0] + 0.3 * r)
+
+    h = 1e-6
+    for cell in [(0, 0, 0), (0, 2, 3), (1, 1, 2), (1, 3, 0)]:
+        step = np.zeros_like(grid)
+        step[cell] = h
+        fd = (scalar(grid + step) - scalar(grid - step)) / (2 * h)
+        assert float(x.grad[cell]) == pytest.approx(fd, rel=1e-5, abs=1e-9)
+    assert float(x.grad[1].abs().max()) > 1e-4  # the second layer moves the light too
+    pytest.importorskip("fmmax")
+    ours = quadrant_spectra(design, [550.0], order=3, samples=8)
+    fm = quadrant_spectra(design, [550.0], order=3, samples=8, solver="fmmax-fft")
+    np.testing.assert_allclose(fm["transmission"], ours["transmission"], atol=0.03)
+
+
+@pytest.mark.parametrize(
+    ("grid", "settings", "message"),
+    [
+        (np.ones((2, 4, 4)), {"thickness": (0.3, 0.2, 0.1)}, "3 thicknesses for a design of 2"),
+        (np.ones((2, 4, 4)), {"spacer": -0.1}, "spacer must be >= 0"),
+        (np.ones((2, 4, 4)), {"thickness": (0.3, 0.0)}, "thickness must be > 0"),
+        (np.ones((1, 2, 2, 2)), {}, "3-D stack of layers"),
+    ],
+)
+def test_bad_stacks_are_refused_in_one_line(grid, settings, message):
+    with pytest.raises(FullwaveError, match=message):
+        RouterDesign(grid, **settings)
+
+
+def test_a_stack_is_kept_whole_by_its_key():
+    """RouterDesign.stack (what compiled solves are kept under) makes the same design again,
+    every cell 0; one layer keeps its thickness a number."""
+    design = RouterDesign(np.ones((2, 3, 3)), 0.8, (0.3, 0.2), 1.5, 2.4, "vacuum", 1.45, 0.1)
+    blank = RouterDesign.blank(design.stack())
+    assert blank.stack() == design.stack() and not blank.grid.any()
+    assert blank.thicknesses == (0.3, 0.2) and blank.cells == (3, 3) and blank.spacer == 0.1
+    one = RouterDesign.blank(RouterDesign(np.ones((3, 3)), thickness=0.6).stack())
+    assert one.thickness == 0.6 and one.layers.shape == (1, 3, 3)
+
+
 # --- the second solver: fmmax (splitcam[fmmax]) ---------------------------------------------
 
 

@@ -102,25 +102,21 @@ def _bloch_fields(design: RouterDesign, setting: dict[str, Any]) -> tuple[Callab
     kept: every wavevector and wavelength reuses the compilation), its expansion's orders and
     its terms: ``(density, um, eps, wavevector, inside) -> [incident, reflected, arriving]``,
     each ``(ex, ey, hx, hy)`` over the supercell's grid and the (polarisation, spot) columns."""
-    key = (
-        design.grid.shape,
-        (design.pitch, design.thickness, design.depth),
-        (design.pillar, design.background, design.substrate),
-        tuple(sorted((k, v) for k, v in setting.items() if k not in ("f_number", "chief_sines"))),
-    )
-    return _compiled_bloch(*key)
+    items = (k for k in setting.items() if k[0] not in ("f_number", "chief_sines"))
+    return _compiled_bloch(design.stack(), tuple(sorted(items)))
 
 
 @functools.lru_cache(maxsize=8)
-def _compiled_bloch(shape, stack, materials, setting_items) -> tuple[Callable, Any, int]:
-    """The Bloch solve of one stack and setting, compiled once: the periodic solve with the
-    spots' plane waves as the incident light, the fields over the supercell."""
+def _compiled_bloch(stack, setting_items) -> tuple[Callable, Any, int]:
+    """The Bloch solve of one stack (:meth:`RouterDesign.stack`) and setting, compiled once:
+    the periodic solve with the spots' plane waves as the incident light, the fields over the
+    supercell."""
     _, fields, _, _ = _fmmax()
     import jax
     import jax.numpy as jnp
 
     setting = dict(setting_items)
-    design = RouterDesign(np.zeros(shape), *stack, *materials)
+    design = RouterDesign.blank(stack)
     cells, samples, positions = setting["cells"], setting["samples"], setting["positions"]
     period = 2.0 * design.pitch
     fmmax_stack = _FmmaxStack.of(design, setting["terms"], setting["formulation"])

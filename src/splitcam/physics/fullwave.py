@@ -109,41 +109,94 @@ def index_of(material: str | float, wavelength_nm: float) -> float:
 
 @dataclass(frozen=True)
 class RouterDesign:
-    """A 2x2-pixel metasurface router (lengths in µm).
+    """A 2x2-pixel metasurface router of one patterned layer or several stacked (lengths in µm).
 
     Args:
-        grid: ``(rows, columns)`` densities in [0, 1] over the period; rows run along y,
-            columns along x, as written in a design file.
+        grid: ``(rows, columns)`` densities in [0, 1] over the period of one layer, or
+            ``(layers, rows, columns)`` of layers stacked, the first the one the light meets
+            first; rows run along y, columns along x, as written in a design file.
         pitch: Pixel pitch (the period is two pixels each way).
-        thickness: Of the patterned layer.
-        depth: Of the monitor plane below the layer, inside the substrate.
+        thickness: Of the patterned layer, or one per layer (a single number: each layer's).
+        depth: Of the monitor plane below the last layer, inside the substrate.
         pillar: The pillars' material (a name of :data:`MATERIALS` or an index).
         background: Between the pillars; light arrives through it.
-        substrate: Below the layer, where the monitor plane lies.
+        substrate: Below the layers, where the monitor plane lies.
+        spacer: Of the background between one layer and the next (0: the layers touch).
     """
 
     grid: np.ndarray
     pitch: float = 1.0
-    thickness: float = 0.6
+    thickness: float | tuple[float, ...] = 0.6
     depth: float = 2.4
     pillar: str | float = "Si3N4"
     background: str | float = "vacuum"
     substrate: str | float = "SiO2"
+    spacer: float = 0.0
 
     def __post_init__(self) -> None:
         grid = np.asarray(self.grid, dtype=np.float64)
-        if grid.ndim != 2 or min(grid.shape) < 1:
-            raise FullwaveError(f"a design is a 2-D grid, got shape {grid.shape}")
+        if grid.ndim not in (2, 3) or min(grid.shape) < 1:
+            raise FullwaveError(
+                f"a design is a 2-D grid, or a 3-D stack of layers' grids, got shape {grid.shape}"
+            )
         if not np.all(np.isfinite(grid)) or grid.min() < 0 or grid.max() > 1:
             raise FullwaveError("a design's cells are densities in [0, 1]")
-        for name in ("pitch", "thickness"):
-            if not getattr(self, name) > 0:
-                raise FullwaveError(f"{name} must be > 0 µm, got {getattr(self, name)}")
-        if self.depth < 0:
-            raise FullwaveError(f"depth must be >= 0 µm, got {self.depth}")
+        thickness = self.thickness
+        if np.ndim(thickness) == 0:
+            thickness = float(thickness)
+        else:
+            thickness = tuple(float(t) for t in thickness)
+            layers = grid.shape[0] if grid.ndim == 3 else 1
+            if len(thickness) != layers:
+                raise FullwaveError(
+                    f"{len(thickness)} thicknesses for a design of {layers} layer(s): give one "
+                    f"per layer, or one for every layer"
+                )
+        if not self.pitch > 0:
+            raise FullwaveError(f"pitch must be > 0 µm, got {self.pitch}")
+        for value in np.atleast_1d(thickness):
+            if not value > 0:
+                raise FullwaveError(f"thickness must be > 0 µm, got {value}")
+        for name in ("depth", "spacer"):
+            if not getattr(self, name) >= 0:
+                raise FullwaveError(f"{name} must be >= 0 µm, got {getattr(self, name)}")
         for material in (self.pillar, self.background, self.substrate):
             index_of(material, 550.0)
         object.__setattr__(self, "grid", grid)
+        object.__setattr__(self, "thickness", thickness)
+
+    @property
+    def layers(self) -> np.ndarray:
+        """``(layers, rows, columns)``: the grid of each layer, the first the one light meets
+        first (one layer for a 2-D grid)."""
+        return self.grid if self.grid.ndim == 3 else self.grid[None]
+
+    @property
+    def cells(self) -> tuple[int, int]:
+        """``(rows, columns)`` of each layer's grid."""
+        rows, cols = self.grid.shape[-2:]
+        return rows, cols
+
+    @property
+    def thicknesses(self) -> tuple[float, ...]:
+        """Each layer's thickness, from the top."""
+        if isinstance(self.thickness, tuple):
+            return self.thickness
+        return (float(self.thickness),) * len(self.layers)
+
+    def stack(self) -> tuple[Any, ...]:
+        """Everything but the cells' densities, hashable: the grid's shape, the lengths and the
+        materials (:meth:`blank` makes a design of it again). Solvers compiled for one stack
+        are kept under it."""
+        lengths = (self.pitch, self.thicknesses, self.depth, self.spacer)
+        return self.grid.shape, lengths, (self.pillar, self.background, self.substrate)
+
+    @classmethod
+    def blank(cls, stack: tuple[Any, ...]) -> RouterDesign:
+        """A design of :meth:`stack`'s stack, every cell 0."""
+        shape, (pitch, thicknesses, depth, spacer), materials = stack
+        thickness = thicknesses[0] if len(thicknesses) == 1 else thicknesses
+        return cls(np.zeros(shape), pitch, thickness, depth, *materials, spacer=spacer)
 
 
 def read_design(path: str | os.PathLike) -> np.ndarray:
@@ -357,6 +410,7 @@ class _SolveLog:
             ).hexdigest(),
             **{k: getattr(design, k) for k in ("pitch", "thickness", "depth")},
             **{k: str(getattr(design, k)) for k in ("pillar", "background", "substrate")},
+            **({"spacer": design.spacer} if len(design.layers) > 1 else {}),
             "solver": solver,
             "terms": int(terms),
             "samples": int(samples),
@@ -445,14 +499,6 @@ def _solve_logged(
 _Solve = Callable[[float, float, float], tuple[np.ndarray, float]]
 
 
-def _fine_grid(design: RouterDesign) -> np.ndarray:
-    """The design sampled finely enough for its Fourier series: every cell a whole number of
-    samples, at least 256 across (the solvers' convolution matrices come from an FFT)."""
-    rows, cols = design.grid.shape
-    up = max(1, math.ceil(256 / max(rows, cols)))
-    return np.kron(design.grid, np.ones((up, up)))
-
-
 def _permittivities(design: RouterDesign, lam: float) -> tuple[float, float, float]:
     materials = (design.pillar, design.background, design.substrate)
     return tuple(index_of(m, lam) ** 2 for m in materials)
@@ -480,7 +526,7 @@ def torcwa_quadrants(
     order: int = 9,
     samples: int = 64,
 ) -> tuple[Any, Any]:
-    """One torcwa solve of ``design``'s stack with its layer's cells set to ``density`` (a
+    """One torcwa solve of ``design``'s stack with its layers' cells set to ``density`` (a
     float64 tensor of the grid's shape, values in [0, 1]), differentiable with respect to it:
     ``((2, 2, 2)`` quadrant transmissions per polarisation ``[p, row, column]``, the reflection
     averaged over the polarisations``)`` as tensors. What :func:`quadrant_spectra` computes
@@ -495,8 +541,11 @@ def torcwa_quadrants(
     fine = _fine_density(design, density)
     um = _off_grazing(lam, period, design) / 1000.0
     eps_p, eps_b, eps_s = _permittivities(design, lam)
-    layer = (eps_b + (eps_p - eps_b) * fine.T).to(torch.complex128)  # [x, y]
-    sim = _stack(torcwa, um, order, period, (eps_b, eps_s), (theta, phi), design, layer)
+    layers = [
+        (eps_b + (eps_p - eps_b) * f.T).to(torch.complex128)  # [x, y]
+        for f in fine.reshape(-1, *fine.shape[-2:])
+    ]
+    sim = _stack(torcwa, um, order, period, (eps_b, eps_s), (theta, phi), design, layers)
     # The incident flux of each source: through an empty stack of the background.
     empty = _stack(torcwa, um, 0, period, (eps_b, eps_b), (theta, phi))
     quads = []
@@ -505,7 +554,8 @@ def torcwa_quadrants(
         empty.source_planewave(amplitude=amplitude, direction="forward")
         incident = _flux(empty.field_xy(-1, coords[:1], coords[:1])).mean()
         sim.source_planewave(amplitude=amplitude, direction="forward")
-        sz = _flux(sim.field_xy(1, coords, coords, z_prop=design.depth)) / incident
+        monitor = sim.field_xy(sim.layer_N, coords, coords, z_prop=design.depth)  # the substrate
+        sz = _flux(monitor) / incident
         quads.append(sz.reshape(2, samples, 2, samples).mean(dim=(1, 3)) / 4.0)
         top = _flux(sim.field_xy(-1, coords, coords, z_prop=0.0)) / incident
         reflected = reflected + 0.5 * (1.0 - top.mean())
@@ -513,12 +563,19 @@ def torcwa_quadrants(
 
 
 def _fine_density(design: RouterDesign, density: Any) -> Any:
-    """:func:`_fine_grid` of a density tensor (the same sampling, differentiable)."""
-    rows, cols = design.grid.shape
-    if tuple(density.shape) != (rows, cols):
-        raise FullwaveError(f"density of shape {tuple(density.shape)} for a {rows}x{cols} design")
-    up = max(1, math.ceil(256 / max(rows, cols)))
-    return density.repeat_interleave(up, 0).repeat_interleave(up, 1)
+    """A density tensor sampled finely enough for the layers' Fourier series: every cell a
+    whole number of samples, at least 256 across (the solvers' convolution matrices come from
+    an FFT); differentiable."""
+    _check_density(design, density)
+    up = max(1, math.ceil(256 / max(design.cells)))
+    return density.repeat_interleave(up, -2).repeat_interleave(up, -1)
+
+
+def _check_density(design: RouterDesign, density: Any) -> None:
+    if tuple(density.shape) != design.grid.shape:
+        raise FullwaveError(
+            f"density of shape {tuple(density.shape)} for a design of shape {design.grid.shape}"
+        )
 
 
 def _fmmax() -> tuple[Any, Any, Any, Any]:
@@ -556,16 +613,14 @@ def _fmmax_solver(
 def _fmmax_core(
     design: RouterDesign, terms: int, formulation: str, samples: int
 ) -> tuple[Callable[..., tuple[Any, Any]], int]:
-    """fmmax's solve of the stack as a JAX function of the layer's cell densities,
+    """fmmax's solve of the stack as a JAX function of the layers' cell densities,
     ``(density, lam, theta, phi) -> (quads (2, 2, 2) [p, y, x], reflection)``, differentiable
     with respect to ``density`` (JAX arrays; :func:`fmmax_quadrants` is its PyTorch face): an
-    ambient layer of the background, the patterned layer, the substrate down to the monitor
-    plane. Each polarisation's fluxes are divided by its incident flux in the ambient; the
+    ambient layer of the background, the patterned layers (the design's spacer of the
+    background between them), the substrate down to the monitor plane. Each polarisation's fluxes are divided by its incident flux in the ambient; the
     reflection is the backward wave's flux there. One function (and its compiled program) per
     stack, grid shape and setting: the cells' values are its argument."""
-    stack = (design.pitch, design.thickness, design.depth)
-    materials = (design.pillar, design.background, design.substrate)
-    return _compiled_core(design.grid.shape, stack, materials, int(terms), formulation, samples)
+    return _compiled_core(design.stack(), int(terms), formulation, samples)
 
 
 class _FmmaxStack(NamedTuple):
@@ -579,8 +634,9 @@ class _FmmaxStack(NamedTuple):
     expansion: Any
     formulation: str
     up: Any
-    thickness: float
+    thicknesses: tuple[float, ...]
     depth: float
+    spacer: float
 
     @classmethod
     def of(cls, design: RouterDesign, terms: int, formulation: str) -> _FmmaxStack:
@@ -594,16 +650,18 @@ class _FmmaxStack(NamedTuple):
             approximate_num_terms=terms,
             truncation=basis.Truncation.CIRCULAR,
         )
-        rows, cols = design.grid.shape
-        up = jnp.ones((max(1, math.ceil(256 / max(rows, cols))),) * 2)  # as _fine_grid samples
-        return cls(lattice, expansion, formulation, up, design.thickness, design.depth)
+        up = jnp.ones((max(1, math.ceil(256 / max(design.cells))),) * 2)  # as _fine_density samples
+        return cls(
+            lattice, expansion, formulation, up, design.thicknesses, design.depth, design.spacer
+        )
 
 
 def _periodic_solve(
     stack: _FmmaxStack, density: Any, um: Any, eps: Any, wavevector: Any, incident: Callable
 ) -> dict[str, Any]:
-    """The layer of ``density`` between ambient and substrate solved at one wavelength (``um``)
-    and in-plane wavevector (JAX, traceable); ``incident(ambient)``: the forward amplitudes of
+    """The layers of ``density`` (a grid, or a stack of layers' grids) between ambient and
+    substrate, the spacers between them of the ambient's medium, solved at one wavelength
+    (``um``) and in-plane wavevector (JAX, traceable); ``incident(ambient)``: the forward amplitudes of
     the light arriving from the ambient. Returns the outer media's modes (``ambient``,
     ``substrate``), the amplitudes ``forward`` and ``zero``, the backward amplitude in the
     ambient (``reflected``) and the forward amplitude at the monitor (``arriving``).
@@ -617,7 +675,6 @@ def _periodic_solve(
     import jax.numpy as jnp
 
     eps_p, eps_b, eps_s = eps[0], eps[1], eps[2]
-    fine = jnp.kron(density, stack.up).T  # fmmax: [x, y]
 
     def modes(permittivity):
         return fmm.eigensolve_isotropic_media(
@@ -632,9 +689,17 @@ def _periodic_solve(
     ambient = modes(jnp.full((1, 1), eps_b))
     substrate = modes(jnp.full((1, 1), eps_s))
     forward = incident(ambient)
+    media, thicknesses = [ambient], [jnp.zeros(())]
+    layers = density if density.ndim == 3 else density[None]
+    for i, (layer, thickness) in enumerate(zip(layers, stack.thicknesses, strict=True)):
+        if i and stack.spacer > 0:  # the ambient's medium between two layers
+            media.append(ambient)
+            thicknesses.append(jnp.asarray(stack.spacer))
+        fine = jnp.kron(layer, stack.up).T  # fmmax: [x, y]
+        media.append(modes(eps_b + (eps_p - eps_b) * fine))
+        thicknesses.append(jnp.asarray(thickness))
     s = scattering.stack_s_matrix(
-        [ambient, modes(eps_b + (eps_p - eps_b) * fine), substrate],
-        [jnp.zeros(()), jnp.asarray(stack.thickness), jnp.asarray(stack.depth)],
+        [*media, substrate], [*thicknesses, jnp.asarray(stack.depth)]
     )
     entering = s.s11 @ forward  # at the substrate's top
     arriving = fields.propagate_amplitude(entering, jnp.asarray(stack.depth), substrate)
@@ -650,16 +715,14 @@ def _periodic_solve(
 
 @functools.lru_cache(maxsize=16)
 def _compiled_core(
-    shape: tuple[int, int],
-    stack: tuple[float, float, float],
-    materials: tuple[Any, Any, Any],
+    stack: tuple[Any, ...],
     terms: int,
     formulation: str,
     samples: int,
 ) -> tuple[Callable[..., tuple[Any, Any]], int]:
-    """:func:`_fmmax_core` of the stack, kept so that every solve of one setting reuses the
-    compilation."""
-    design = RouterDesign(np.zeros(shape), *stack, *materials)
+    """:func:`_fmmax_core` of the stack (:meth:`RouterDesign.stack`), kept so that every solve
+    of one setting reuses the compilation."""
+    design = RouterDesign.blank(stack)
     _, fields, _, _ = _fmmax()
     import jax
     import jax.numpy as jnp
@@ -721,9 +784,7 @@ def fmmax_quadrants(
     import jax.numpy as jnp
     import torch
 
-    rows, cols = design.grid.shape
-    if tuple(density.shape) != (rows, cols):
-        raise FullwaveError(f"density of shape {tuple(density.shape)} for a {rows}x{cols} design")
+    _check_density(design, density)
     core, _ = _fmmax_core(design, terms, formulation, samples)
 
     def run(x):
@@ -772,9 +833,10 @@ def _sum_of_two_squares(n: int) -> bool:
     return any(math.isqrt(n - m * m) ** 2 == n - m * m for m in range(math.isqrt(n) + 1))
 
 
-def _stack(torcwa, um, order, period, media, angles, design=None, layer=None):
+def _stack(torcwa, um, order, period, media, angles, design=None, layers=()):
     """A torcwa solve of light from ``media[0]`` into ``media[1]`` (permittivities) at
-    ``angles`` (polar, azimuth), through the design's patterned ``layer`` if given."""
+    ``angles`` (polar, azimuth), through the design's patterned ``layers`` (permittivities
+    ``[x, y]``, from the top), the design's spacer of ``media[0]`` between them."""
     import torch
 
     sim = torcwa.rcwa(
@@ -787,8 +849,10 @@ def _stack(torcwa, um, order, period, media, angles, design=None, layer=None):
     sim.add_input_layer(eps=complex(media[0]))
     sim.add_output_layer(eps=complex(media[1]))
     sim.set_incident_angle(*angles)
-    if layer is not None:
-        sim.add_layer(thickness=design.thickness, eps=layer)
+    for i, layer in enumerate(layers):
+        if i and design.spacer > 0:
+            sim.add_layer(thickness=design.spacer, eps=complex(media[0]))
+        sim.add_layer(thickness=design.thicknesses[i], eps=layer)
     sim.solve_global_smatrix()
     return sim
 
