@@ -617,9 +617,10 @@ def _fmmax_core(
     ``(density, lam, theta, phi) -> (quads (2, 2, 2) [p, y, x], reflection)``, differentiable
     with respect to ``density`` (JAX arrays; :func:`fmmax_quadrants` is its PyTorch face): an
     ambient layer of the background, the patterned layers (the design's spacer of the
-    background between them), the substrate down to the monitor plane. Each polarisation's fluxes are divided by its incident flux in the ambient; the
-    reflection is the backward wave's flux there. One function (and its compiled program) per
-    stack, grid shape and setting: the cells' values are its argument."""
+    background between them), the substrate down to the monitor plane. Each polarisation's
+    fluxes are divided by its incident flux in the ambient; the reflection is the backward
+    wave's flux there. One function (and its compiled program) per stack, grid shape and
+    setting: the cells' values are its argument."""
     return _compiled_core(design.stack(), int(terms), formulation, samples)
 
 
@@ -661,8 +662,8 @@ def _periodic_solve(
 ) -> dict[str, Any]:
     """The layers of ``density`` (a grid, or a stack of layers' grids) between ambient and
     substrate, the spacers between them of the ambient's medium, solved at one wavelength
-    (``um``) and in-plane wavevector (JAX, traceable); ``incident(ambient)``: the forward amplitudes of
-    the light arriving from the ambient. Returns the outer media's modes (``ambient``,
+    (``um``) and in-plane wavevector (JAX, traceable); ``incident(ambient)``: the forward
+    amplitudes of the light arriving from the ambient. Returns the outer media's modes (``ambient``,
     ``substrate``), the amplitudes ``forward`` and ``zero``, the backward amplitude in the
     ambient (``reflected``) and the forward amplitude at the monitor (``arriving``).
 
@@ -698,9 +699,7 @@ def _periodic_solve(
         fine = jnp.kron(layer, stack.up).T  # fmmax: [x, y]
         media.append(modes(eps_b + (eps_p - eps_b) * fine))
         thicknesses.append(jnp.asarray(thickness))
-    s = scattering.stack_s_matrix(
-        [*media, substrate], [*thicknesses, jnp.asarray(stack.depth)]
-    )
+    s = scattering.stack_s_matrix([*media, substrate], [*thicknesses, jnp.asarray(stack.depth)])
     entering = s.s11 @ forward  # at the substrate's top
     arriving = fields.propagate_amplitude(entering, jnp.asarray(stack.depth), substrate)
     return {
