@@ -471,6 +471,52 @@ def test_a_run_of_binary_steps_only_descends_on_fabricable_layers_from_a_binary_
     assert "saved before binary layers kept their minimum feature" in capsys.readouterr().err
 
 
+def test_layers_stacked_are_designed_together_and_their_files_solve_to_the_design(tmp_path, capsys):
+    """`optics rcwa-design` of two layers (a noise start each, their own thicknesses, a spacer):
+    a design file per layer, both binary and different, the report measures each; the saved
+    settings rebuild the design problem, and `optics rcwa` of the two files written, in the
+    same stack, solves to the spectra of the pattern the run wrote."""
+    import splitcam.design.fullwave as fd
+    from splitcam import patterns
+    from splitcam.cli import main
+
+    stack = ["--thickness", "0.3", "0.2", "--spacer", "0.1", "--order", "1"]
+    args = ["optics", "rcwa-design", "noise:6x6", "noise:6x6", *stack, "--samples", "64"]
+    args += ["--steps", "2", "--binary-steps", "1", "--feature", "0.4", "--quiet"]
+    args += ["--wavelengths", "460,620", "--out", str(tmp_path / "two")]
+    assert main(args) == 0
+    out = tmp_path / "two"
+    files = {p.name for p in out.iterdir()}
+    assert {"two-layer1.csv", "two-layer2.csv", "two-layer1-density.csv", "two.toml"} <= files
+    assert "two.csv" not in files
+    layers = [np.loadtxt(out / f"two-layer{i}.csv", delimiter=",") for i in (1, 2)]
+    assert all(layer.shape == (6, 6) and set(np.unique(layer)) <= {0.0, 1.0} for layer in layers)
+    assert not np.array_equal(*layers)  # each layer its own
+    report = (out / "report.md").read_text()
+    assert "layer `two-layer1.csv`" in report and "layer `two-layer2.csv`" in report
+    said = capsys.readouterr().out
+    settings = json.loads((out / "state.json").read_text())["settings"]
+    assert settings["stack"][1] == [0.3, 0.2] and settings["spacer"] == 0.1
+    again = fd.FullwaveDesign.from_settings(np.stack(layers), settings)
+    assert again.geometry.thicknesses == (0.3, 0.2) and again.geometry.spacer == 0.1
+    with torch.no_grad():
+        t = again.transmission(torch.from_numpy(np.stack(layers)))[0].clamp_min(0.0)
+    solved_again = float(re.search(r"-> ([0-9.]+) dB \(binary", said)[1])
+    assert -10 * math.log10(float(again.image_error(t))) == pytest.approx(solved_again, abs=0.006)
+    files = [str(out / f"two-layer{i}.csv") for i in (1, 2)]
+    rcwa = ["optics", "rcwa", *files, *stack, "--wavelengths", "460,620", "--quiet"]
+    assert main([*rcwa, "--name", "check", "--out", str(tmp_path / "check")]) == 0
+    spectra = [
+        np.loadtxt(p, delimiter=",", skiprows=1)
+        for p in (out / "two-spectra.csv", tmp_path / "check" / "check-spectra.csv")
+    ]
+    np.testing.assert_allclose(spectra[1], spectra[0], atol=1e-9)
+    assert spectra[0][:, 1:5].std() > 0.01  # the layers sort light
+    text = (tmp_path / "check" / "check.toml").read_text()
+    assert "2 layers of Si3N4 (0.3 / 0.2 µm, 0.1 µm apart)" in text
+    assert "2 layers of Si3N4" in patterns.get(str(out / "two.toml")).description
+
+
 @pytest.mark.parametrize(
     ("extra", "message"),
     [
@@ -480,6 +526,9 @@ def test_a_run_of_binary_steps_only_descends_on_fabricable_layers_from_a_binary_
         (["noise:1x1"], "at least 2x2"),
         (["nowhere.csv"], "cannot read design"),
         (["noise:6x6", "--feature", "0.4", "--stack", "silicon,glass"], "unknown"),
+        (["noise:6x6", "noise:4x4", "--feature", "0.4"], "must have one grid"),
+        (["noise:6x6", "noise:6x6", "--thickness", "0.3", "0.2", "0.1"], "3 thicknesses"),
+        (["noise:6x6", "noise:6x6", "--feature", "0.4", "--spacer", "-1"], "spacer must be"),
     ],
 )
 def test_bad_design_settings_are_one_line_and_write_nothing(tmp_path, capsys, extra, message):

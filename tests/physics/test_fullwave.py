@@ -336,6 +336,25 @@ def test_the_command_names_files_after_the_design_and_refuses_f_number_0(tmp_pat
         assert "f-number must be > 0.5" in capsys.readouterr().err and not out.exists()
 
 
+def test_layers_of_different_grids_or_thicknesses_are_refused_before_any_solve(tmp_path, capsys):
+    """`optics rcwa` of two design files: one line naming both where their grids differ, or
+    where the thicknesses given are neither one nor one per layer; nothing written."""
+    from splitcam.cli import main
+
+    (tmp_path / "a.csv").write_text("0,1\n1,0\n")
+    (tmp_path / "b.csv").write_text("0,1,1\n1,0,0\n1,1,0\n")
+    out = tmp_path / "o"
+    settings = ["--order", "1", "--quiet", "--out", str(out)]
+    files = [str(tmp_path / "a.csv"), str(tmp_path / "b.csv")]
+    assert main(["optics", "rcwa", *files, *settings]) == 1
+    err = capsys.readouterr().err
+    assert "must have one grid" in err and "2x2 cells" in err and "b.csv 3x3" in err
+    files = [str(tmp_path / "a.csv")] * 2
+    assert main(["optics", "rcwa", *files, "--thickness", "0.2", "0.3", "0.4", *settings]) == 1
+    assert "3 thicknesses for a design of 2 layer(s)" in capsys.readouterr().err
+    assert not out.exists()
+
+
 def test_colliding_roles_are_said_with_the_numbers(tmp_path, capsys):
     """A design that sends blue and red into the same pixel (a blank layer sends every colour
     everywhere alike) has no band efficiencies: the command writes its spectra and pattern and

@@ -23,7 +23,12 @@ def register(optics_sub: argparse._SubParsersAction) -> None:
         "NAME-solves.jsonl as it finishes: the same command run again after an interruption "
         "continues where it stopped.",
     )
-    p.add_argument("design", help="CSV grid of 0/1 or densities in [0, 1]; rows along y")
+    p.add_argument(
+        "design",
+        nargs="+",
+        help="CSV grid of 0/1 or densities in [0, 1], rows along y; several: layers stacked, "
+        "the top one (where light arrives) first",
+    )
     p.add_argument("--out", required=True, help="folder for the spectra and NAME.toml")
     p.add_argument(
         "--name",
@@ -70,7 +75,19 @@ def add_stack_options(
     """The layer stack, the wavelengths, the solver and its Fourier order or terms: the options
     of every command that solves a router (``optics rcwa``, ``optics rcwa-design``)."""
     p.add_argument("--pitch", type=float, default=1.0, help="pixel pitch, µm (default 1)")
-    p.add_argument("--thickness", type=float, default=0.6, help="layer, µm (default 0.6)")
+    p.add_argument(
+        "--thickness",
+        type=float,
+        nargs="+",
+        default=[0.6],
+        help="layer, µm (default 0.6); layers stacked: one for every layer or one per layer",
+    )
+    p.add_argument(
+        "--spacer",
+        type=float,
+        default=0.0,
+        help="µm of the background between layers stacked (default 0: they touch)",
+    )
     p.add_argument("--depth", type=float, default=2.4, help="monitor below it, µm (default 2.4)")
     p.add_argument("--pillar", default="Si3N4", help="material or index (default Si3N4)")
     p.add_argument("--background", default="vacuum", help="material or index (default vacuum)")
@@ -103,14 +120,56 @@ def stack_of(args: argparse.Namespace, grid):
     """The :class:`~splitcam.physics.fullwave.RouterDesign` of :func:`add_stack_options`."""
     from ..physics.fullwave import RouterDesign, material_of
 
+    thickness = args.thickness[0] if len(args.thickness) == 1 else tuple(args.thickness)
     return RouterDesign(
         grid,
         pitch=args.pitch,
-        thickness=args.thickness,
+        thickness=thickness,
         depth=args.depth,
         pillar=material_of(args.pillar),
         background=material_of(args.background),
         substrate=material_of(args.substrate),
+        spacer=args.spacer,
+    )
+
+
+def read_layers(paths):
+    """The design files of :func:`add_stack_options`'s stack, read: one file's grid, or the
+    layers of several stacked (``(layers, rows, cols)``, the first file on top).
+
+    Raises:
+        FullwaveError: A file :func:`~splitcam.physics.fullwave.read_design` refuses, or
+            layers of different grids (the message names both files).
+    """
+    import numpy as np
+
+    from ..physics.fullwave import FullwaveError, read_design
+
+    grids = [read_design(path) for path in paths]
+    for path, grid in zip(paths[1:], grids[1:], strict=True):
+        if grid.shape != grids[0].shape:
+            raise FullwaveError(
+                f"the layers stacked must have one grid: {paths[0]} is "
+                f"{grids[0].shape[0]}x{grids[0].shape[1]} cells, {path} "
+                f"{grid.shape[0]}x{grid.shape[1]}"
+            )
+    return grids[0] if len(grids) == 1 else np.stack(grids)
+
+
+def stack_text(design, pillar: str, background: str, substrate: str) -> str:
+    """The stack in words, for a pattern file's description: ``pitch 1 µm, 0.6 µm of Si3N4 in
+    vacuum on SiO2, monitor 2.4 µm deep`` (layers stacked: each thickness from the top, and
+    their spacer)."""
+    thick = design.thicknesses
+    if len(thick) == 1:
+        layers = f"{thick[0]:g} µm of {pillar}"
+    else:
+        apart = f", {design.spacer:g} µm apart" if design.spacer else ", touching"
+        each = " / ".join(f"{t:g}" for t in thick)
+        layers = f"{len(thick)} layers of {pillar} ({each} µm{apart})"
+    return (
+        f"pitch {design.pitch:g} µm, {layers} in {background} on {substrate}, monitor "
+        f"{design.depth:g} µm deep"
     )
 
 
@@ -141,17 +200,12 @@ def run(args: argparse.Namespace) -> int:
 
     from ..patterns.files import save_transmission
     from ..patterns.spectral import SpectralPattern
-    from ..physics.fullwave import (
-        check_solver,
-        quadrant_spectra,
-        read_design,
-    )
+    from ..physics.fullwave import check_solver, quadrant_spectra
 
     check_solver(args.solver)  # a missing extra, before anything is read or shown
     lams = wavelengths_of(args.wavelengths)
-    grid = read_design(args.design)
-    design = stack_of(args, grid)
-    name = args.name or Path(args.design).stem
+    design = stack_of(args, read_layers(args.design))
+    name = args.name or Path(args.design[0]).stem
     stem = file_stem(name)
     # The pattern's checks (wavelength range) before minutes of solving.
     SpectralPattern.from_transmission(name, lams, np.zeros((2, 2, len(lams))))
@@ -185,9 +239,8 @@ def run(args: argparse.Namespace) -> int:
     t = _checked_transmission(args, result, out, stem, lams)
     info = {
         "provenance": f"full-wave (RCWA, {_solved_by(args, result['terms'])}, {where})",
-        "description": f"metasurface router {Path(args.design).name}: pitch {args.pitch:g} µm, "
-        f"{args.thickness:g} µm of {args.pillar} in {args.background} on {args.substrate}, "
-        f"monitor {args.depth:g} µm deep; {where}",
+        "description": f"metasurface router {', '.join(Path(d).name for d in args.design)}: "
+        f"{stack_text(design, args.pillar, args.background, args.substrate)}; {where}",
         "reference": "splitcam optics rcwa",
     }
     out.mkdir(parents=True, exist_ok=True)

@@ -4,6 +4,7 @@ image it gives at one exposure (splitcam.design.fullwave)."""
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 import re
 from pathlib import Path
@@ -28,8 +29,10 @@ def register(optics_sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "start",
+        nargs="+",
         help="design CSV to start from (e.g. experiments/fullwave/designs/best-240325.csv), or "
-        "noise:ROWSxCOLS (a random start of that many cells)",
+        "noise:ROWSxCOLS (a random start of that many cells); several: layers stacked, the top "
+        "one first, each a CSV or noise (with --thickness and --spacer)",
     )
     p.add_argument("--out", required=True, help="folder of the run and its results")
     p.add_argument("--name", help="the design's name (default: the folder's)")
@@ -107,18 +110,31 @@ def _add_descent_options(p: argparse.ArgumentParser) -> None:
     )
 
 
-def _start_grid(text: str, seed: int):
+def _start_grid(items: list[str], seed: int):
+    """The start's grid: one layer's, or the layers' stacked (each a design file or noise; the
+    noise of layer ``i`` drawn from ``seed + i``)."""
     import numpy as np
 
-    from ..physics.fullwave import read_design
+    from ..physics.fullwave import FullwaveError, read_design
 
-    match = re.fullmatch(r"noise:(\d+)x(\d+)", text)
-    if match:
-        rows, cols = int(match[1]), int(match[2])
-        if min(rows, cols) < 2:
-            raise ValueError(f"a noise: start needs at least 2x2 cells, got {rows}x{cols}")
-        return np.random.default_rng(seed).uniform(0.3, 0.7, (rows, cols))
-    return read_design(text)
+    grids = []
+    for i, text in enumerate(items):
+        match = re.fullmatch(r"noise:(\d+)x(\d+)", text)
+        if match:
+            rows, cols = int(match[1]), int(match[2])
+            if min(rows, cols) < 2:
+                raise ValueError(f"a noise: start needs at least 2x2 cells, got {rows}x{cols}")
+            grids.append(np.random.default_rng(seed + i).uniform(0.3, 0.7, (rows, cols)))
+        else:
+            grids.append(read_design(text))
+    for text, grid in zip(items[1:], grids[1:], strict=True):
+        if grid.shape != grids[0].shape:
+            raise FullwaveError(
+                f"the layers stacked must have one grid: {items[0]} is "
+                f"{grids[0].shape[0]}x{grids[0].shape[1]} cells, {text} "
+                f"{grid.shape[0]}x{grid.shape[1]}"
+            )
+    return grids[0] if len(grids) == 1 else np.stack(grids)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -178,15 +194,16 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _settings_of(args: argparse.Namespace, grid, lams: list[float]) -> dict:
-    """What the run was started with: a continued run must have the same (``optics`` and
-    ``filter`` only where given, so that runs saved before them continue)."""
+    """What the run was started with: a continued run must have the same (``optics``,
+    ``filter`` and ``spacer`` only where given, a layer's start and thickness as one value, so
+    that runs saved before them continue)."""
     settings = {
-        "start": args.start,
+        "start": args.start[0] if len(args.start) == 1 else list(args.start),
         "seed": args.seed,
         "grid": list(grid.shape),
         "stack": [
             args.pitch,
-            args.thickness,
+            args.thickness[0] if len(args.thickness) == 1 else list(args.thickness),
             args.depth,
             args.pillar,
             args.background,
@@ -206,6 +223,8 @@ def _settings_of(args: argparse.Namespace, grid, lams: list[float]) -> dict:
         settings["optics"] = args.stack
     if args.filter is not None:  # absent otherwise: runs saved before it continue
         settings["filter"] = args.filter
+    if args.spacer:
+        settings["spacer"] = args.spacer
     return settings
 
 
@@ -217,13 +236,13 @@ def _finish(
 
     from ..io import write_text
     from ..patterns.files import save_transmission
-    from ..physics.fullwave import RouterDesign, quadrant_spectra
-    from .rcwa import _say_roles, _solved_by, _write_spectra, file_stem
+    from ..physics.fullwave import quadrant_spectra
+    from .rcwa import _say_roles, _solved_by, _write_spectra, file_stem, stack_text
 
     stem = file_stem(name)
     g = design.geometry
     solved = quadrant_spectra(
-        RouterDesign(binary, g.pitch, g.thickness, g.depth, g.pillar, g.background, g.substrate),
+        dataclasses.replace(g, grid=binary),
         lams,
         order=args.order,
         solver=args.solver,
@@ -234,8 +253,11 @@ def _finish(
     )
     t = np.clip(solved["transmission"], 0.0, None)
     error = float(design.image_error(torch.from_numpy(t)))
-    write_text(out / f"{stem}.csv", _csv(binary))
-    write_text(out / f"{stem}-density.csv", _csv(density, "{:.4f}"))
+    names = _layer_files(stem, len(g.layers))
+    layers = binary.reshape(g.layers.shape)
+    for layer_name, layer, dense in zip(names, layers, density.reshape(layers.shape), strict=True):
+        write_text(out / f"{layer_name}.csv", _csv(layer))
+        write_text(out / f"{layer_name}-density.csv", _csv(dense, "{:.4f}"))
     where = f"f/{args.f_number:g} cone" if args.f_number else "normal incidence"
     info = {
         "provenance": f"designed through RCWA ({_solved_by(args, solved['terms'])}, {where}) "
@@ -244,9 +266,8 @@ def _finish(
         + (f", every pixel behind {design.optics}" if design.optics is not None else "")
         + "; "
         f"{len(history)} steps; binary, minimum feature {args.feature:g} µm",
-        "description": f"metasurface router {stem}.csv: pitch {g.pitch:g} µm, "
-        f"{g.thickness:g} µm of {args.pillar} in {args.background} on {args.substrate}, "
-        f"monitor {g.depth:g} µm deep",
+        "description": f"metasurface router {', '.join(f'{n}.csv' for n in names)}: "
+        f"{stack_text(g, args.pillar, args.background, args.substrate)}",
         "reference": "splitcam optics rcwa-design",
     }
     pattern_file = save_transmission(out / f"{stem}.toml", name, lams, t, **info)
@@ -254,7 +275,7 @@ def _finish(
     _say_roles(lams, t, solved["reflection"], out / f"{stem}-spectra.png", f"{name}: {where}")
     psnr = -10.0 * math.log10(error)
     start_psnr = start["psnr"]
-    chart = _report_chart(history, density, binary, out / "report.png")
+    chart = _report_chart(history, density.reshape(layers.shape), layers, out / "report.png")
     first = (
         ""
         if history[0].get("binary")
@@ -267,12 +288,17 @@ def _finish(
         info["provenance"] + ".",
         "",
         f"- Closed-form LMMSE PSNR at the target exposure: {start_psnr:.2f} dB for the start "
-        f"as given ({args.start}), {first}{_last_steps(history)}, {psnr:.2f} dB for the "
-        f"binary design solved again; all at {_solved_by(args, solved['terms'])}.",
-        _measured_feature(binary, 2.0 * g.pitch / max(binary.shape)),
+        f"as given ({' + '.join(args.start)}), {first}{_last_steps(history)}, {psnr:.2f} dB "
+        f"for the binary design solved again; all at {_solved_by(args, solved['terms'])}.",
+        *(
+            _measured_feature(layer, 2.0 * g.pitch / max(g.cells), n if len(names) > 1 else "")
+            for n, layer in zip(names, layers, strict=True)
+        ),
         f"- Reflection {float(solved['reflection'].mean()):.3f}; solving time "
         f"{sum(r['seconds'] for r in history) / 60:.1f} minutes over {len(history)} steps.",
-        f"- Files: `{stem}.csv` (the design), `{stem}-density.csv`, `{stem}-spectra.csv`, "
+        f"- Files: {_and(f'`{n}.csv`' for n in names)} (the design"
+        f"{', a layer each, the top one first' if len(names) > 1 else ''}), "
+        f"{_and(f'`{n}-density.csv`' for n in names)}, `{stem}-spectra.csv`, "
         f"`{pattern_file.name}` (use it as `--pattern`).",
         "",
         *_band_table(lams, {"the start as given": start["transmission"], "the design": t}),
@@ -283,20 +309,33 @@ def _finish(
     write_text(out / "report.md", "\n".join(lines))
     print(
         f"designed {name}: LMMSE PSNR at N = {args.photons:g}: {start_psnr:.2f} dB (the start "
-        f"as given) -> {psnr:.2f} dB (binary, solved again); wrote {out}/{stem}.csv, "
-        f"{pattern_file.name} and report.md"
+        f"as given) -> {psnr:.2f} dB (binary, solved again); wrote "
+        f"{', '.join(f'{out}/{n}.csv' for n in names)}, {pattern_file.name} and report.md"
     )
     return 0
 
 
-def _measured_feature(binary, cell: float) -> str:
-    """The binary design's minimum solid and void length scales, measured (the rule the
-    binary steps keep, checked on the design written)."""
+def _layer_files(stem: str, layers: int) -> list[str]:
+    """The stems of a design's files: ``stem`` for one layer, ``stem-layer1``, ``stem-layer2``
+    ... (the top one first) for layers stacked."""
+    return [stem] if layers == 1 else [f"{stem}-layer{i + 1}" for i in range(layers)]
+
+
+def _and(items) -> str:
+    items = list(items)
+    return items[0] if len(items) == 1 else f"{', '.join(items[:-1])} and {items[-1]}"
+
+
+def _measured_feature(binary, cell: float, which: str = "") -> str:
+    """The binary layer's minimum solid and void length scales, measured (the rule the
+    binary steps keep, checked on the design written); ``which``: the layer's name, where
+    there are several."""
     from ..design.lengthscale import minimum_length_scale
 
     solid, void = minimum_length_scale(binary)
+    on = f"layer `{which}.csv`" if which else "the design"
     return (
-        f"- Minimum feature, measured on the design (periodic): solid {solid} cells "
+        f"- Minimum feature, measured on {on} (periodic): solid {solid} cells "
         f"({solid * cell:.3g} µm), void {void} cells ({void * cell:.3g} µm)."
     )
 
@@ -348,12 +387,15 @@ def _csv(grid, fmt: str = "{:g}") -> str:
 
 
 def _report_chart(history, density, binary, path: Path) -> Path:
+    """The objective against steps, then each layer's densities and binary design
+    (``(layers, rows, cols)``, the top one first)."""
     from matplotlib.figure import Figure
 
     from ..viz._save import save_figure
 
-    fig = Figure(figsize=(11, 3.6))
-    ax1, ax2, ax3 = fig.subplots(1, 3)
+    count = len(binary)
+    fig = Figure(figsize=(11 + 7.4 * (count - 1), 3.6))
+    ax1, *images = fig.subplots(1, 1 + 2 * count)
     for binary_rows, label in ((False, "continuous densities"), (True, "binary layer")):
         rows = [r for r in history if bool(r.get("binary")) == binary_rows]
         if rows:
@@ -363,10 +405,14 @@ def _report_chart(history, density, binary, path: Path) -> Path:
     ax1.set_xlabel("step")
     ax1.set_ylabel("closed-form LMMSE PSNR (dB)")
     ax1.grid(alpha=0.3)
-    for ax, image, title in (
-        (ax2, density, "densities (black: pillar)"),
-        (ax3, binary, "binary design"),
-    ):
+    panels = []
+    for i in range(count):
+        layer = f"layer {i + 1}: " if count > 1 else ""
+        panels += [
+            (density[i], f"{layer}densities (black: pillar)"),
+            (binary[i], f"{layer}binary design"),
+        ]
+    for ax, (image, title) in zip(images, panels, strict=True):
         ax.imshow(image, cmap="gray_r", vmin=0, vmax=1)
         ax.set_title(title, fontsize=10)
         ax.set_xticks([])

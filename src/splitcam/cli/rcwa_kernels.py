@@ -8,7 +8,7 @@ import argparse
 import math
 from pathlib import Path
 
-from .rcwa import add_stack_options, file_stem, stack_of, wavelengths_of
+from .rcwa import add_stack_options, file_stem, read_layers, stack_of, stack_text, wavelengths_of
 
 __all__ = ["register"]
 
@@ -28,7 +28,12 @@ def register(optics_sub: argparse._SubParsersAction) -> None:
         "wavelength. Every wavelength is kept in NAME-kernels-solves.jsonl as it finishes: the "
         "same command run again continues where it stopped.",
     )
-    p.add_argument("design", help="CSV grid of 0/1 or densities in [0, 1]; rows along y")
+    p.add_argument(
+        "design",
+        nargs="+",
+        help="CSV grid of 0/1 or densities in [0, 1], rows along y; several: layers stacked, "
+        "the top one first",
+    )
     p.add_argument("--out", required=True, help="folder for the pattern files")
     p.add_argument("--name", help="the pattern's name (default: the design file's stem)")
     add_stack_options(p, wavelengths="410:690:20", order=4, solvers=("fmmax-jones", "fmmax-fft"))
@@ -56,15 +61,15 @@ def register(optics_sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..physics.fullwave import check_solver, read_design
+    from ..physics.fullwave import check_solver
 
     check_solver("fmmax-jones")  # a missing extra, before anything is read or shown
     lams = wavelengths_of(args.wavelengths)
-    design = stack_of(args, read_design(args.design))
-    name = args.name or Path(args.design).stem
+    design = stack_of(args, read_layers(args.design))
+    name = args.name or Path(args.design[0]).stem
     out = Path(args.out)
     result = _solve(args, design, lams, name, out)
-    written = _write_patterns(args, result, lams, name, out)
+    written = _write_patterns(args, design, result, lams, name, out)
     cost = result["cost"]
     print(
         f"wrote {', '.join(str(p) for p in written)}: misfit "
@@ -111,7 +116,7 @@ def _solve(args: argparse.Namespace, design, lams: list[float], name: str, out: 
 
 
 def _write_patterns(
-    args: argparse.Namespace, result: dict, lams: list[float], name: str, out: Path
+    args: argparse.Namespace, design, result: dict, lams: list[float], name: str, out: Path
 ) -> list[Path]:
     """The computed pattern, its 5 x 5 cut where the kernels are larger, and the nearest-copy
     pattern on the same totals."""
@@ -128,9 +133,8 @@ def _write_patterns(
         "reference": "splitcam optics rcwa-kernels",
     }
     what = (
-        f"metasurface router {Path(args.design).name}: pitch {args.pitch:g} µm, "
-        f"{args.thickness:g} µm of {args.pillar} in {args.background} on {args.substrate}, "
-        f"monitor {args.depth:g} µm deep; {where}"
+        f"metasurface router {', '.join(Path(d).name for d in args.design)}: "
+        f"{stack_text(design, args.pillar, args.background, args.substrate)}; {where}"
     )
     kernels = result["kernels"]
     written = [

@@ -61,8 +61,9 @@ __all__ = ["FullwaveDesign", "beta_at", "conic_filter", "project", "rgb_kernels"
 
 def conic_filter(x: torch.Tensor, radius: float) -> torch.Tensor:
     """``x`` ``(rows, cols)`` averaged with weights ``max(0, radius - distance)`` over the
-    cells within ``radius`` (in cells), wrapping around the edges (the layer is periodic).
-    Keeps the mean and maps a constant to itself; radius below 1 returns ``x``."""
+    cells within ``radius`` (in cells), wrapping around the edges (the layer is periodic);
+    each layer of ``(layers, rows, cols)`` on its own. Keeps the mean and maps a constant to
+    itself; radius below 1 returns ``x``."""
     if radius < 1:
         return x
     reach = int(math.ceil(radius)) - 1 if float(radius).is_integer() else int(radius)
@@ -70,8 +71,9 @@ def conic_filter(x: torch.Tensor, radius: float) -> torch.Tensor:
     dist = torch.sqrt(offsets[:, None] ** 2 + offsets[None, :] ** 2)
     weights = torch.clamp(radius - dist, min=0.0)
     weights = weights / weights.sum()
-    padded = torch.nn.functional.pad(x[None, None], (reach,) * 4, mode="circular")
-    return torch.nn.functional.conv2d(padded, weights[None, None])[0, 0]
+    layers = x.reshape(-1, 1, *x.shape[-2:])
+    padded = torch.nn.functional.pad(layers, (reach,) * 4, mode="circular")
+    return torch.nn.functional.conv2d(padded, weights[None, None]).reshape(x.shape)
 
 
 def project(x: torch.Tensor, beta: float, eta: float = 0.5) -> torch.Tensor:
@@ -110,11 +112,12 @@ def rgb_kernels(transmission: torch.Tensor, wavelengths: Sequence[float]) -> tor
 
 @dataclass
 class FullwaveDesign:
-    """A 2x2-pixel router whose layer is designed for the LMMSE image error at one exposure.
+    """A 2x2-pixel router whose layer, or layers stacked, are designed for the LMMSE image
+    error at one exposure.
 
     Args:
-        geometry: The stack (pitch, thickness, depth, materials); its grid sets the number of
-            design cells and is where :meth:`start` begins from.
+        geometry: The stack (pitch, thickness, depth, materials; the layers and their spacer);
+            its grid sets the number of design cells and is where :meth:`start` begins from.
         wavelengths: nm, where the spectra are solved (the band's ends and middle at least).
         photons: The exposure designed for (photo-electrons of a lossless full-light pixel).
         read_noise: Electrons.
@@ -159,8 +162,8 @@ class FullwaveDesign:
             )
         if self.radius < 0:
             raise FullwaveError(f"the filter radius must be >= 0 cells, got {self.radius}")
-        if self.feature_cells > min(self.geometry.grid.shape):
-            rows, cols = self.geometry.grid.shape
+        if self.feature_cells > min(self.geometry.cells):
+            rows, cols = self.geometry.cells
             raise FullwaveError(
                 f"the minimum feature ({self.feature_cells} cells) is wider than the layer "
                 f"({rows} x {cols} cells)"
@@ -175,7 +178,8 @@ class FullwaveDesign:
     def from_settings(cls, grid: np.ndarray, settings: Mapping[str, Any]) -> FullwaveDesign:
         """The design problem a run's ``settings`` describe (as ``splitcam optics
         rcwa-design`` saves them beside its state): the stack (``[pitch, thickness, depth,
-        pillar, background, substrate]``) around ``grid``, the lens's cone (``f_number`` 0:
+        pillar, background, substrate]``, a thickness per layer for layers stacked, and the
+        ``spacer`` between them where given) around ``grid``, the lens's cone (``f_number`` 0:
         normal incidence), the exposure, the solver, the minimum feature in µm (and the filter's
         radius in µm where ``filter`` is given; else the feature), and the optical stack in
         front of every pixel where ``optics`` (its comma-separated names) is given.
@@ -187,8 +191,15 @@ class FullwaveDesign:
         from ..physics.stack import stack_of
 
         pitch, thickness, depth, *materials = settings["stack"]
-        geometry = RouterDesign(grid, pitch, thickness, depth, *map(material_of, materials))
-        cell = 2.0 * pitch / max(geometry.grid.shape)
+        geometry = RouterDesign(
+            grid,
+            pitch,
+            thickness,
+            depth,
+            *map(material_of, materials),
+            spacer=settings.get("spacer", 0.0),
+        )
+        cell = 2.0 * pitch / max(geometry.cells)
         feature = settings["feature"]
         if feature < cell:
             raise FullwaveError(
@@ -223,7 +234,7 @@ class FullwaveDesign:
         return torch.from_numpy(np.log(g / (1 - g)))
 
     def densities(self, theta: torch.Tensor, beta: float) -> torch.Tensor:
-        """Sigmoid, conic filter, projection: the layer's densities in [0, 1]."""
+        """Sigmoid, conic filter, projection: the layers' densities in [0, 1]."""
         return project(conic_filter(torch.sigmoid(theta), self.radius), beta)
 
     @property
@@ -240,8 +251,9 @@ class FullwaveDesign:
             return self._fabricable(self.densities(theta, beta))
 
     def _fabricable(self, density: torch.Tensor) -> np.ndarray:
-        layer = (density.detach() >= 0.5).numpy()
-        return with_minimum_feature(layer, self.feature_cells).astype(np.float64)
+        layers = (density.detach() >= 0.5).numpy().reshape(-1, *density.shape[-2:])
+        kept = [with_minimum_feature(layer, self.feature_cells) for layer in layers]
+        return np.stack(kept).reshape(density.shape).astype(np.float64)
 
     def binarised(self, theta: torch.Tensor, beta: float) -> torch.Tensor:
         """The binary layer of :meth:`binary` in the forward pass, the projected densities'
