@@ -135,22 +135,32 @@ def stack_of(args: argparse.Namespace, grid):
 
 def read_layers(paths):
     """The design files of :func:`add_stack_options`'s stack, read: one file's grid, or the
-    layers of several stacked (``(layers, rows, cols)``, the first file on top).
+    layers of several stacked (:func:`stacked`).
 
     Raises:
         FullwaveError: A file :func:`~splitcam.physics.fullwave.read_design` refuses, or
-            layers of different grids (the message names both files).
+            layers of different grids.
+    """
+    from ..physics.fullwave import read_design
+
+    return stacked(paths, [read_design(path) for path in paths])
+
+
+def stacked(names, grids):
+    """One layer's grid, or ``(layers, rows, cols)`` of several stacked, the first on top.
+
+    Raises:
+        FullwaveError: Layers of different grids (the message names both by ``names``).
     """
     import numpy as np
 
-    from ..physics.fullwave import FullwaveError, read_design
+    from ..physics.fullwave import FullwaveError
 
-    grids = [read_design(path) for path in paths]
-    for path, grid in zip(paths[1:], grids[1:], strict=True):
+    for name, grid in zip(names[1:], grids[1:], strict=True):
         if grid.shape != grids[0].shape:
             raise FullwaveError(
-                f"the layers stacked must have one grid: {paths[0]} is "
-                f"{grids[0].shape[0]}x{grids[0].shape[1]} cells, {path} "
+                f"the layers stacked must have one grid: {names[0]} is "
+                f"{grids[0].shape[0]}x{grids[0].shape[1]} cells, {name} "
                 f"{grid.shape[0]}x{grid.shape[1]}"
             )
     return grids[0] if len(grids) == 1 else np.stack(grids)

@@ -9,7 +9,7 @@ import math
 import re
 from pathlib import Path
 
-from .rcwa import add_stack_options, wavelengths_of
+from .rcwa import add_stack_options, stacked, wavelengths_of
 
 
 def register(optics_sub: argparse._SubParsersAction) -> None:
@@ -115,7 +115,7 @@ def _start_grid(items: list[str], seed: int):
     noise of layer ``i`` drawn from ``seed + i``)."""
     import numpy as np
 
-    from ..physics.fullwave import FullwaveError, read_design
+    from ..physics.fullwave import read_design
 
     grids = []
     for i, text in enumerate(items):
@@ -127,14 +127,7 @@ def _start_grid(items: list[str], seed: int):
             grids.append(np.random.default_rng(seed + i).uniform(0.3, 0.7, (rows, cols)))
         else:
             grids.append(read_design(text))
-    for text, grid in zip(items[1:], grids[1:], strict=True):
-        if grid.shape != grids[0].shape:
-            raise FullwaveError(
-                f"the layers stacked must have one grid: {items[0]} is "
-                f"{grids[0].shape[0]}x{grids[0].shape[1]} cells, {text} "
-                f"{grid.shape[0]}x{grid.shape[1]}"
-            )
-    return grids[0] if len(grids) == 1 else np.stack(grids)
+    return stacked(items, grids)
 
 
 def run(args: argparse.Namespace) -> int:
