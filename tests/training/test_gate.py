@@ -104,7 +104,7 @@ def test_refused_candidates_keep_their_reason(photos, tmp_path) -> None:
 
 def test_cli_gate_is_dry_unless_told_and_refuses_bad_input(photos, tmp_path, capsys) -> None:
     path = _candidate(tmp_path / "c", "D")
-    table = tmp_path / "gate.md"
+    table = tmp_path / "gates" / "gate.md"  # its folder made, as --out's are
     assert main(["models", "gate", str(path), "--data", str(photos), "--table", str(table)]) == 0
     out = capsys.readouterr().out
     assert "would ship: nothing" in out and _rows(table.read_text())["D"][-1] == "no"
@@ -114,6 +114,7 @@ def test_cli_gate_is_dry_unless_told_and_refuses_bad_input(photos, tmp_path, cap
         (["models", "gate", str(tmp_path / "D.txt")], "not an exported model"),
         (["models", "gate", str(path), "--data", str(tmp_path / "none")], "no training photos"),
         (["models", "gate", str(path), "--ship", "--out", str(tmp_path)], "not both"),
+        (["models", "gate", str(path), "--data", str(photos), "--table", str(tmp_path)], "folder"),
     ]:
         assert main(argv) != 0
         err = capsys.readouterr().err.strip()

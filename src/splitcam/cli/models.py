@@ -100,7 +100,7 @@ def run(args: argparse.Namespace) -> int:
 
 def run_gate(args: argparse.Namespace) -> int:
     from ..data.registry import training_folder
-    from ..io import weights
+    from ..io import weights, write_text
     from ..training.gate import gate, gate_table, ship
 
     if not args.paths:
@@ -113,11 +113,14 @@ def run_gate(args: argparse.Namespace) -> int:
     data = Path(args.data) if args.data else training_folder()
     if not data.is_dir():
         raise FileNotFoundError(f"no training photos at {data}: give --data DIR")
+    if args.table and Path(args.table).is_dir():
+        raise ValueError(f"--table {args.table} is a folder: give the Markdown file to write")
     verdicts = gate([Path(p) for p in args.paths], data, threads=args.threads)
     table = gate_table(verdicts)
     print(table)
-    if args.table:
-        Path(args.table).write_text(table)
+    if args.table:  # its folder made as --out's are: minutes of gating are not lost to it
+        Path(args.table).parent.mkdir(parents=True, exist_ok=True)
+        write_text(args.table, table)
     ship_to = weights.MODELS_DIR if args.ship else Path(args.out) if args.out else None
     if ship_to is None:
         names = [v.name for v in verdicts if v.ships]
