@@ -90,6 +90,20 @@ def test_free_space_keeps_the_light_on_its_pixel():
     assert result["misfit"][0] < 0.01 and result["reflection"][0] == pytest.approx(0, abs=1e-9)
 
 
+@pytest.mark.slow  # about 20 s: two Bloch solves compiled
+def test_a_layer_cut_in_two_touching_halves_has_the_layer_s_kernels():
+    """Layers stacked reach the Bloch solve: the layer as two touching halves gives its kernels
+    and reflection (the same stack of scattering matrices), and a spacer between the halves
+    moves them."""
+    whole = _design()
+    halves = RouterDesign(np.stack([whole.grid, whole.grid]), thickness=0.125, depth=1.0)
+    apart = RouterDesign(np.stack([whole.grid, whole.grid]), 1.0, 0.125, 1.0, spacer=0.3)
+    ours = [pixel_kernels(d, [600.0], f_number=2.0, **SMALL) for d in (whole, halves, apart)]
+    np.testing.assert_allclose(ours[1]["kernels"], ours[0]["kernels"], atol=1e-9)
+    np.testing.assert_allclose(ours[1]["reflection"], ours[0]["reflection"], atol=1e-9)
+    assert np.abs(ours[2]["kernels"] - ours[0]["kernels"]).max() > 1e-3
+
+
 def test_fold_puts_each_supercell_pixel_at_its_offset_and_splits_the_far_one():
     cells = 2  # a 4 x 4 supercell, offsets -2 .. 2
     shares = np.arange(16.0).reshape(4, 4)
