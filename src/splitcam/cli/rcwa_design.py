@@ -246,11 +246,7 @@ def _finish(
     )
     t = np.clip(solved["transmission"], 0.0, None)
     error = float(design.image_error(torch.from_numpy(t)))
-    names = _layer_files(stem, len(g.layers))
-    layers = binary.reshape(g.layers.shape)
-    for layer_name, layer, dense in zip(names, layers, density.reshape(layers.shape), strict=True):
-        write_text(out / f"{layer_name}.csv", _csv(layer))
-        write_text(out / f"{layer_name}-density.csv", _csv(dense, "{:.4f}"))
+    names, layers = _write_layers(out, stem, g, binary, density)
     where = f"f/{args.f_number:g} cone" if args.f_number else "normal incidence"
     info = {
         "provenance": f"designed through RCWA ({_solved_by(args, solved['terms'])}, {where}) "
@@ -289,10 +285,7 @@ def _finish(
         ),
         f"- Reflection {float(solved['reflection'].mean()):.3f}; solving time "
         f"{sum(r['seconds'] for r in history) / 60:.1f} minutes over {len(history)} steps.",
-        f"- Files: {_and(f'`{n}.csv`' for n in names)} (the design"
-        f"{', a layer each, the top one first' if len(names) > 1 else ''}), "
-        f"{_and(f'`{n}-density.csv`' for n in names)}, `{stem}-spectra.csv`, "
-        f"`{pattern_file.name}` (use it as `--pattern`).",
+        _files_line(names, stem, pattern_file.name),
         "",
         *_band_table(lams, {"the start as given": start["transmission"], "the design": t}),
         "",
@@ -306,6 +299,29 @@ def _finish(
         f"{', '.join(f'{out}/{n}.csv' for n in names)}, {pattern_file.name} and report.md"
     )
     return 0
+
+
+def _write_layers(out: Path, stem: str, geometry, binary, density) -> tuple[list[str], object]:
+    """Each layer's binary design and densities as CSVs: ``(file stems, (layers, rows, cols)
+    binary layers)``."""
+    from ..io import write_text
+
+    names = _layer_files(stem, len(geometry.layers))
+    layers = binary.reshape(geometry.layers.shape)
+    for name, layer, dense in zip(names, layers, density.reshape(layers.shape), strict=True):
+        write_text(out / f"{name}.csv", _csv(layer))
+        write_text(out / f"{name}-density.csv", _csv(dense, "{:.4f}"))
+    return names, layers
+
+
+def _files_line(names: list[str], stem: str, pattern: str) -> str:
+    """The report's list of the files written."""
+    return (
+        f"- Files: {_and(f'`{n}.csv`' for n in names)} (the design"
+        f"{', a layer each, the top one first' if len(names) > 1 else ''}), "
+        f"{_and(f'`{n}-density.csv`' for n in names)}, `{stem}-spectra.csv`, "
+        f"`{pattern}` (use it as `--pattern`)."
+    )
 
 
 def _layer_files(stem: str, layers: int) -> list[str]:
