@@ -120,11 +120,10 @@ def stack_of(args: argparse.Namespace, grid):
     """The :class:`~splitcam.physics.fullwave.RouterDesign` of :func:`add_stack_options`."""
     from ..physics.fullwave import RouterDesign, material_of
 
-    thickness = args.thickness[0] if len(args.thickness) == 1 else tuple(args.thickness)
     return RouterDesign(
         grid,
         pitch=args.pitch,
-        thickness=thickness,
+        thickness=args.thickness,
         depth=args.depth,
         pillar=material_of(args.pillar),
         background=material_of(args.background),

@@ -141,17 +141,16 @@ class RouterDesign:
             )
         if not np.all(np.isfinite(grid)) or grid.min() < 0 or grid.max() > 1:
             raise FullwaveError("a design's cells are densities in [0, 1]")
-        thickness = self.thickness
-        if np.ndim(thickness) == 0:
-            thickness = float(thickness)
-        else:
-            thickness = tuple(float(t) for t in thickness)
-            layers = grid.shape[0] if grid.ndim == 3 else 1
-            if len(thickness) != layers:
-                raise FullwaveError(
-                    f"{len(thickness)} thicknesses for a design of {layers} layer(s): give one "
-                    f"per layer, or one for every layer"
-                )
+        # One number for every layer (a sequence of one is that number: a one-layer design's
+        # thickness stays a number, as its solve logs and descriptions record it).
+        thickness = tuple(float(t) for t in np.atleast_1d(self.thickness))
+        layers = grid.shape[0] if grid.ndim == 3 else 1
+        if len(thickness) not in (1, layers):
+            raise FullwaveError(
+                f"{len(thickness)} thicknesses for a design of {layers} layer(s): give one "
+                f"per layer, or one for every layer"
+            )
+        thickness = thickness[0] if len(thickness) == 1 else thickness
         if not self.pitch > 0:
             raise FullwaveError(f"pitch must be > 0 µm, got {self.pitch}")
         for value in np.atleast_1d(thickness):
@@ -195,8 +194,7 @@ class RouterDesign:
     def blank(cls, stack: tuple[Any, ...]) -> RouterDesign:
         """A design of :meth:`stack`'s stack, every cell 0."""
         shape, (pitch, thicknesses, depth, spacer), materials = stack
-        thickness = thicknesses[0] if len(thicknesses) == 1 else thicknesses
-        return cls(np.zeros(shape), pitch, thickness, depth, *materials, spacer=spacer)
+        return cls(np.zeros(shape), pitch, thicknesses, depth, *materials, spacer=spacer)
 
 
 def read_design(path: str | os.PathLike) -> np.ndarray:
