@@ -298,7 +298,7 @@ def _run_exposure(args: argparse.Namespace, images: list, names: str, photons: l
         out=Path(out) / "evaluation",
         scene_sets=args.scene_sets,
         restart=args.restart,
-        update=args.update,
+        rescore_changed=args.update,
     )
     snr = (
         raw_snr_check(images, patterns=loaded, domain=args.domain)

@@ -81,7 +81,7 @@ def exposure_study(
     out: str | os.PathLike[str] | None = None,
     scene_sets: dict[str, str] | None = None,
     restart: bool = False,
-    update: bool = False,
+    rescore_changed: bool = False,
     **settings: Any,
 ) -> dict[str, dict[float, dict[str, float]]]:
     """``{label: {photons: {"psnr", "ssim", "ciede2000"}}}``: the closed-form LMMSE of each
@@ -96,8 +96,9 @@ def exposure_study(
     scored, and a run interrupted and started again with the same ``out`` continues where it
     stopped (results of the same method, image, exposure and sensor are reused); ``restart``
     discards the results ``out`` holds instead (for instance those of other weights), and
-    ``update`` scores again only the methods whose weights or pattern changed since (a model
-    shipped since), keeping the others' results.
+    ``rescore_changed`` (:func:`~splitcam.evaluation.protocol.evaluate`'s) scores again only
+    the methods whose weights or pattern changed since (a model shipped since), keeping the
+    others' results.
     ``scene_sets``: ``{image name: scene set}`` (Kodak24, McMaster, ...), so that crossovers
     are also given per set (:func:`write_study`); the images are scored as one set either way.
 
@@ -123,7 +124,7 @@ def exposure_study(
         progress=progress,
         domain=domain,
         resume=not restart,
-        rescore_changed=update,
+        rescore_changed=rescore_changed,
     )
     results: dict[str, dict[float, dict[str, Any]]] = {}
     for method in todo:
