@@ -447,7 +447,10 @@ def _films(indices, thicknesses, n_sub: float, lam: float) -> float:
     return float(4 * n_sub / abs(b + c) ** 2)
 
 
-@pytest.mark.parametrize("solver", ["torcwa", "fmmax-fft"])
+@pytest.mark.parametrize(
+    "solver",
+    ["torcwa", pytest.param("fmmax-fft", marks=pytest.mark.slow)],  # fmmax: 4 s compiling
+)
 def test_uniform_layers_stacked_transmit_what_films_stacked_do(solver):
     """Two uniform layers of different densities and thicknesses, a spacer of the background
     between them: the transmittance of the three films (layer, vacuum, layer) on silica."""
@@ -491,9 +494,9 @@ def test_a_layer_cut_in_two_touching_halves_is_the_layer(solver):
     assert total == pytest.approx(1.0, abs=1e-6)  # light is conserved through both layers
 
 
-def test_the_layers_solve_alike_in_both_solvers_and_differentiate_in_each_layer():
-    """Two different patterned layers apart: fmmax near torcwa at the same order, and torcwa's
-    gradient with respect to cells of either layer the central difference."""
+def test_the_gradient_in_either_of_two_layers_is_the_central_difference():
+    """Two different patterned layers apart: torcwa's gradient with respect to cells of either
+    layer is the central difference."""
     import torch
 
     from splitcam.physics.fullwave import torcwa_quadrants
@@ -517,7 +520,14 @@ def test_the_layers_solve_alike_in_both_solvers_and_differentiate_in_each_layer(
         fd = (scalar(grid + step) - scalar(grid - step)) / (2 * h)
         assert float(x.grad[cell]) == pytest.approx(fd, rel=1e-5, abs=1e-9)
     assert float(x.grad[1].abs().max()) > 1e-4  # the second layer moves the light too
-    pytest.importorskip("fmmax")
+
+
+@pytest.mark.slow  # about 4 s: fmmax's solve compiled
+def test_two_different_layers_apart_solve_alike_in_both_solvers():
+    """fmmax lands near torcwa at the same order for two different patterned layers apart."""
+    _fmmax()
+    grid = np.random.default_rng(5).uniform(0.2, 0.8, (2, 4, 4))
+    design = RouterDesign(grid, thickness=(0.3, 0.2), depth=0.8, spacer=0.1)
     ours = quadrant_spectra(design, [550.0], order=3, samples=8)
     fm = quadrant_spectra(design, [550.0], order=3, samples=8, solver="fmmax-fft")
     np.testing.assert_allclose(fm["transmission"], ours["transmission"], atol=0.03)
@@ -546,6 +556,9 @@ def test_a_stack_is_kept_whole_by_its_key():
     assert blank.thicknesses == (0.3, 0.2) and blank.cells == (3, 3) and blank.spacer == 0.1
     one = RouterDesign.blank(RouterDesign(np.ones((3, 3)), thickness=0.6).stack())
     assert one.thickness == 0.6 and one.layers.shape == (1, 3, 3)
+    # A sequence of one thickness (the CLI's --thickness) is that number, for any layer count.
+    assert RouterDesign(np.ones((3, 3)), thickness=[0.6]).thickness == 0.6
+    assert RouterDesign(np.ones((2, 3, 3)), thickness=[0.3]).thicknesses == (0.3, 0.3)
 
 
 # --- the second solver: fmmax (splitcam[fmmax]) ---------------------------------------------
