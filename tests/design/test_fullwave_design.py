@@ -652,3 +652,25 @@ def test_backtracking_returns_to_the_best_layer_at_half_the_rate_and_continues_e
     torch.testing.assert_close(late.scored[first + 1], late.scored[best])
     assert on[first + 1]["psnr"] == flat[best]["psnr"] and on[first + 1]["lr"] == 0.5
     assert on[first + 2]["lr"] == 0.5 and not torch.equal(late.scored[first + 2], late.scored[best])
+
+
+def test_the_reports_band_table_scores_each_band_and_leaves_one_without_wavelengths_empty():
+    """The report's band table: efficiency into a band's own pixels and purity of what they
+    receive, computed here by hand; with no design wavelength in the red band, its cells say
+    so instead of NaN."""
+    from splitcam.cli.rcwa_design import _band_table
+
+    lams = [450.0, 550.0]  # blue and green only
+    # Pixels (row-major) at 450 / 550 nm: blue peaks at pixel 0, the longest wavelength at
+    # pixel 3 (red), so green is pixels 1 and 2.
+    t = np.array([[[0.6, 0.1], [0.1, 0.3]], [[0.1, 0.3], [0.2, 0.5]]])
+    table = _band_table(lams, {"a router": t})
+    head, row = table[-3], table[-1]
+    cells = [c.strip() for c in row.strip("|").split("|")]
+    assert head.startswith("| router |")
+    assert cells[0] == "a router"
+    blue_eff, green_eff = 0.6, 0.3 + 0.3
+    blue_pur, green_pur = 0.6 / (0.6 + 0.1), (0.3 + 0.3) / (0.1 + 0.3 + 0.1 + 0.3)
+    assert [float(cells[1]), float(cells[2])] == pytest.approx([blue_eff, green_eff], abs=5e-4)
+    assert [float(cells[4]), float(cells[5])] == pytest.approx([blue_pur, green_pur], abs=5e-4)
+    assert cells[3] == cells[6] == "–"

@@ -364,14 +364,23 @@ def _band_table(lams: list[float], spectra: dict) -> list[str]:
             continue
         pur = band_purities(t, lams, eff["quadrants"])
         bands = ("blue", "green", "red")
-        rows.append([label, *(f"{eff[b]:.3f}" for b in bands), *(f"{pur[b]:.3f}" for b in bands)])
-    head = ["layer", "efficiency: blue", "green", "red", "purity: blue", "green", "red"]
+        # A band with no design wavelength has no efficiency (NaN) and so no purity either.
+        purity = [_share(pur[b] if eff[b] == eff[b] else eff[b]) for b in bands]
+        rows.append([label, *(_share(eff[b]) for b in bands), *purity])
+    head = ["router", "efficiency: blue", "green", "red", "purity: blue", "green", "red"]
     return [
         "Band efficiency (mean transmission of a band into its own pixels) and purity (the "
-        "share of what those pixels receive that is their band), at the design's wavelengths:",
+        "share of what those pixels receive that is their band), at the design's wavelengths "
+        "(–: no design wavelength in the band):",
         "",
         *markdown_table(head, rows),
     ]
+
+
+def _share(value: float) -> str:
+    """A band's efficiency or purity for the table; a band no design wavelength falls in has
+    none (NaN)."""
+    return "–" if value != value else f"{value:.3f}"
 
 
 def _last_steps(history: list[dict]) -> str:
