@@ -450,3 +450,25 @@ def test_each_pattern_named_is_read_once(tmp_path, monkeypatch):
     args += ["--datasets", str(folder), "--sigmas", "0", "--quiet", "--out", str(tmp_path / "e")]
     assert main(args) == 0
     assert len(made) == 1
+
+
+def test_a_copy_of_a_model_beside_it_is_refused_in_one_line_that_says_why(tmp_path, capsys):
+    """A user copies a shipped model file to compare it with the shipped one: both are named by
+    the name stored inside, so the evaluation refuses before scoring, naming the label twice
+    given and where labels come from, and writes nothing."""
+    import splitcam.weights
+
+    shipped = splitcam.weights.__path__[0] + "/models/bayer"
+    for ext in (".json", ".safetensors"):
+        shutil.copy(shipped + ext, tmp_path / f"my-bayer{ext}")
+    photos = tmp_path / "photos"
+    write_photos(photos, n=1, size=(32, 32))
+    out = tmp_path / "out"
+    code = main(
+        ["evaluate", "--model", "bayer", "--model", str(tmp_path / "my-bayer.json")]
+        + ["--datasets", str(photos), "--sigmas", "0", "--out", str(out)]
+    )
+    err = capsys.readouterr().err
+    assert code != 0
+    assert "net-bayer more than once" in err and "name stored in its model file" in err
+    assert not out.exists()

@@ -378,8 +378,12 @@ def _check_settings(
     if not methods:
         raise ValueError("expected at least one method to evaluate")
     names = [m.name for m in methods]
-    if len(set(names)) != len(names):
-        raise ValueError(f"expected distinct method names, got {names}")
+    twice = sorted({n for n in names if names.count(n) > 1})
+    if twice:
+        raise ValueError(
+            f"expected distinct method names, got {', '.join(twice)} more than once (a network "
+            "is named by the name stored in its model file, not by the file's name)"
+        )
     domain = check_method_domains(methods, domain)
     levels = [check_level(s) for s in sigmas]
     if not levels:
