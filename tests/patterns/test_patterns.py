@@ -24,6 +24,7 @@ def test_registry_names_and_case_insensitive_lookup():
         "router-best",
         "router-best-fullwave",
         "router-best-fullwave-f2",
+        "router-best-n30-fullwave-f2",
         "router-zou-fullwave",
         "router-zou-fullwave-f2",
         "bayer-d5100",
