@@ -365,7 +365,7 @@ def _band_table(lams: list[float], spectra: dict) -> list[str]:
         pur = band_purities(t, lams, eff["quadrants"])
         bands = ("blue", "green", "red")
         # A band with no design wavelength has no efficiency (NaN) and so no purity either.
-        purity = [_share(pur[b] if eff[b] == eff[b] else eff[b]) for b in bands]
+        purity = ["–" if math.isnan(eff[b]) else _share(pur[b]) for b in bands]
         rows.append([label, *(_share(eff[b]) for b in bands), *purity])
     head = ["router", "efficiency: blue", "green", "red", "purity: blue", "green", "red"]
     return [
@@ -380,7 +380,7 @@ def _band_table(lams: list[float], spectra: dict) -> list[str]:
 def _share(value: float) -> str:
     """A band's efficiency or purity for the table; a band no design wavelength falls in has
     none (NaN)."""
-    return "–" if value != value else f"{value:.3f}"
+    return "–" if math.isnan(value) else f"{value:.3f}"
 
 
 def _last_steps(history: list[dict]) -> str:
