@@ -415,6 +415,9 @@ def test_band_purities_are_the_band_shares_of_what_each_pixel_receives():
     assert band_purities(t, lams, q) == pytest.approx(
         {"blue": 1.1 / 1.4, "red": 1.1 / 1.5, "green": 1.1 / 1.9}
     )
+    # No wavelength in the red band: no purity there (NaN, as its efficiency), not 0.
+    short = band_purities(t[..., :4], lams[:4], q)
+    assert np.isnan(short["red"]) and short["blue"] == pytest.approx(1.1 / 1.3)
 
 
 def test_a_wavelength_where_an_order_grazes_is_solved():

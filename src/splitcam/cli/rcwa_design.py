@@ -364,9 +364,7 @@ def _band_table(lams: list[float], spectra: dict) -> list[str]:
             continue
         pur = band_purities(t, lams, eff["quadrants"])
         bands = ("blue", "green", "red")
-        # A band with no design wavelength has no efficiency (NaN) and so no purity either.
-        purity = ["–" if math.isnan(eff[b]) else _share(pur[b]) for b in bands]
-        rows.append([label, *(_share(eff[b]) for b in bands), *purity])
+        rows.append([label, *(_share(eff[b]) for b in bands), *(_share(pur[b]) for b in bands)])
     head = ["router", "efficiency: blue", "green", "red", "purity: blue", "green", "red"]
     return [
         "Band efficiency (mean transmission of a band into its own pixels) and purity (the "

@@ -912,11 +912,17 @@ def band_purities(transmission: Any, wavelengths: Any, quadrants: dict[str, int]
     """Colour purity per band of a 2x2 router: of all the light (400-700 nm, the wavelengths
     weighted alike) that reaches a band's own pixels (``quadrants`` as
     :func:`band_efficiencies` returns them; green: the other two), the share that belongs to
-    that band. 1 is a pixel that receives its own band only; a third is no sorting at all."""
+    that band. 1 is a pixel that receives its own band only; a third is no sorting at all; NaN
+    for a band none of ``wavelengths`` falls in (as :func:`band_efficiencies`)."""
     t = np.asarray(transmission).reshape(4, -1)
     lam = np.asarray(wavelengths)
     out: dict[str, Any] = {}
     for name, quads, inside in _bands(int(quadrants["blue"]), int(quadrants["red"]), lam):
         received = t[quads].sum(axis=0)
-        out[name] = float(received[inside].sum() / received.sum()) if received.sum() > 0 else 0.0
+        if not inside.any():
+            out[name] = float("nan")
+        elif received.sum() > 0:
+            out[name] = float(received[inside].sum() / received.sum())
+        else:
+            out[name] = 0.0
     return out
