@@ -79,6 +79,7 @@ def test_kernels_add_up_to_the_periodic_solves_of_the_lens_plane_waves():
     assert k.sum(axis=(-2, -1)).mean() == pytest.approx(periodic.sum(), abs=0.03)
 
 
+@pytest.mark.slow
 def test_free_space_keeps_the_light_on_its_pixel():
     """Without a router the kernels must undo the lens's own blur (an f/2 spot, about 1.3 µm
     across at 550 nm, spills over a 1 µm pixel) and leave each pixel's light on it."""

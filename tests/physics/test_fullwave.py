@@ -571,7 +571,9 @@ def _fmmax():
     pytest.importorskip("fmmax")
 
 
-@pytest.mark.parametrize("solver", ["fmmax-fft", "fmmax-jones"])
+@pytest.mark.parametrize(
+    "solver", ["fmmax-fft", pytest.param("fmmax-jones", marks=pytest.mark.slow)]
+)
 def test_fmmax_transmits_what_a_thin_film_does(solver):
     _fmmax()
     lam = 530.0

@@ -158,8 +158,19 @@ def test_closed_form_equals_filters_of_measured_design_matrices(name: str) -> No
         torch.testing.assert_close(b, b_ref, rtol=1e-6, atol=1e-8)
 
 
+#: One pattern of each kind runs in the default suite (a filter array, a router of the paper,
+#: a 6x6 filter array, a measured filter array, a full-wave router); the rest are ``slow``.
+_FIT_QUICK = {"bayer", "A", "xtrans", "rgbw-d5100", "router-zou-fullwave-f2"}
+
+
 @pytest.mark.skipif(not TRAIN.is_dir(), reason="training images not available")
-@pytest.mark.parametrize("name", patterns.names())
+@pytest.mark.parametrize(
+    "name",
+    [
+        pytest.param(name, marks=() if name in _FIT_QUICK else pytest.mark.slow)
+        for name in patterns.names()
+    ],
+)
 def test_closed_form_matches_simulated_fit(name: str) -> None:
     """Same images: the closed form and the simulated-moments fit give the same LMMSE error
     (in-sample expected MSE) and the same PSNR on a held-out image, up to sampling error."""

@@ -73,6 +73,21 @@ def test_pattern_file_named_like_a_builtin_is_not_the_builtin(tmp_path, capsys):
         )
         == 0
     )
+
+
+@pytest.mark.slow
+def test_an_edited_pattern_file_is_fitted_on_training_photos_as_itself(tmp_path):
+    """`--lmmse-train` with a file named like a built-in fits the file's kernels, not the
+    built-in's: the two fits reconstruct differently."""
+    photos = tmp_path / "photos"
+    write_photos(photos, size=(60, 64))
+    edited = patterns.get("D")
+    kernels = edited.kernels.copy()
+    kernels[1, 0] = kernels[0, 0]
+    import dataclasses
+
+    mine = tmp_path / "mine.toml"
+    patterns.save(dataclasses.replace(edited, kernels=kernels), mine)
     fitted = build_method("lmmse", pattern=mine, lmmse_train=photos)
     assert fitted.name == "lmmse-mine.toml"
     assert np.array_equal(fitted.pattern.kernels, kernels)
