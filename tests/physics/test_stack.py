@@ -112,7 +112,7 @@ def test_study_exposure_puts_every_sensor_behind_the_stack(tmp_path, capsys):
     for extra, message in [
         (["--stack", "glass"], "unknown stack element 'glass'"),
         (["--stack", "silicon", "--silicon-depth", "3"], "leave --silicon-depth out"),
-        (["--stack", "silicon", "--model", "A-photon"], "knows its sensor without the stack"),
+        (["--stack", "silicon", "--model", "A-photon"], "reconstructs A behind no stack"),
     ]:
         out = tmp_path / "refused"
         assert main([*args, *extra, "--out", str(out)]) == 1
@@ -211,7 +211,7 @@ def test_study_exposure_lights_the_scenes_with_its_illuminant(tmp_path, capsys):
     capsys.readouterr()
     for extra, message in [
         (["--illuminant", "F2"], "unknown illuminant 'F2'"),
-        (["--illuminant", "A", "--model", "A-photon"], "knows its sensor without the stack"),
+        (["--illuminant", "A", "--model", "A-photon"], "reconstructs A behind no stack"),
     ]:
         out = tmp_path / "refused"
         assert main([*args, *extra, "--out", str(out)]) == 1
@@ -220,3 +220,73 @@ def test_study_exposure_lights_the_scenes_with_its_illuminant(tmp_path, capsys):
     assert main(["study", "breakeven", "--illuminant", "A", "--out", str(out)]) == 1
     assert "--illuminant relights them in study exposure only" in capsys.readouterr().err
     assert not out.exists()
+
+
+def test_a_network_trained_behind_the_stack_is_scored_only_behind_it(tmp_path, capsys):
+    """`train --stack` trains on the sensor the exposure study simulates behind that stack (the
+    same kernels), and the study takes a network only behind the stack its run recorded: a
+    network of the bare sensor would otherwise be scored on another sensor than the study's."""
+    from conftest import TINY_SETTINGS, blocky_images
+
+    from splitcam.io import checkpoints as ckpt_io
+
+    photos = blocky_images(tmp_path / "photos", 6)
+    sections: dict[str, list[str]] = {}
+    for key, value in TINY_SETTINGS.items():
+        section, name = key.split(".")
+        sections.setdefault(section, []).append(f"{name} = {value!r}")
+    config = tmp_path / "tiny.toml"
+    config.write_text("".join(f"[{s}]\n" + "\n".join(v) + "\n" for s, v in sections.items()))
+    train = ["train", "--config", str(config), "--data", str(photos), "--pattern", "rgbw-d5100"]
+    train += ["--noise", "photon", "--domain", "linear", "--photons", "10", "1000", "--quiet"]
+    stacked, bare = tmp_path / "stacked", tmp_path / "bare"
+    assert main([*train, "--stack", "silicon,ir-cut", "--out", str(stacked)]) == 0
+    assert main([*train, "--out", str(bare)]) == 0
+    want = stack_of("silicon,ir-cut").apply(patterns.get("rgbw-d5100"))
+    held = patterns.Pattern.from_dict(ckpt_io.load(stacked).meta["pattern"])
+    np.testing.assert_allclose(held.kernels, want.kernels, rtol=0, atol=1e-6)
+    assert not np.allclose(held.kernels, patterns.get("rgbw-d5100").kernels, atol=1e-3)
+    # resumed, the run keeps the stacked sensor it recorded
+    assert main(["train", "--out", str(stacked), "--resume", "--steps", "8", "--quiet"]) == 0
+    held = patterns.Pattern.from_dict(ckpt_io.load(stacked).meta["pattern"])
+    np.testing.assert_allclose(held.kernels, want.kernels, rtol=0, atol=1e-6)
+
+    study = ["study", "exposure", "--datasets", str(photos), "--max-images", "1", "--crop", "32"]
+    study += ["--photons", "30", "3000", "--patterns", "rgbw-d5100", "--quiet"]
+    out = tmp_path / "scored"
+    args = [*study, "--stack", "silicon,ir-cut", "--checkpoint", str(stacked), "--out", str(out)]
+    assert main(args) == 0
+    results = json.loads((out / "exposure.json").read_text())["results"]
+    assert set(results) == {"rgbw-d5100", "stacked"}  # the LMMSE and the run's network
+    capsys.readouterr()
+    for extra, message in [
+        (["--checkpoint", str(stacked)], "behind silicon 3 µm deep × IR cut"),
+        (["--stack", "silicon,ir-cut", "--checkpoint", str(bare)], "behind no stack"),
+        (["--stack", "silicon", "--checkpoint", str(stacked)], "the study puts every sensor"),
+    ]:
+        refused = tmp_path / "refused"
+        assert main([*study, *extra, "--out", str(refused)]) == 1
+        assert message in capsys.readouterr().err and not refused.exists()
+    # a stack named twice would multiply the light by its curves twice
+    with pytest.raises(ValueError, match="behind an optical stack already"):
+        stack_of("silicon").apply(want)
+
+
+@pytest.mark.parametrize(
+    ("changes", "message"),
+    [
+        ({"pattern.stack": "glass"}, "unknown stack element 'glass'"),
+        ({"pattern.stack": "silicon", "pattern.name": "random"}, "leave it out with"),
+        ({"pattern.stack": "silicon", "pattern.learn": True}, "leave it out with"),
+    ],
+)
+def test_a_training_stack_is_checked_before_anything_is_written(tmp_path, changes, message):
+    from conftest import blocky_images, tiny_config
+
+    from splitcam.training import ConfigError, train
+
+    config = tiny_config(blocky_images(tmp_path / "photos", 4), tmp_path / "run", **changes)
+    with pytest.raises(ConfigError, match=message):
+        config.validate()
+        train(config)
+    assert not (tmp_path / "run").exists()

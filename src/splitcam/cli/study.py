@@ -282,9 +282,9 @@ def _run_exposure(args: argparse.Namespace, images: list, names: str, photons: l
     stack = args.optical_stack
     if stack is not None:
         given = [patterns.Given(stack.apply(g.pattern), g.label) for g in given]
-        _check_stacked_models(args.model)
     methods = model_methods(args.model, given, main_job=False, options=options)
     methods += [build_method(c, domain=args.domain) for c in args.checkpoint]
+    _check_networks_behind(methods, stack)
     out = args.out or "results/exposure"
     loaded = [g.pattern for g in given]
     results = exposure_study(
@@ -343,17 +343,20 @@ def _stack_note(stack, camera) -> str:
     return note
 
 
-def _check_stacked_models(models: list[str]) -> None:
-    """Behind a stack, a network must serve any pattern: one trained on one sensor knows that
-    sensor without the stack."""
-    from ..recon.loading import model_serves_any_pattern
+def _check_networks_behind(methods: list, stack) -> None:
+    """Every network must reconstruct its sensor behind the study's stack: one trained on one
+    sensor knows that sensor behind the stack its run recorded (``splitcam train --stack``), and
+    would otherwise be scored on another sensor than the study's."""
+    from ..physics.stack import recorded_stack
 
-    single = [m for m in models if not model_serves_any_pattern(m)]
-    if single:
+    want = str(stack) if stack is not None else "no stack"
+    wrong = [m for m in methods if recorded_stack(m.pattern) != want]
+    if wrong:
+        m = wrong[0]
         raise ValueError(
-            "--stack and --illuminant change every sensor: "
-            f"--model {', '.join(single)} knows its sensor without the stack; use a model for "
-            "any pattern (universal-photon)"
+            f"{m.name} reconstructs {m.pattern.name} behind {recorded_stack(m.pattern)}, the "
+            f"study puts every sensor behind {want}: train it with the study's --stack, or use "
+            "a model for any pattern (universal-photon)"
         )
 
 

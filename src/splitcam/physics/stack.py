@@ -69,6 +69,7 @@ __all__ = [
     "SceneLight",
     "TabulatedCurve",
     "d5100_ir_cut",
+    "recorded_stack",
     "stack_of",
 ]
 
@@ -270,8 +271,18 @@ class OpticalStack:
 
     def apply(self, pattern: Pattern) -> Pattern:
         """``pattern`` behind this stack (module docstring), under the same name; its
-        metadata records the stack."""
+        metadata records the stack.
+
+        Raises:
+            ValueError: ``pattern`` is behind a stack already (its metadata records one): a
+                second stack would multiply its light by the curves twice.
+        """
         pattern = check_pattern(pattern)
+        if "stack" in pattern.metadata:
+            raise ValueError(
+                f"pattern {pattern.name!r} is behind an optical stack already "
+                f"({pattern.metadata['stack']}): give the bare pattern"
+            )
         spectral = pattern.metadata.get("spectral")
         if spectral is None:
             kernels = np.asarray(pattern.kernels) * self.band_factors()[None, :, None, None]
@@ -295,6 +306,13 @@ class OpticalStack:
             metadata={**info, "stack": str(self)},
         )
         return stacked.to_pattern()
+
+
+def recorded_stack(pattern: Pattern) -> str:
+    """The optical stack a pattern is behind, as :meth:`OpticalStack.apply` recorded it
+    (``"no stack"`` for a bare pattern): how a network trained behind a stack is matched with
+    the sensors of a study."""
+    return str(pattern.metadata.get("stack", "no stack"))
 
 
 def _measured_filters(pattern: Pattern, kernels: np.ndarray) -> list[int]:

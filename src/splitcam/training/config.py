@@ -101,9 +101,24 @@ class PatternConfig:
         "steps (`splitcam design`, seconds), then train them jointly with the network",
     )
 
+    stack: str | None = _opt(
+        None,
+        "train behind an optical stack in front of every pixel, as `splitcam study exposure "
+        "--stack` puts its sensors (comma-separated: silicon, ir-cut, lens or a CSV file of "
+        "wavelength_nm,transmission); the run's pattern records it, and the exposure study "
+        "takes the network only behind the same stack",
+    )
+
     def checks(self) -> list[tuple[bool, str]]:
         """``(holds, message)`` of every range and choice of this section."""
+        fixed = self.name.strip().lower() != "random" and not self.learn and not self.metasurface
         return [
+            (
+                self.stack is None or fixed,
+                "pattern.stack puts one pattern's kernels behind the stack: leave it out with "
+                "--pattern random, --learn-pattern or --metasurface",
+            ),
+            (self.stack is None or not _stack_problem(self.stack), _stack_problem(self.stack)),
             (
                 self.init in ("support", "exact", "random"),
                 f"pattern.init must be support, exact or random, got {self.init!r}",
@@ -118,6 +133,19 @@ class PatternConfig:
                 f"pattern.design_steps must be >= 0, got {self.design_steps}",
             ),
         ]
+
+
+def _stack_problem(text: str | None) -> str:
+    """Why ``pattern.stack`` names no optical stack ("" when it does)."""
+    if text is None:
+        return ""
+    from ..physics.stack import stack_of
+
+    try:
+        stack_of(text)
+    except ValueError as exc:
+        return f"pattern.stack: {exc}"
+    return ""
 
 
 @dataclass

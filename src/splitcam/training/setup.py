@@ -344,10 +344,23 @@ def config_patterns(config: TrainConfig, start: patterns.Pattern | None = None) 
     names = [*config.pattern.mix, *config.pattern.val_patterns] if random else [config.pattern.name]
     read = [patterns.get(name) for name in names]
     if not random:
-        return ConfigPatterns(read[0], None, ())
+        return ConfigPatterns(_behind_stack(read[0], config.pattern.stack), None, ())
     mixed = len(config.pattern.mix)
     mix = PatternMix(read[:mixed], config.pattern.mix_fraction, seed=seeds.mix_seed(config))
     return ConfigPatterns(None, mix, tuple(read[mixed:]))
+
+
+def _behind_stack(pattern: patterns.Pattern, text: str | None) -> patterns.Pattern:
+    """``pattern`` behind the optical stack ``pattern.stack`` names, if any (the stacked
+    pattern records the stack in its metadata, and so in every checkpoint)."""
+    if text is None:
+        return pattern
+    from ..physics.stack import stack_of
+
+    try:
+        return stack_of(text).apply(pattern)
+    except ValueError as exc:
+        raise ConfigError(f"pattern.stack: {exc}") from None
 
 
 def _metasurface_sensor(spec: str, period: tuple[int, int], config: TrainConfig) -> SplitterSensor:
