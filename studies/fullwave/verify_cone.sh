@@ -9,8 +9,8 @@
 #       # (793 terms, 410-690 nm, f/2; about two hours of one thread), in the design's folder;
 #       # PARTS=2 shares the solving between two processes, one core each
 #   SPLITCAM_DATA=DIR bash studies/fullwave/verify_cone.sh answer best-n30-f2 best-n300-f2
-#       # the exposure answer with the designs added (only the new patterns are scored): the
-#       # solve's pattern, and the kernels' where that stage has run
+#       # the exposure answer (studies/exposure/answer.sh) with the designs added (only the new
+#       # patterns are scored): the solve's pattern, and the kernels' where that stage has run
 set -euo pipefail
 export OMP_NUM_THREADS=1
 D=docs/results/fullwave/design
@@ -62,12 +62,7 @@ answer)
         done
         added="$added,$D/$name/verify/$name-f2-fmmax797.toml"
     done
-    V=$D/zou-n30-binary-lr0.03/verify
-    P="1 2.15 4.64 10 21.5 46.4 100 215 464 1000 2150 4640 10000"
-    splitcam study exposure --datasets kodak24,mcmaster,/tmp/splitcam-heldout6 --crop 192 \
-        --patterns rgbw-d5100,bayer-d5100,router-zou-fullwave-f2,router-best-fullwave-f2,$K/zou-f2-computed.json,$K/zou-f2-nearest.toml,$K/best-f2-computed.json,$K/best-f2-nearest.toml,$A/zou-f2-centre-6wl.toml,$A/zou-f2-corner-6wl.toml,$A/best-f2-centre-6wl.toml,$A/best-f2-corner-6wl.toml,$A/zou-f2-middle-6wl.toml,$A/best-f2-middle-6wl.toml,$V/zou-n30-binary-f2-fmmax797.toml$added,router-best-n30-fullwave-f2 \
-        --photons $P --read-noise 2 --model universal-photon --reference rgbw-d5100,bayer-d5100 \
-        --stack silicon,ir-cut --full-well 6000 --quiet --out docs/results/exposure/answer/rn2
+    ADD="$added" bash studies/exposure/answer.sh --quiet
     ;;
 *)
     echo "usage: verify_cone.sh solve|kernels|answer NAME..." >&2
