@@ -112,13 +112,14 @@ class PatternConfig:
     def checks(self) -> list[tuple[bool, str]]:
         """``(holds, message)`` of every range and choice of this section."""
         fixed = self.name.strip().lower() != "random" and not self.learn and not self.metasurface
+        stack_problem = _stack_problem(self.stack)
         return [
             (
                 self.stack is None or fixed,
                 "pattern.stack puts one pattern's kernels behind the stack: leave it out with "
                 "--pattern random, --learn-pattern or --metasurface",
             ),
-            (self.stack is None or not _stack_problem(self.stack), _stack_problem(self.stack)),
+            (not stack_problem, stack_problem),
             (
                 self.init in ("support", "exact", "random"),
                 f"pattern.init must be support, exact or random, got {self.init!r}",
