@@ -31,7 +31,7 @@ ALL=$ALL,$D/best-n30-fab-f2/kernels-793/best-n30-fab-f2-computed.json
 ALL=$ALL,$D/best-n30-fab-f2/kernels-793/best-n30-fab-f2-nearest.toml
 ALL=$ALL,$D/best-n30-fab-f2/verify/best-n30-fab-f2-f2-fmmax797.toml
 ALL=$ALL,$D/best-n300-fab-f2/verify/best-n300-fab-f2-f2-fmmax797.toml
-ALL=$ALL,router-best-n30-fullwave-f2
+ALL=$ALL,router-best-n30-fullwave-f2,router-best-n300-fullwave-f2
 splitcam study exposure --datasets "kodak24,mcmaster,$HELD" --crop 192 \
     --patterns "${PATTERNS:-$ALL}${ADD:-}" \
     --photons 1 2.15 4.64 10 21.5 46.4 100 215 464 1000 2150 4640 10000 --read-noise 2 \

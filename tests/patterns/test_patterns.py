@@ -25,6 +25,7 @@ def test_registry_names_and_case_insensitive_lookup():
         "router-best-fullwave",
         "router-best-fullwave-f2",
         "router-best-n30-fullwave-f2",
+        "router-best-n300-fullwave-f2",
         "router-zou-fullwave",
         "router-zou-fullwave-f2",
         "bayer-d5100",
