@@ -28,6 +28,7 @@ SENSORS = (
     "bayer-d5100",
     "router-best-fullwave-f2",
     "router-best-n30-fullwave-f2",
+    "router-best-n300-fullwave-f2",
     f"{K}/best-f2-computed.json",
     f"{K}/zou-f2-computed.json",
 )
