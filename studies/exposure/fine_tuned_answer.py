@@ -42,8 +42,11 @@ The answer's setting (every pixel behind silicon and the D5100's IR cut, routers
 cone, read noise 2 e⁻, full well 6000 e⁻, Kodak24 + McMaster + six held-out training photos at
 192 px) with each sensor's network fine-tuned from `universal-photon` by one rule: 720 steps,
 batch 8 of 64x64 patches, photons 1 to 10⁴, on the sensor behind the same stack and full well
-(`splitcam train --stack`), one thread each. A fine-tuned network is compared only with the
-reference's fine-tuned network, so both sides of every crossover had the same training.
+(`splitcam train --stack`), one thread each (10-14 minutes a run on a 2-core AMD EPYC, two
+runs side by side). Each run's network is the one of its best validation step, so a run that
+never gained on the held-out photos keeps `universal-photon`'s weights. A fine-tuned network is
+compared only with the reference's fine-tuned network: both sides of every crossover went
+through the same rule.
 
 ```bash
 export SPLITCAM_DATA=DIR
