@@ -347,9 +347,9 @@ def _check_networks_behind(methods: list, stack) -> None:
     """Every network must reconstruct its sensor behind the study's stack: one trained on one
     sensor knows that sensor behind the stack its run recorded (``splitcam train --stack``), and
     would otherwise be scored on another sensor than the study's."""
-    from ..physics.stack import recorded_stack
+    from ..physics.stack import NO_STACK, recorded_stack
 
-    want = str(stack) if stack is not None else "no stack"
+    want = str(stack) if stack is not None else NO_STACK
     wrong = [m for m in methods if recorded_stack(m.pattern) != want]
     if wrong:
         m = wrong[0]

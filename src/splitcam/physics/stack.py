@@ -64,6 +64,7 @@ from .radiometry import ILLUMINANTS, SiliconQE
 
 __all__ = [
     "ELEMENTS",
+    "NO_STACK",
     "IRCut",
     "OpticalStack",
     "SceneLight",
@@ -73,6 +74,8 @@ __all__ = [
     "stack_of",
 ]
 
+#: How a bare pixel's stack reads (:class:`OpticalStack` of no curves, :func:`recorded_stack`).
+NO_STACK = "no stack"
 #: The band every curve must cover (nm): the band of the sensor model.
 BAND = (400.0, 700.0)
 #: The grid RGB sensors' band factors are taken on (nm).
@@ -252,7 +255,7 @@ class OpticalStack:
     def __str__(self) -> str:
         stack = " × ".join(str(e) for e in self.elements)
         if self.light is None:
-            return stack or "no stack"
+            return stack or NO_STACK
         return f"{stack}, {self.light}" if stack else str(self.light)
 
     def weights(self, nm: Any) -> np.ndarray:
@@ -312,7 +315,7 @@ def recorded_stack(pattern: Pattern) -> str:
     """The optical stack a pattern is behind, as :meth:`OpticalStack.apply` recorded it
     (``"no stack"`` for a bare pattern): how a network trained behind a stack is matched with
     the sensors of a study."""
-    return str(pattern.metadata.get("stack", "no stack"))
+    return str(pattern.metadata.get("stack", NO_STACK))
 
 
 def _measured_filters(pattern: Pattern, kernels: np.ndarray) -> list[int]:
