@@ -284,6 +284,44 @@ def test_bad_settings_are_refused():
         FullwaveDesign(RouterDesign(np.eye(4)), solver="meep")
     with pytest.raises(FullwaveError, match="for an fmmax solver"):
         FullwaveDesign(RouterDesign(np.eye(4)), terms=100)
+    for workers in (0, 1.5, True):
+        with pytest.raises(FullwaveError, match="workers: a whole number >= 1"):
+            FullwaveDesign(RouterDesign(np.eye(4)), workers=workers)
+
+
+@pytest.mark.slow  # about 10 s, most of it starting the workers (the command's test has one)
+def test_solves_shared_by_worker_processes_give_the_same_loss_spectra_and_gradient():
+    """Behind a cone, two worker processes share a step's solves (forward, then each solve's
+    pullback): the loss, the spectra, the reflection and the gradient equal one process's to
+    rounding (the workers' single thread sums in another order); leaving the with-block stops
+    the workers."""
+    from splitcam.physics.fullwave import cone_directions
+
+    rng = np.random.default_rng(11)
+    geometry = RouterDesign(rng.random((6, 6)), thickness=0.5, depth=1.0)
+    kw = dict(
+        wavelengths=[470.0, 610.0], photons=50.0, order=1, samples=4, radius=1.0,
+        directions=cone_directions(2.0)[:2],
+    )  # fmt: skip
+    serial = FullwaveDesign(geometry, **kw)
+    with FullwaveDesign(geometry, **kw, workers=2) as pooled:
+        results = []
+        for design in (serial, pooled):
+            theta = design.start().clone().requires_grad_(True)
+            loss, info = design.objective(theta, beta=2.0)
+            loss.backward()
+            results.append((float(loss.detach()), info, theta.grad.clone()))
+        (loss1, info1, grad1), (loss2, info2, grad2) = results
+        assert loss2 == pytest.approx(loss1, rel=1e-13)
+        np.testing.assert_allclose(info2["transmission"], info1["transmission"], rtol=1e-12)
+        assert info2["reflection"] == pytest.approx(info1["reflection"], rel=1e-12)
+        assert torch.allclose(grad2, grad1, rtol=1e-10, atol=1e-15)
+        assert float(grad1.abs().max()) > 0
+        with torch.no_grad():  # without a gradient to take: the forward round alone
+            t = pooled.transmission(pooled.densities(pooled.start(), 2.0))[0]
+        np.testing.assert_allclose(t.numpy(), info1["transmission"], rtol=1e-12)
+        assert pooled._pool is not None
+    assert pooled._pool is None  # the with-block stopped the workers
 
 
 def test_the_design_command_writes_a_solved_binary_design_and_continues_a_stopped_run(
@@ -291,7 +329,8 @@ def test_the_design_command_writes_a_solved_binary_design_and_continues_a_stoppe
 ):
     """`optics rcwa-design` from noise: the binary design, its spectra and pattern file, a
     report; a run stopped after one step and started again ends where an unstopped run ends
-    (the design variables and Adam's moments are saved every step)."""
+    (the design variables and Adam's moments are saved every step), also when the run is
+    continued with its solves shared by worker processes (`--workers`)."""
     import splitcam.design.fullwave as fd
     from splitcam import patterns
     from splitcam.cli import main
@@ -369,7 +408,8 @@ def test_the_design_command_writes_a_solved_binary_design_and_continues_a_stoppe
         assert "interrupted" in capsys.readouterr().err
         assert not (tmp_path / "stopped" / "stopped.csv").exists()
     monkeypatch.setattr(fd.FullwaveDesign, "objective", real)
-    assert main([*args, "--out", str(tmp_path / "stopped")]) == 0
+    # Continued with its solves shared by two worker processes: the same descent.
+    assert main([*args, "--workers", "2", "--out", str(tmp_path / "stopped")]) == 0
     a = np.loadtxt(tmp_path / "whole" / "whole-density.csv", delimiter=",")
     b = np.loadtxt(tmp_path / "stopped" / "stopped-density.csv", delimiter=",")
     np.testing.assert_allclose(a, b, atol=1e-4)
@@ -529,6 +569,7 @@ def test_layers_stacked_are_designed_together_and_their_files_solve_to_the_desig
         (["noise:6x6", "noise:4x4", "--feature", "0.4"], "must have one grid"),
         (["noise:6x6", "noise:6x6", "--thickness", "0.3", "0.2", "0.1"], "3 thicknesses"),
         (["noise:6x6", "noise:6x6", "--feature", "0.4", "--spacer", "-1"], "spacer must be"),
+        (["noise:6x6", "--feature", "0.4", "--workers", "0"], "workers: a whole number >= 1"),
     ],
 )
 def test_bad_design_settings_are_one_line_and_write_nothing(tmp_path, capsys, extra, message):

@@ -55,6 +55,7 @@ from ..physics.noise import Exposure
 from ..physics.sensor import pixel_kernels
 from ..recon.closed_form import closed_form_mse, shipped_image_statistics
 from .lengthscale import with_minimum_feature
+from .solvepool import SolvePool, pooled_solves
 
 __all__ = ["FullwaveDesign", "beta_at", "conic_filter", "project", "rgb_kernels", "run_design"]
 
@@ -139,6 +140,10 @@ class FullwaveDesign:
             behind it, each wavelength's transmission weighted by the stack's, as
             :meth:`~splitcam.physics.stack.OpticalStack.apply` weights a spectral pattern; the
             spectra reported stay the router's own. None: a bare, lossless pixel.
+        workers: Processes that share each step's solves (one thread each;
+            :mod:`splitcam.design.solvepool`); 1: every solve in this process. The same spectra,
+            and the same gradient to rounding, either way. Started on first use; :meth:`close`
+            (or ``with design:``) stops them.
     """
 
     geometry: RouterDesign
@@ -153,7 +158,9 @@ class FullwaveDesign:
     solver: str = "torcwa"
     terms: int | None = None
     optics: Any = None
+    workers: int = 1
     _stats: Any = field(default=None, init=False, repr=False)
+    _pool: Any = field(default=None, init=False, repr=False)
 
     def __post_init__(self) -> None:
         if not self.photons > 0:
@@ -172,17 +179,34 @@ class FullwaveDesign:
             raise FullwaveError(f"unknown solver {self.solver!r}; expected one of {SOLVERS}")
         if self.terms is not None and (self.solver == "torcwa" or self.terms < 1):
             raise FullwaveError("terms: a number >= 1, for an fmmax solver (torcwa takes order)")
+        if isinstance(self.workers, bool) or not isinstance(self.workers, int) or self.workers < 1:
+            raise FullwaveError(f"workers: a whole number >= 1, got {self.workers!r}")
         self._stats = shipped_image_statistics("linear")
 
+    def __enter__(self) -> FullwaveDesign:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def close(self) -> None:
+        """Stop the worker processes, if any were started (a later solve starts them again)."""
+        if self._pool is not None:
+            self._pool.close()
+            self._pool = None
+
     @classmethod
-    def from_settings(cls, grid: np.ndarray, settings: Mapping[str, Any]) -> FullwaveDesign:
+    def from_settings(
+        cls, grid: np.ndarray, settings: Mapping[str, Any], *, workers: int = 1
+    ) -> FullwaveDesign:
         """The design problem a run's ``settings`` describe (as ``splitcam optics
         rcwa-design`` saves them beside its state): the stack (``[pitch, thickness, depth,
         pillar, background, substrate]``, a thickness per layer for layers stacked, and the
         ``spacer`` between them where given) around ``grid``, the lens's cone (``f_number`` 0:
         normal incidence), the exposure, the solver, the minimum feature in µm (and the filter's
         radius in µm where ``filter`` is given; else the feature), and the optical stack in
-        front of every pixel where ``optics`` (its comma-separated names) is given.
+        front of every pixel where ``optics`` (its comma-separated names) is given. ``workers``
+        is not a setting of the problem (a continued run may change it): see the class.
 
         Raises:
             FullwaveError: A feature size below the grid step, or any of the stack's or the
@@ -223,6 +247,7 @@ class FullwaveDesign:
             solver=settings["solver"],
             terms=settings["terms"],
             optics=stack_of(optics) if optics else None,
+            workers=workers,
         )
 
     def start(self) -> torch.Tensor:
@@ -267,17 +292,28 @@ class FullwaveDesign:
         directions) and ``(L,)`` reflection, differentiable in ``density``."""
         weights = torch.tensor([w for _, _, w in self.directions], dtype=torch.float64)
         weights = weights / weights.sum()
+        jobs = [(lam, theta, phi) for lam in self.wavelengths for theta, phi, _ in self.directions]
+        if self.workers > 1:
+            solved = iter(zip(*pooled_solves(self._solve_pool(), density, jobs), strict=True))
+        else:
+            solved = (self._solve(density, *job) for job in jobs)
         spectra, reflection = [], []
-        for lam in self.wavelengths:
+        for _ in self.wavelengths:  # jobs run wavelength by wavelength, directions inside
             t = density.new_zeros(2, 2)
             r = density.new_zeros(())
-            for (theta, phi, _), w in zip(self.directions, weights, strict=True):
-                quads, refl = self._solve(density, lam, theta, phi)
+            for w in weights:
+                quads, refl = next(solved)
                 t = t + w * quads.mean(0)
                 r = r + w * refl
             spectra.append(t)
             reflection.append(r)
         return torch.stack(spectra, dim=-1), torch.stack(reflection)
+
+    def _solve_pool(self) -> SolvePool:
+        if self._pool is None:
+            setting = (self.geometry, self.solver, self.order, self.terms, self.samples)
+            self._pool = SolvePool(solve_quadrants, setting, self.workers)
+        return self._pool
 
     def _solve(
         self, density: torch.Tensor, lam: float, theta: float, phi: float
@@ -296,15 +332,8 @@ class FullwaveDesign:
     ) -> tuple[torch.Tensor, torch.Tensor]:
         """One solve by the design's solver: ``(2, 2, 2)`` quadrant transmissions per
         polarisation and the reflection, differentiable in ``density``."""
-        if self.solver == "torcwa":
-            return torcwa_quadrants(
-                self.geometry, density, lam, theta, phi, self.order, self.samples
-            )
-        terms = self.terms or (2 * self.order + 1) ** 2
-        formulation = "JONES_DIRECT" if self.solver == "fmmax-jones" else "FFT"
-        return fmmax_quadrants(
-            self.geometry, density, lam, theta, phi, terms, self.samples, formulation
-        )
+        setting = (self.geometry, self.solver, self.order, self.terms, self.samples)
+        return solve_quadrants(setting, density, lam, theta, phi)
 
     def image_error(self, transmission: torch.Tensor) -> torch.Tensor:
         """The closed-form LMMSE error (per colour, linear light in [0, 1]) of the router with
@@ -335,6 +364,24 @@ class FullwaveDesign:
             "reflection": float(reflection.detach().mean()),
         }
         return loss, info
+
+
+def solve_quadrants(
+    setting: tuple[RouterDesign, str, int, int | None, int],
+    density: torch.Tensor,
+    lam: float,
+    theta: float,
+    phi: float,
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """:meth:`FullwaveDesign.quadrants` of the design whose ``(geometry, solver, order,
+    terms, samples)`` is ``setting``: a module-level function, so that worker processes
+    (:mod:`splitcam.design.solvepool`) run the very same solve."""
+    geometry, solver, order, terms, samples = setting
+    if solver == "torcwa":
+        return torcwa_quadrants(geometry, density, lam, theta, phi, order, samples)
+    formulation = "JONES_DIRECT" if solver == "fmmax-jones" else "FFT"
+    terms = terms or (2 * order + 1) ** 2
+    return fmmax_quadrants(geometry, density, lam, theta, phi, terms, samples, formulation)
 
 
 STATE_FORMAT = "splitcam-fullwave-design"
