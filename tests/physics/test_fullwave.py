@@ -196,6 +196,29 @@ def test_an_interrupted_solve_continues_from_its_log(tmp_path, monkeypatch):
     assert len(calls) == 2
 
 
+def test_worker_processes_share_the_solves_a_log_lacks(tmp_path):
+    """With workers, the solves the log lacks are shared by processes and logged; the log's
+    own are taken from it: the spectra are one process's (to rounding: the workers run one
+    thread), and a later run finds every solve in the log."""
+    design = RouterDesign(np.eye(6), thickness=0.4, depth=0.5)
+    lams = [470.0, 560.0, 650.0]
+    kw = dict(order=2, samples=16, directions=cone_directions(3.0)[:2])
+    plain = quadrant_spectra(design, lams, **kw)
+    log = tmp_path / "solves.jsonl"
+    quadrant_spectra(design, lams[1:2], **kw, cache=log)  # two of the six solves logged
+    shared = quadrant_spectra(design, lams, **kw, cache=log, workers=2)
+    assert shared["cost"] == {**shared["cost"], "solves": 6, "reused": 2}
+    assert shared["cost"]["seconds"] > 0
+    for key in ("transmission", "by_polarisation", "reflection"):
+        np.testing.assert_allclose(shared[key], plain[key], rtol=1e-12, atol=1e-15)
+    assert len(log.read_text().splitlines()) == 6
+    again = quadrant_spectra(design, lams, **kw, cache=log, workers=2)
+    assert again["cost"]["reused"] == 6
+    np.testing.assert_array_equal(again["transmission"], shared["transmission"])
+    with pytest.raises(FullwaveError, match="workers: a whole number >= 1"):
+        quadrant_spectra(design, lams, **kw, workers=0)
+
+
 def test_the_command_at_a_chief_ray_continues_an_interrupted_run(tmp_path, capsys):
     """--chief-ray tilts the cone; a second run of the same command takes every solve from
     the first's log and writes the same spectra; a cone that reaches grazing is refused in

@@ -9,7 +9,7 @@ import math
 import re
 from pathlib import Path
 
-from .rcwa import add_stack_options, stacked, wavelengths_of
+from .rcwa import add_stack_options, add_workers_option, stacked, wavelengths_of
 
 
 def register(optics_sub: argparse._SubParsersAction) -> None:
@@ -51,13 +51,8 @@ def register(optics_sub: argparse._SubParsersAction) -> None:
     p.add_argument("--samples", type=int, default=16, help="flux grid points per pixel")
     p.add_argument("--seed", type=int, default=0, help="of a noise: start (default 0)")
     p.add_argument("--threads", type=int, help="CPU threads (default: torch's)")
-    p.add_argument(
-        "--workers",
-        type=int,
-        default=1,
-        help="processes, one thread each, that share each step's solves (wavelengths times "
-        "directions): about 1/W of the time on W free cores, the same design (default 1; a "
-        "continued run may change it)",
+    add_workers_option(
+        p, "each step's solves (wavelengths times directions; a continued run may change it)"
     )
     p.add_argument("--quiet", action="store_true")
     add_stack_options(p, wavelengths="450,550,650", order=5)
@@ -259,6 +254,7 @@ def _finish(
         samples=args.samples,
         directions=design.directions,
         cache=out / f"{stem}-solves.jsonl",
+        workers=design.workers,
     )
     t = np.clip(solved["transmission"], 0.0, None)
     error = float(design.image_error(torch.from_numpy(t)))

@@ -34,7 +34,7 @@ import functools
 import math
 import os
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, NamedTuple
@@ -310,6 +310,7 @@ def quadrant_spectra(
     terms: int | None = None,
     progress: Callable[[int], None] | None = None,
     cache: str | os.PathLike | None = None,
+    workers: int = 1,
 ) -> dict[str, Any]:
     """Transmission into each pixel quadrant of the monitor plane, per wavelength.
 
@@ -329,6 +330,8 @@ def quadrant_spectra(
             of the same design and setting found there are not repeated. An interrupted run
             given the same file continues where it stopped (at most the solve in progress is
             lost), and several runs may share one file.
+        workers: Processes (spawned, one thread each) that share the solves not found in
+            ``cache``; 1: every solve in this process. The same results either way.
 
     Returns:
         ``transmission``: ``(2, 2, L)`` the share of the light arriving on the period crossing
@@ -352,20 +355,19 @@ def quadrant_spectra(
     if weights.size == 0 or weights.min() < 0 or weights.sum() <= 0:
         raise FullwaveError("directions need non-negative weights")
     weights = weights / weights.sum()
-    if solver == "torcwa":
-        solve, count = _torcwa_solver(design, order, samples)
-    else:
-        formulation = "JONES_DIRECT" if solver == "fmmax-jones" else "FFT"
-        solve, count = _fmmax_solver(design, terms or (2 * order + 1) ** 2, formulation, samples)
+    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
+        raise FullwaveError(f"workers: a whole number >= 1, got {workers!r}")
+    setting = (design, solver, order, terms, samples)
+    solve, count = _spectra_solver(*setting)
     log = _SolveLog(cache, design, solver, count, samples) if cache is not None else None
+    keys = [(lam, theta, phi) for lam in wavelengths for theta, phi, _ in directions]
+    solved = _solved(keys, log, solve, setting, workers)
     by_pol = np.zeros((2, 2, 2, len(wavelengths)))
     reflection = np.zeros(len(wavelengths))
     cost = {"solves": 0, "reused": 0, "seconds": 0.0}
-    for li, lam in enumerate(wavelengths):
-        for (theta, phi, _), weight in zip(directions, weights, strict=True):
-            quads, reflected, _, seconds, reused = _solve_logged(
-                log, (lam, theta, phi), lambda k=(lam, theta, phi): (*solve(*k), None)
-            )
+    for li, _ in enumerate(wavelengths):
+        for weight in weights:
+            quads, reflected, seconds, reused = next(solved)
             cost["reused"] += reused
             cost["solves"] += 1
             cost["seconds"] += seconds
@@ -373,6 +375,7 @@ def quadrant_spectra(
             reflection[li] += weight * reflected
         if progress is not None:
             progress(li + 1)
+    solved.close()  # stops the worker processes, if any
     return {
         "transmission": by_pol.mean(axis=0),
         "by_polarisation": by_pol,
@@ -380,6 +383,76 @@ def quadrant_spectra(
         "terms": count,
         "cost": cost,
     }
+
+
+def _spectra_solver(
+    design: RouterDesign, solver: str, order: int, terms: int | None, samples: int
+) -> tuple[_Solve, int]:
+    """The NumPy solve of ``design``'s own grid by ``solver``, and its Fourier terms."""
+    if solver == "torcwa":
+        return _torcwa_solver(design, order, samples)
+    formulation = "JONES_DIRECT" if solver == "fmmax-jones" else "FFT"
+    return _fmmax_solver(design, terms or (2 * order + 1) ** 2, formulation, samples)
+
+
+def _solved(
+    keys: list[tuple[float, float, float]],
+    log: _SolveLog | None,
+    solve: _Solve,
+    setting: tuple[Any, ...],
+    workers: int,
+) -> Iterator[tuple[np.ndarray, float, float, bool]]:
+    """``(quadrants, reflected, seconds, reused)`` of each key in order: from ``log`` where
+    it holds the solve, else solved (here, or by ``workers`` processes, each result logged as
+    it is taken)."""
+    todo = list(dict.fromkeys(k for k in keys if log is None or log.get(*k) is None))
+    if workers < 2 or len(todo) < 2:
+        for key in keys:
+            quads, reflected, _, seconds, reused = _solve_logged(
+                log, key, lambda k=key: (*solve(*k), None)
+            )
+            yield quads, reflected, seconds, reused
+        return
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    fresh: dict[tuple[float, float, float], tuple[np.ndarray, float, float]] = {}
+    with ProcessPoolExecutor(
+        min(workers, len(todo)),
+        mp_context=multiprocessing.get_context("spawn"),  # fmmax's JAX may hang in a fork
+        initializer=_start_solver,
+        initargs=setting,
+    ) as pool:
+        results = pool.map(_solve_in_worker, todo)
+        for key in keys:
+            if key not in fresh and key in todo:
+                while key not in fresh:  # results come back in the order of todo
+                    done = todo[len(fresh)]
+                    fresh[done] = next(results)
+                    if log is not None:
+                        log.add(*done, *fresh[done])
+            if key in fresh:
+                quads, reflected, seconds = fresh[key]
+                yield quads, reflected, seconds, False
+            else:
+                quads, reflected, seconds = log.get(*key)
+                yield quads, reflected, seconds, True
+
+
+_WORKER_SOLVE: list[_Solve] = []
+
+
+def _start_solver(*setting: Any) -> None:
+    import torch
+
+    torch.set_num_threads(1)
+    _WORKER_SOLVE[:] = [_spectra_solver(*setting)[0]]
+
+
+def _solve_in_worker(key: tuple[float, float, float]) -> tuple[np.ndarray, float, float]:
+    start = time.perf_counter()
+    quads, reflected = _WORKER_SOLVE[0](*key)
+    return quads, reflected, time.perf_counter() - start
 
 
 class _SolveLog:
