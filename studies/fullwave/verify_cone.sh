@@ -4,7 +4,8 @@
 # stop). One thread each; run two designs' stages side by side on the two cores.
 #
 #   bash studies/fullwave/verify_cone.sh solve best-n30-f2     # the binary design at 797 terms,
-#       # f/2 cone, six wavelengths, against the leaderboard design at the same setting
+#       # f/2 cone, six wavelengths, against the leaderboard design at the same setting (one
+#       # layer or layers stacked); WORKERS=2 shares its solves between two processes
 #   bash studies/fullwave/verify_cone.sh kernels best-n30-f2   # its kernels from the fields
 #       # (793 terms, 410-690 nm, f/2; about two hours of one thread), in the design's folder;
 #       # PARTS=2 shares the solving between two processes, one core each
@@ -22,14 +23,20 @@ shift
 case "$stage" in
 solve)
     for name in "$@"; do
-        [ -f "$D/$name/$name.csv" ] || { echo "$D/$name/$name.csv: the run has not ended" >&2; exit 1; }
-        # the run's own layer thickness and spacer depth (its state's stack)
-        read -r thickness depth < <(python -c 'import json, sys
-s = json.load(open(sys.argv[1]))["settings"]["stack"]
-print(s[1], s[2])' "$D/$name/state.json")
-        splitcam optics rcwa "$D/$name/$name.csv" --thickness "$thickness" --depth "$depth" \
-            --solver fmmax-jones --terms 797 --wavelengths $LAMS --f-number 2 --threads 1 \
-            --name "$name-f2-fmmax797" --out "$D/$name/verify" --quiet
+        # one layer (NAME.csv) or layers stacked (NAME-layer1.csv, NAME-layer2.csv, ...)
+        layers=("$D/$name/$name.csv")
+        [ -f "${layers[0]}" ] || layers=("$D/$name/$name"-layer*.csv)
+        [ -f "${layers[0]}" ] || { echo "$D/$name: the run has not ended" >&2; exit 1; }
+        # the run's own layer thicknesses, spacer depth and spacer between layers (its state)
+        read -r thickness depth spacer < <(python -c 'import json, sys
+s = json.load(open(sys.argv[1]))["settings"]
+t = s["stack"][1]
+print(",".join(map(str, t if isinstance(t, list) else [t])), s["stack"][2], s.get("spacer", 0))' \
+            "$D/$name/state.json")
+        splitcam optics rcwa "${layers[@]}" --thickness ${thickness//,/ } --depth "$depth" \
+            --spacer "$spacer" --solver fmmax-jones --terms 797 --wavelengths $LAMS --f-number 2 \
+            --threads 1 --workers "${WORKERS:-1}" --name "$name-f2-fmmax797" \
+            --out "$D/$name/verify" --quiet
         verify=(python studies/fullwave/verify_design.py
             "$D/$name/verify/$name-f2-fmmax797-spectra.csv" "$A/best-f2-centre-6wl.toml")
         { echo "# $name solved again: 797 terms, f/2 cone, against the leaderboard design"
