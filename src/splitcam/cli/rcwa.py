@@ -67,8 +67,9 @@ def add_workers_option(p: argparse.ArgumentParser, what: str) -> None:
         "--workers",
         type=int,
         default=1,
-        help=f"processes, one thread each, that share {what}: about 1/W of the time on W "
-        "free cores, the same results (default 1)",
+        help=f"processes, one thread each, that share {what}: the same results in up to 1/W "
+        "of the time on W free cores (less with fmmax, whose JAX already spreads a solve over "
+        "more than one core; default 1)",
     )
 
 

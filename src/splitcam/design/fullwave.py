@@ -47,15 +47,14 @@ from ..physics.fullwave import (
     FullwaveError,
     RouterDesign,
     cone_directions,
-    fmmax_quadrants,
     material_of,
-    torcwa_quadrants,
+    solve_quadrants,
 )
 from ..physics.noise import Exposure
 from ..physics.sensor import pixel_kernels
+from ..physics.solvepool import SolvePool, pooled_solves
 from ..recon.closed_form import closed_form_mse, shipped_image_statistics
 from .lengthscale import with_minimum_feature
-from .solvepool import SolvePool, pooled_solves
 
 __all__ = ["FullwaveDesign", "beta_at", "conic_filter", "project", "rgb_kernels", "run_design"]
 
@@ -141,7 +140,7 @@ class FullwaveDesign:
             :meth:`~splitcam.physics.stack.OpticalStack.apply` weights a spectral pattern; the
             spectra reported stay the router's own. None: a bare, lossless pixel.
         workers: Processes that share each step's solves (one thread each;
-            :mod:`splitcam.design.solvepool`); 1: every solve in this process. The same spectra,
+            :mod:`splitcam.physics.solvepool`); 1: every solve in this process. The same spectra,
             and the same gradient to rounding, either way. Started on first use; :meth:`close`
             (or ``with design:``) stops them.
     """
@@ -364,24 +363,6 @@ class FullwaveDesign:
             "reflection": float(reflection.detach().mean()),
         }
         return loss, info
-
-
-def solve_quadrants(
-    setting: tuple[RouterDesign, str, int, int | None, int],
-    density: torch.Tensor,
-    lam: float,
-    theta: float,
-    phi: float,
-) -> tuple[torch.Tensor, torch.Tensor]:
-    """:meth:`FullwaveDesign.quadrants` of the design whose ``(geometry, solver, order,
-    terms, samples)`` is ``setting``: a module-level function, so that worker processes
-    (:mod:`splitcam.design.solvepool`) run the very same solve."""
-    geometry, solver, order, terms, samples = setting
-    if solver == "torcwa":
-        return torcwa_quadrants(geometry, density, lam, theta, phi, order, samples)
-    formulation = "JONES_DIRECT" if solver == "fmmax-jones" else "FFT"
-    terms = terms or (2 * order + 1) ** 2
-    return fmmax_quadrants(geometry, density, lam, theta, phi, terms, samples, formulation)
 
 
 STATE_FORMAT = "splitcam-fullwave-design"

@@ -55,6 +55,7 @@ __all__ = [
     "fmmax_quadrants",
     "index_of",
     "quadrant_spectra",
+    "solve_quadrants",
     "read_design",
     "torcwa_quadrants",
 ]
@@ -413,46 +414,46 @@ def _solved(
             )
             yield quads, reflected, seconds, reused
         return
-    import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor
+    from .solvepool import SolvePool
 
-    fresh: dict[tuple[float, float, float], tuple[np.ndarray, float, float]] = {}
-    with ProcessPoolExecutor(
-        min(workers, len(todo)),
-        mp_context=multiprocessing.get_context("spawn"),  # fmmax's JAX may hang in a fork
-        initializer=_start_solver,
-        initargs=setting,
-    ) as pool:
-        results = pool.map(_solve_in_worker, todo)
+    design = setting[0]
+    pool = SolvePool(solve_quadrants, setting, min(workers, len(todo)))
+    try:
+        results = pool.solutions(np.asarray(design.grid, dtype=np.float64), todo)
+        fresh: dict[tuple[float, float, float], tuple[np.ndarray, float, float]] = {}
         for key in keys:
-            if key not in fresh and key in todo:
-                while key not in fresh:  # results come back in the order of todo
-                    done = todo[len(fresh)]
-                    fresh[done] = next(results)
-                    if log is not None:
-                        log.add(*done, *fresh[done])
+            while key in todo and key not in fresh:  # they come back in the order of todo
+                done = todo[len(fresh)]
+                fresh[done] = next(results)
+                if log is not None:
+                    log.add(*done, *fresh[done])
             if key in fresh:
-                quads, reflected, seconds = fresh[key]
-                yield quads, reflected, seconds, False
+                yield (*fresh[key], False)
             else:
-                quads, reflected, seconds = log.get(*key)
-                yield quads, reflected, seconds, True
+                yield (*log.get(*key), True)
+    finally:
+        pool.close()
 
 
-_WORKER_SOLVE: list[_Solve] = []
-
-
-def _start_solver(*setting: Any) -> None:
-    import torch
-
-    torch.set_num_threads(1)
-    _WORKER_SOLVE[:] = [_spectra_solver(*setting)[0]]
-
-
-def _solve_in_worker(key: tuple[float, float, float]) -> tuple[np.ndarray, float, float]:
-    start = time.perf_counter()
-    quads, reflected = _WORKER_SOLVE[0](*key)
-    return quads, reflected, time.perf_counter() - start
+def solve_quadrants(
+    setting: tuple[RouterDesign, str, int, int | None, int],
+    density: Any,
+    lam: float,
+    theta: float,
+    phi: float,
+) -> tuple[Any, Any]:
+    """One solve of the design ``setting`` names, ``(design, solver, order, terms, samples)``,
+    with its layers' cells set to ``density`` (a float64 tensor of the grid's shape): the
+    ``(2, 2, 2)`` quadrant transmissions per polarisation and the reflection, differentiable
+    in ``density`` (:func:`torcwa_quadrants`, :func:`fmmax_quadrants`). A module-level
+    function of picklable arguments, so that worker processes
+    (:mod:`splitcam.physics.solvepool`) run the very same solve."""
+    design, solver, order, terms, samples = setting
+    if solver == "torcwa":
+        return torcwa_quadrants(design, density, lam, theta, phi, order, samples)
+    formulation = "JONES_DIRECT" if solver == "fmmax-jones" else "FFT"
+    terms = terms or (2 * order + 1) ** 2
+    return fmmax_quadrants(design, density, lam, theta, phi, terms, samples, formulation)
 
 
 class _SolveLog:

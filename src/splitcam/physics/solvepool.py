@@ -1,9 +1,10 @@
-"""The full-wave solves of one design step spread over worker processes.
+"""Full-wave solves of one layer spread over worker processes.
 
-A step of :class:`~splitcam.design.fullwave.FullwaveDesign` solves every wavelength in every
-direction of the lens's cone (42 solves for six wavelengths behind f/2), each independent of
-the others given the layer; the loss joins them only after. So the solves go to a pool of
-processes, one thread each, in two rounds:
+The solves of a router's spectra (every wavelength in every direction of a lens's cone: 42 for
+six wavelengths behind f/2) are independent of each other given the layer, so they can run in
+processes of one thread each: :func:`splitcam.physics.fullwave.quadrant_spectra` takes the ones
+its log lacks in order as they come back, and a design step
+(:class:`splitcam.design.fullwave.FullwaveDesign`) takes them in two rounds:
 
 1. **forward**: each worker solves its share without keeping any intermediate and sends back
    the quadrant transmissions (``(2, 2, 2)``) and the reflection;
@@ -11,17 +12,20 @@ processes, one thread each, in two rounds:
    each worker solves its share again with the gradient tape on and sends back the
    vector-Jacobian product, a density-shaped array; the parent sums them.
 
-That is the work the one-process path does too (it holds no solve's intermediates between the
-passes either, and solves again in the backward), so ``W`` workers take about ``1 / W`` of the
-time on ``W`` free cores, and give the same spectra and, to rounding in the sum, the same
-gradient (tested). Processes are spawned, not forked: JAX (fmmax) is multithreaded, and a fork
-of it may hang. A worker that dies ends the step with an error; the design run continues from
-its last saved step when started again.
+That is the work one process does too (it holds no solve's intermediates between the passes
+either, and solves again in the backward), with the same spectra and, to rounding in the sum,
+the same gradient (tested). What it saves depends on how much of the machine one process
+already uses: torcwa with one thread keeps one core busy, while fmmax's JAX spreads some of
+its work over more cores by itself (docs/results/fullwave/README.md gives the measured
+steps). Processes are spawned, not forked: JAX is multithreaded, and a fork of it may hang. A
+worker that dies ends the work with an error; a design run continues from its last saved step,
+and a logged solve run from its log, when started again.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+import time
+from collections.abc import Callable, Iterator, Sequence
 from itertools import repeat
 from typing import Any
 
@@ -42,10 +46,13 @@ def _start_worker(solve: Solve, setting: Any, threads: int) -> None:
     _WORKER.update(solve=solve, setting=setting)
 
 
-def _forward(density: np.ndarray, job: tuple[float, float, float]) -> tuple[np.ndarray, float]:
+def _forward(
+    density: np.ndarray, job: tuple[float, float, float]
+) -> tuple[np.ndarray, float, float]:
+    start = time.perf_counter()
     with torch.no_grad():
         quads, reflected = _WORKER["solve"](_WORKER["setting"], torch.from_numpy(density), *job)
-    return quads.numpy(), float(reflected)
+    return quads.numpy(), float(reflected), time.perf_counter() - start
 
 
 def _pullback(
@@ -81,11 +88,20 @@ class SolvePool:
             initargs=(solve, setting, threads),
         )
 
+    def solutions(
+        self, density: np.ndarray, jobs: Sequence[tuple[float, float, float]]
+    ) -> Iterator[tuple[np.ndarray, float, float]]:
+        """Each job's ``(quadrants, reflection, seconds of solving)``, in the order of
+        ``jobs``, each as soon as it and the ones before it are done."""
+        return self._executor.map(_forward, repeat(density), jobs)
+
     def forward(
         self, density: np.ndarray, jobs: Sequence[tuple[float, float, float]]
-    ) -> list[tuple[np.ndarray, float]]:
-        """Each job's ``(quadrants, reflection)``, in the order of ``jobs``."""
-        return list(self._executor.map(_forward, repeat(density), jobs))
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """Every job's quadrants ``(J, 2, 2, 2)`` and reflection ``(J,)`` (float64)."""
+        solved = list(self.solutions(density, jobs))
+        quads = torch.from_numpy(np.stack([q for q, _, _ in solved]))
+        return quads, torch.tensor([r for _, r, _ in solved], dtype=torch.float64)
 
     def pullback(
         self,
@@ -109,12 +125,9 @@ class SolvePool:
 class _Pooled(torch.autograd.Function):
     @staticmethod
     def forward(ctx, density, pool, jobs):  # noqa: ANN001, ANN205 - torch's signature
-        solved = pool.forward(density.detach().numpy(), jobs)
         ctx.pool, ctx.jobs = pool, jobs
         ctx.save_for_backward(density)
-        quads = torch.from_numpy(np.stack([q for q, _ in solved]))
-        reflected = torch.tensor([r for _, r in solved], dtype=torch.float64)
-        return quads, reflected
+        return pool.forward(density.detach().numpy(), jobs)
 
     @staticmethod
     def backward(ctx, d_quads, d_reflected):  # noqa: ANN001, ANN205
@@ -131,7 +144,5 @@ def pooled_solves(
     """Every job ``(wavelength, polar angle, azimuth)`` solved by ``pool``: ``(J, 2, 2, 2)``
     quadrant transmissions and ``(J,)`` reflections, differentiable in ``density`` (float64)."""
     if not (density.requires_grad and torch.is_grad_enabled()):
-        solved = pool.forward(density.detach().numpy(), list(jobs))
-        quads = torch.from_numpy(np.stack([q for q, _ in solved]))
-        return quads, torch.tensor([r for _, r in solved], dtype=torch.float64)
+        return pool.forward(density.detach().numpy(), list(jobs))
     return _Pooled.apply(density, pool, list(jobs))
