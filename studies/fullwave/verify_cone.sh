@@ -25,7 +25,7 @@ solve)
     for name in "$@"; do
         # one layer (NAME.csv) or layers stacked (NAME-layer1.csv, NAME-layer2.csv, ...)
         layers=("$D/$name/$name.csv")
-        [ -f "${layers[0]}" ] || layers=("$D/$name/$name"-layer*.csv)
+        [ -f "${layers[0]}" ] || layers=("$D/$name/$name"-layer[0-9].csv)
         [ -f "${layers[0]}" ] || { echo "$D/$name: the run has not ended" >&2; exit 1; }
         # the run's own layer thicknesses, spacer depth and spacer between layers (its state)
         read -r thickness depth spacer < <(python -c 'import json, sys
