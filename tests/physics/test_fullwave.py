@@ -196,16 +196,27 @@ def test_an_interrupted_solve_continues_from_its_log(tmp_path, monkeypatch):
     assert len(calls) == 2
 
 
-def test_worker_processes_share_the_solves_a_log_lacks(tmp_path):
-    """With workers, the solves the log lacks are shared by processes and logged; the log's
-    own are taken from it: the spectra are one process's (to rounding: the workers run one
-    thread), and a later run finds every solve in the log."""
+def test_worker_processes_share_the_solves_a_log_lacks(tmp_path, monkeypatch):
+    """With workers, the solves the log lacks are shared by processes (none is solved in this
+    one) and logged; the log's own are taken from it: the spectra are one process's (to
+    rounding: the workers run one thread), and a later run finds every solve in the log."""
+    import splitcam.physics.fullwave as fw
+
     design = RouterDesign(np.eye(6), thickness=0.4, depth=0.5)
     lams = [470.0, 560.0, 650.0]
     kw = dict(order=2, samples=16, directions=cone_directions(3.0)[:2])
     plain = quadrant_spectra(design, lams, **kw)
     log = tmp_path / "solves.jsonl"
     quadrant_spectra(design, lams[1:2], **kw, cache=log)  # two of the six solves logged
+    real = fw._torcwa_solver
+
+    def here(*a, **k):  # a solve in this process fails; the spawned workers solve for real
+        def refused(*args):
+            raise AssertionError("solved in the parent process")
+
+        return refused, real(*a, **k)[1]
+
+    monkeypatch.setattr(fw, "_torcwa_solver", here)
     shared = quadrant_spectra(design, lams, **kw, cache=log, workers=2)
     assert shared["cost"] == {**shared["cost"], "solves": 6, "reused": 2}
     assert shared["cost"]["seconds"] > 0

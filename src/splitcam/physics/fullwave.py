@@ -404,35 +404,34 @@ def _solved(
     workers: int,
 ) -> Iterator[tuple[np.ndarray, float, float, bool]]:
     """``(quadrants, reflected, seconds, reused)`` of each key in order: from ``log`` where
-    it holds the solve, else solved (here, or by ``workers`` processes, each result logged as
-    it is taken)."""
+    it holds the solve, else solved (here, or by ``workers`` processes when more than one solve
+    is missing), each new solve logged as it is taken."""
     todo = list(dict.fromkeys(k for k in keys if log is None or log.get(*k) is None))
-    if workers < 2 or len(todo) < 2:
-        for key in keys:
-            quads, reflected, _, seconds, reused = _solve_logged(
-                log, key, lambda k=key: (*solve(*k), None)
-            )
-            yield quads, reflected, seconds, reused
-        return
-    from .solvepool import SolvePool
+    pool = None
+    if workers > 1 and len(todo) > 1:
+        from .solvepool import SolvePool
 
-    design = setting[0]
-    pool = SolvePool(solve_quadrants, setting, min(workers, len(todo)))
+        pool = SolvePool(solve_quadrants, setting, min(workers, len(todo)))
+        results = pool.solutions(np.asarray(setting[0].grid, dtype=np.float64), todo)
+    else:
+        results = (_timed(solve, *key) for key in todo)
     try:
-        results = pool.solutions(np.asarray(design.grid, dtype=np.float64), todo)
         fresh: dict[tuple[float, float, float], tuple[np.ndarray, float, float]] = {}
-        for key in keys:
-            while key in todo and key not in fresh:  # they come back in the order of todo
-                done = todo[len(fresh)]
-                fresh[done] = next(results)
+        for key in keys:  # the missing ones come back in the order of todo: the order of keys
+            if key in todo and key not in fresh:
+                fresh[key] = next(results)
                 if log is not None:
-                    log.add(*done, *fresh[done])
-            if key in fresh:
-                yield (*fresh[key], False)
-            else:
-                yield (*log.get(*key), True)
+                    log.add(*key, *fresh[key])
+            yield (*fresh[key], False) if key in fresh else (*log.get(*key), True)
     finally:
-        pool.close()
+        if pool is not None:
+            pool.close()
+
+
+def _timed(solve: _Solve, *key: float) -> tuple[np.ndarray, float, float]:
+    start = time.perf_counter()
+    quads, reflected = solve(*key)
+    return quads, reflected, time.perf_counter() - start
 
 
 def solve_quadrants(
