@@ -285,7 +285,7 @@ def test_bad_settings_are_refused():
     with pytest.raises(FullwaveError, match="for an fmmax solver"):
         FullwaveDesign(RouterDesign(np.eye(4)), terms=100)
     for workers in (0, 1.5, True):
-        with pytest.raises(FullwaveError, match="workers: a whole number >= 1"):
+        with pytest.raises(FullwaveError, match="workers must be an integer >= 1"):
             FullwaveDesign(RouterDesign(np.eye(4)), workers=workers)
 
 
@@ -569,7 +569,7 @@ def test_layers_stacked_are_designed_together_and_their_files_solve_to_the_desig
         (["noise:6x6", "noise:4x4", "--feature", "0.4"], "must have one grid"),
         (["noise:6x6", "noise:6x6", "--thickness", "0.3", "0.2", "0.1"], "3 thicknesses"),
         (["noise:6x6", "noise:6x6", "--feature", "0.4", "--spacer", "-1"], "spacer must be"),
-        (["noise:6x6", "--feature", "0.4", "--workers", "0"], "workers: a whole number >= 1"),
+        (["noise:6x6", "--feature", "0.4", "--workers", "0"], "workers must be an integer >= 1"),
     ],
 )
 def test_bad_design_settings_are_one_line_and_write_nothing(tmp_path, capsys, extra, message):

@@ -226,7 +226,7 @@ def test_worker_processes_share_the_solves_a_log_lacks(tmp_path, monkeypatch):
     again = quadrant_spectra(design, lams, **kw, cache=log, workers=2)
     assert again["cost"]["reused"] == 6
     np.testing.assert_array_equal(again["transmission"], shared["transmission"])
-    with pytest.raises(FullwaveError, match="workers: a whole number >= 1"):
+    with pytest.raises(FullwaveError, match="workers must be an integer >= 1"):
         quadrant_spectra(design, lams, **kw, workers=0)
 
 

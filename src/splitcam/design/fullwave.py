@@ -46,6 +46,7 @@ from ..physics.fullwave import (
     SOLVERS,
     FullwaveError,
     RouterDesign,
+    check_workers,
     cone_directions,
     material_of,
     solve_quadrants,
@@ -178,8 +179,7 @@ class FullwaveDesign:
             raise FullwaveError(f"unknown solver {self.solver!r}; expected one of {SOLVERS}")
         if self.terms is not None and (self.solver == "torcwa" or self.terms < 1):
             raise FullwaveError("terms: a number >= 1, for an fmmax solver (torcwa takes order)")
-        if isinstance(self.workers, bool) or not isinstance(self.workers, int) or self.workers < 1:
-            raise FullwaveError(f"workers: a whole number >= 1, got {self.workers!r}")
+        check_workers(self.workers)
         self._stats = shipped_image_statistics("linear")
 
     def __enter__(self) -> FullwaveDesign:

@@ -356,8 +356,7 @@ def quadrant_spectra(
     if weights.size == 0 or weights.min() < 0 or weights.sum() <= 0:
         raise FullwaveError("directions need non-negative weights")
     weights = weights / weights.sum()
-    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
-        raise FullwaveError(f"workers: a whole number >= 1, got {workers!r}")
+    check_workers(workers)
     setting = (design, solver, order, terms, samples)
     solve, count = _spectra_solver(*setting)
     log = _SolveLog(cache, design, solver, count, samples) if cache is not None else None
@@ -426,6 +425,17 @@ def _solved(
     finally:
         if pool is not None:
             pool.close()
+
+
+def check_workers(workers: Any) -> int:
+    """``workers`` as an ``int`` >= 1 (:func:`splitcam.checks.check_count`), else
+    :class:`FullwaveError`."""
+    from ..checks import check_count
+
+    try:
+        return check_count(workers, "workers", 1)
+    except ValueError as exc:
+        raise FullwaveError(str(exc)) from None
 
 
 def _timed(solve: _Solve, *key: float) -> tuple[np.ndarray, float, float]:
