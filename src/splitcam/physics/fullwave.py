@@ -41,6 +41,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from ..checks import check_count
 from ..io import appending, read_json_lines
 
 __all__ = [
@@ -430,8 +431,6 @@ def _solved(
 def check_workers(workers: Any) -> int:
     """``workers`` as an ``int`` >= 1 (:func:`splitcam.checks.check_count`), else
     :class:`FullwaveError`."""
-    from ..checks import check_count
-
     try:
         return check_count(workers, "workers", 1)
     except ValueError as exc:
