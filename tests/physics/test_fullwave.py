@@ -162,7 +162,7 @@ def test_an_interrupted_solve_continues_from_its_log(tmp_path, monkeypatch):
     directions = cone_directions(3.0)[:2]
     plain = quadrant_spectra(design, lams, order=2, samples=16, directions=directions)
     log = tmp_path / "solves.jsonl"
-    real = fw._torcwa_solver
+    real = fw._spectra_solver
     calls = []
 
     def stopping(*a, **k):
@@ -176,7 +176,7 @@ def test_an_interrupted_solve_continues_from_its_log(tmp_path, monkeypatch):
 
         return once, count
 
-    monkeypatch.setattr(fw, "_torcwa_solver", stopping)
+    monkeypatch.setattr(fw, "_spectra_solver", stopping)
     with pytest.raises(KeyboardInterrupt):
         quadrant_spectra(design, lams, order=2, samples=16, directions=directions, cache=log)
     assert len(log.read_text().splitlines()) == 3
@@ -208,7 +208,7 @@ def test_worker_processes_share_the_solves_a_log_lacks(tmp_path, monkeypatch):
     plain = quadrant_spectra(design, lams, **kw)
     log = tmp_path / "solves.jsonl"
     quadrant_spectra(design, lams[1:2], **kw, cache=log)  # two of the six solves logged
-    real = fw._torcwa_solver
+    real = fw._spectra_solver
 
     def here(*a, **k):  # a solve in this process fails; the spawned workers solve for real
         def refused(*args):
@@ -216,7 +216,7 @@ def test_worker_processes_share_the_solves_a_log_lacks(tmp_path, monkeypatch):
 
         return refused, real(*a, **k)[1]
 
-    monkeypatch.setattr(fw, "_torcwa_solver", here)
+    monkeypatch.setattr(fw, "_spectra_solver", here)
     shared = quadrant_spectra(design, lams, **kw, cache=log, workers=2)
     assert shared["cost"] == {**shared["cost"], "solves": 6, "reused": 2}
     assert shared["cost"]["seconds"] > 0

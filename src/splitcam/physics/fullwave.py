@@ -359,7 +359,7 @@ def quadrant_spectra(
     weights = weights / weights.sum()
     check_workers(workers)
     setting = (design, solver, order, terms, samples)
-    solve, count = _spectra_solver(*setting)
+    solve, count = _spectra_solver(setting)
     log = _SolveLog(cache, design, solver, count, samples) if cache is not None else None
     keys = [(lam, theta, phi) for lam in wavelengths for theta, phi, _ in directions]
     solved = _solved(keys, log, solve, setting, workers)
@@ -386,14 +386,28 @@ def quadrant_spectra(
     }
 
 
-def _spectra_solver(
-    design: RouterDesign, solver: str, order: int, terms: int | None, samples: int
-) -> tuple[_Solve, int]:
-    """The NumPy solve of ``design``'s own grid by ``solver``, and its Fourier terms."""
+def _spectra_solver(setting: tuple[RouterDesign, str, int, int | None, int]) -> tuple[_Solve, int]:
+    """The solve of the design's own grid at ``setting`` (:func:`solve_quadrants`, without
+    its gradient) as NumPy, and the Fourier terms it solves."""
+    import torch
+
+    design, solver, order, terms, samples = setting
+    density = torch.from_numpy(np.asarray(design.grid, dtype=np.float64))
+
+    def solve(lam: float, theta: float, phi: float) -> tuple[np.ndarray, float]:
+        with torch.no_grad():
+            quads, reflected = solve_quadrants(setting, density, lam, theta, phi)
+        return quads.numpy(), float(reflected)
+
     if solver == "torcwa":
-        return _torcwa_solver(design, order, samples)
+        return solve, (2 * order + 1) ** 2
+    return solve, _fmmax_core(design, *_fmmax_setting(solver, order, terms), samples)[1]
+
+
+def _fmmax_setting(solver: str, order: int, terms: int | None) -> tuple[int, str]:
+    """An fmmax solver's Fourier terms asked for and its formulation."""
     formulation = "JONES_DIRECT" if solver == "fmmax-jones" else "FFT"
-    return _fmmax_solver(design, terms or (2 * order + 1) ** 2, formulation, samples)
+    return terms or (2 * order + 1) ** 2, formulation
 
 
 def _solved(
@@ -459,8 +473,7 @@ def solve_quadrants(
     design, solver, order, terms, samples = setting
     if solver == "torcwa":
         return torcwa_quadrants(design, density, lam, theta, phi, order, samples)
-    formulation = "JONES_DIRECT" if solver == "fmmax-jones" else "FFT"
-    terms = terms or (2 * order + 1) ** 2
+    terms, formulation = _fmmax_setting(solver, order, terms)
     return fmmax_quadrants(design, density, lam, theta, phi, terms, samples, formulation)
 
 
@@ -584,19 +597,6 @@ def _permittivities(design: RouterDesign, lam: float) -> tuple[float, float, flo
     return tuple(index_of(m, lam) ** 2 for m in materials)
 
 
-def _torcwa_solver(design: RouterDesign, order: int, samples: int) -> tuple[_Solve, int]:
-    import torch
-
-    density = torch.from_numpy(design.grid)
-
-    def solve(lam: float, theta: float, phi: float) -> tuple[np.ndarray, float]:
-        with torch.no_grad():
-            quads, reflected = torcwa_quadrants(design, density, lam, theta, phi, order, samples)
-        return quads.numpy(), float(reflected)
-
-    return solve, (2 * order + 1) ** 2
-
-
 def torcwa_quadrants(
     design: RouterDesign,
     density: Any,
@@ -671,23 +671,6 @@ def _fmmax() -> tuple[Any, Any, Any, Any]:
         raise FullwaveError(f"the fmmax solver is an optional extra: {INSTALL_FMMAX}") from None
     jax.config.update("jax_enable_x64", True)
     return basis, fields, fmm, scattering
-
-
-def _fmmax_solver(
-    design: RouterDesign, terms: int, formulation: str, samples: int
-) -> tuple[_Solve, int]:
-    """fmmax's solve of the same stack as :func:`_torcwa_solver` (:func:`_fmmax_core` at the
-    design's own grid), as NumPy."""
-    import jax.numpy as jnp
-
-    core, n = _fmmax_core(design, terms, formulation, samples)
-    grid = jnp.asarray(design.grid)
-
-    def solve(lam: float, theta: float, phi: float) -> tuple[np.ndarray, float]:
-        quads, reflected = core(grid, lam, theta, phi)
-        return np.asarray(quads), float(reflected)
-
-    return solve, n
 
 
 def _fmmax_core(
