@@ -36,7 +36,7 @@ import torch
 
 from ..checks import check_count
 from ..patterns import Pattern
-from ..physics.sensor import SplitterSensor
+from .sensor import SplitterSensor
 
 __all__ = [
     "MetasurfaceSensor",
