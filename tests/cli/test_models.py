@@ -65,3 +65,22 @@ def test_models_export_never_replaces_a_model_unasked(tmp_path, monkeypatch, cap
     assert main(["models", "export", str(run), "--name", "D", "--ship", "--force"]) == 0
 
     assert load_model("D").meta["name"] == "D"
+
+
+def test_cli_models_blend_writes_a_candidate_and_never_ships_it(
+    trained_run, tmp_path, monkeypatch, capsys
+):
+    """`models blend` of a model with itself gives the same weights (to float16); it writes
+    into --out, refuses --ship (a blend ships through the gate) and an existing file unasked."""
+    monkeypatch.chdir(tmp_path)
+    assert main(["models", "export", str(trained_run), "--name", "D", "--out", "m"]) == 0
+    args = ["models", "blend", "m/D.json", "m/D.json", "--weight", "0.25", "--name", "D"]
+    assert main([*args, "--out", "blend"]) == 0
+    one, two = load_model("m/D.json").network, load_model("blend/D.json").network
+    for key, value in one.state_dict().items():
+        assert (two.state_dict()[key] - value).abs().max() <= 1e-3 * value.abs().max() + 1e-6
+    assert main([*args, "--out", "blend"]) == 1
+    assert "exists; --force replaces it" in capsys.readouterr().err
+    assert main([*args, "--ship"]) == 1
+    assert "through the gate" in capsys.readouterr().err
+    assert main(["models", "blend", "m/D.json", "--weight", "0.5", "--name", "D"]) == 1

@@ -195,3 +195,52 @@ def test_no_shipped_file_names_a_folder_of_the_machine_it_was_made_on():
         if str(source).startswith("/"):
             found.append(f"{path.name}: source = {source}")
     assert found == []
+
+
+def test_a_blend_lies_on_the_line_between_its_two_models(trained_run, run_images, tmp_path):
+    """`blend_models` against the weights computed here from the two loaded models: each
+    trained weight is (1 - w) start + w end, exactly in float32 storage; the ends of the line
+    are the two models themselves; what is not trained is kept; the header records the blend."""
+    from splitcam.training.models import blend_models
+
+    other = tmp_path / "other"
+    train(small_config(run_images, other, **{"run.seed": 5}), progress=False)
+    start = export_model(trained_run, tmp_path / "start", storage="float32")
+    end = export_model(other, tmp_path / "end", storage="float32")
+    first, second = load_model(start).network, load_model(end).network
+    trained = {n for n, _ in second.named_parameters()}
+    assert any(
+        not torch.equal(first.state_dict()[k], second.state_dict()[k]) for k in trained
+    )  # two different networks
+    for weight in (0.0, 0.3, 1.0):
+        path = blend_models(start, end, weight, tmp_path / f"b{weight}", storage="float32")
+        blended = load_model(path)
+        for key, value in blended.network.state_dict().items():
+            a, b = first.state_dict()[key], second.state_dict()[key]
+            expected = a + weight * (b - a) if key in trained else b
+            torch.testing.assert_close(value, expected, rtol=1e-6, atol=1e-7)
+        blend = blended.meta["provenance"]["blend"]
+        assert blend["weight"] == weight
+        assert [blend["start"]["name"], blend["end"]["name"]] == ["start", "end"]
+        assert blended.meta["pattern"] == load_model(end).meta["pattern"]
+        assert blended.meta["description"].endswith(
+            f"with the model start ({load_model(start).meta['meta_sha256'][:8]}): "
+            f"{weight:g} of these weights and {1 - weight:g} of its"
+        )
+
+
+def test_a_blend_refuses_models_of_different_patterns_or_a_weight_off_the_line(
+    trained_run, run_images, tmp_path
+):
+    from splitcam.recon.loading import ModelError
+    from splitcam.training.models import blend_models
+
+    other = tmp_path / "other"
+    train(small_config(run_images, other, **{"pattern.name": "bayer"}), progress=False)
+    start = export_model(trained_run, tmp_path / "start")
+    end = export_model(other, tmp_path / "end")
+    with pytest.raises(ModelError, match="different patterns"):
+        blend_models(start, end, 0.5, tmp_path / "b")
+    with pytest.raises(ModelError, match=r"in \[0, 1\]"):
+        blend_models(start, start, 1.5, tmp_path / "b")
+    assert not (tmp_path / "b.json").exists()

@@ -21,16 +21,25 @@ def register(sub: argparse._SubParsersAction) -> None:
         "their names on held-out photos of DIR, whole at half size, and says which pass (the "
         "cleanest level rises, the noisiest falls by no more than 0.05 dB; "
         "splitcam.training.gate); --ship copies those that pass into the package's shipped "
-        "models (--out DIR: there).",
+        "models (--out DIR: there). `splitcam models blend START.json END.json --weight W "
+        "--name NAME` writes the model whose weights are (1 - W) START + W END (two models of "
+        "one network and pattern, as a stage and the model it started from), a candidate for "
+        "the gate like an exported one.",
     )
-    p.add_argument("action", nargs="?", choices=["list", "export", "gate"], default="list")
+    p.add_argument("action", nargs="?", choices=["list", "export", "gate", "blend"], default="list")
     p.add_argument(
         "paths",
         nargs="*",
         metavar="PATH",
-        help="run folder or checkpoint (export); candidates NAME.json (gate)",
+        help="run folder or checkpoint (export); candidates NAME.json (gate); the two models "
+        "(blend: shipped names or NAME.json)",
     )
-    p.add_argument("--name", help="model name (export)")
+    p.add_argument("--name", help="model name (export, blend)")
+    p.add_argument(
+        "--weight",
+        type=float,
+        help="blend: the second model's share of every weight, in [0, 1]",
+    )
     p.add_argument("--out", help="folder to export into (default: ./models); gate: ship into it")
     p.add_argument(
         "--data",
@@ -63,18 +72,12 @@ def run(args: argparse.Namespace) -> int:
 
     if args.action == "gate":
         return run_gate(args)
+    if args.action == "blend":
+        return run_blend(args)
     if args.action == "export":
         if len(args.paths) != 1 or not args.name:
             raise ValueError("models export needs a run folder and --name")
-        if args.ship and args.out:
-            raise ValueError("give --ship (into the package's shipped models) or --out, not both")
-        out = (weights.MODELS_DIR if args.ship else Path(args.out or "models")) / args.name
-        existing = [
-            p for p in (out.with_suffix(".json"), out.with_suffix(".safetensors")) if p.exists()
-        ]
-        if existing and not args.force:
-            what = f"the shipped model {args.name}" if args.ship else f"the model {existing[0]}"
-            raise ValueError(f"{what} exists; --force replaces it")
+        out = _target(args)
         from ..io.checkpoints import which_checkpoint
 
         if (note := which_checkpoint(args.paths[0])) is not None:
@@ -95,6 +98,43 @@ def run(args: argparse.Namespace) -> int:
         print(f"no models shipped in {weights.MODELS_DIR}")
         return 0
     print(table(rows))
+    return 0
+
+
+def _target(args: argparse.Namespace) -> Path:
+    """Where export or blend writes NAME: refused where a model is and --force is not given."""
+    from ..io import weights
+
+    if args.ship and args.out:
+        raise ValueError("give --ship (into the package's shipped models) or --out, not both")
+    out = (weights.MODELS_DIR if args.ship else Path(args.out or "models")) / args.name
+    existing = [
+        p for p in (out.with_suffix(".json"), out.with_suffix(".safetensors")) if p.exists()
+    ]
+    if existing and not args.force:
+        what = f"the shipped model {args.name}" if args.ship else f"the model {existing[0]}"
+        raise ValueError(f"{what} exists; --force replaces it")
+    return out
+
+
+def run_blend(args: argparse.Namespace) -> int:
+    from ..training.models import blend_models
+
+    if len(args.paths) != 2 or not args.name or args.weight is None:
+        raise ValueError("models blend needs two models, --weight W and --name NAME")
+    if args.ship:
+        raise ValueError("a blend is a candidate: write it with --out and ship it through the gate")
+    out = _target(args)
+    path = blend_models(
+        args.paths[0],
+        args.paths[1],
+        args.weight,
+        out,
+        name=args.name,
+        storage=args.storage,
+        description=args.description or "",
+    )
+    print(f"wrote {path} and {path.with_suffix('.safetensors').name}")
     return 0
 
 

@@ -30,11 +30,12 @@ from ..data.registry import portable_path
 from ..io import checkpoints as ckpt_io
 from ..io.domains import SRGB
 from ..io.tensorfiles import paired_paths, save_pair
-from ..recon.loading import MODEL_FORMAT, MODEL_VERSION, ModelError, load_network
+from ..recon.loading import MODEL_FORMAT, MODEL_VERSION, ModelError, load_model, load_network
 from .recipe import MACHINE_KEYS, replayable
 from .rundir import METRICS_NAME, changes_rows, failure_of, last_metrics, metrics_rows
 
 __all__ = [
+    "blend_models",
     "described",
     "export_model",
     "model_summary",
@@ -222,6 +223,78 @@ def export_model(
     if failure:
         meta["provenance"]["failure"] = failure
     meta["description"] = described(meta)
+    return save_pair(meta_path, tensors, MODEL_FORMAT, MODEL_VERSION, meta)
+
+
+def blend_models(
+    start: str | os.PathLike[str],
+    end: str | os.PathLike[str],
+    weight: float,
+    out: str | os.PathLike[str],
+    *,
+    name: str | None = None,
+    storage: str = "float16",
+    description: str = "",
+) -> Path:
+    """A model whose trained weights lie on the straight line between two models of one
+    network and pattern: ``(1 - weight) * start + weight * end``, written as ``out``.
+
+    Two networks where one was trained on from the other (a stage of its recipe) sit in one
+    basin of the loss, and the points between them are networks too, trading what the stage
+    won against what it cost: a fine-tuned network interpolated with its start can keep most
+    of the gain on the new data and lose less on the old (Wortsman et al. 2022, "Robust
+    fine-tuning of zero-shot models"). The weights are blended in float32 and stored as
+    ``storage``; buffers that are not trained parameters must be equal in both. The header
+    is ``end``'s (pattern, config, provenance), with the blend recorded in
+    ``provenance["blend"]``: the weight and the name, description and checksum of each end.
+
+    Raises:
+        ModelError: A weight outside [0, 1], a bad ``storage``, or models of different
+            networks, patterns or buffers.
+    """
+    if not 0.0 <= weight <= 1.0:
+        raise ModelError(f"the blend's weight must be in [0, 1], got {weight}")
+    if storage not in STORAGE:
+        raise ModelError(f"storage must be one of {', '.join(STORAGE)}, got {storage!r}")
+    first, second = load_model(start), load_model(end)
+    for part in ("network", "pattern"):
+        if first.meta[part] != second.meta[part]:
+            raise ModelError(
+                f"{start} and {end} are models of different {part}s: only two models of one "
+                f"network and pattern can be blended"
+            )
+    ours, theirs = first.network.state_dict(), second.network.state_dict()
+    params = {n for n, _ in second.network.named_parameters()}
+    tensors = {}
+    for key, value in theirs.items():
+        if key in params:
+            mixed = torch.lerp(ours[key].float(), value.float(), weight)
+            tensors[key] = mixed.to(STORAGE[storage])
+        elif torch.equal(ours[key], value):
+            tensors[key] = value
+        else:
+            raise ModelError(f"{start} and {end} differ in {key!r}, which is not trained")
+    _, meta_path = paired_paths(out)
+    ends = [
+        {k: m.meta.get(k) for k in ("name", "description", "meta_sha256")} for m in (first, second)
+    ]
+    meta = {
+        **{k: second.meta.get(k) for k in ("network", "pattern", "start_pattern", "config")},
+        "name": name or meta_path.stem,
+        "description": description,
+        "storage": storage,
+        "exported": time.strftime("%Y-%m-%dT%H:%M:%S"),
+        "provenance": {
+            **second.meta.get("provenance", {}),
+            "blend": {"weight": weight, "start": ends[0], "end": ends[1]},
+        },
+    }
+    if not description:
+        sha = (ends[0]["meta_sha256"] or "")[:8]
+        meta["description"] = (
+            f"{ends[1]['description']}; then blended weight by weight with the model "
+            f"{ends[0]['name']} ({sha}): {weight:g} of these weights and {1 - weight:g} of its"
+        )
     return save_pair(meta_path, tensors, MODEL_FORMAT, MODEL_VERSION, meta)
 
 
