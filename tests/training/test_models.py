@@ -219,7 +219,10 @@ def test_a_blend_lies_on_the_line_between_its_two_models(trained_run, run_images
             a, b = first.state_dict()[key], second.state_dict()[key]
             expected = a + weight * (b - a) if key in trained else b
             torch.testing.assert_close(value, expected, rtol=1e-6, atol=1e-7)
-        blend = blended.meta["provenance"]["blend"]
+        # two runs of 4 steps from scratch: the blend has seen the steps of both
+        prov = blended.meta["provenance"]
+        assert prov["total_steps"] == 8 and len(prov["segments"]) == 2
+        blend = prov["blend"]
         assert blend["weight"] == weight
         assert [blend["start"]["name"], blend["end"]["name"]] == ["start", "end"]
         assert blended.meta["pattern"] == load_model(end).meta["pattern"]

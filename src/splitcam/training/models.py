@@ -245,7 +245,8 @@ def blend_models(
     of the gain on the new data and lose less on the old (Wortsman et al. 2022, "Robust
     fine-tuning of zero-shot models"). The weights are blended in float32 and stored as
     ``storage``; buffers that are not trained parameters must be equal in both. The header
-    is ``end``'s (pattern, config, provenance), with the blend recorded in
+    is ``end``'s (pattern, config, provenance), its provenance given the segments of ``start``
+    it lacks (a soup of stages counts each stage's steps), and the blend recorded in
     ``provenance["blend"]``: the weight and the name, description and checksum of each end.
 
     Raises:
@@ -284,11 +285,9 @@ def blend_models(
         "description": description,
         "storage": storage,
         "exported": time.strftime("%Y-%m-%dT%H:%M:%S"),
-        "provenance": {
-            **second.meta.get("provenance", {}),
-            "blend": {"weight": weight, "start": ends[0], "end": ends[1]},
-        },
+        "provenance": _blended_provenance(first.meta, second.meta),
     }
+    meta["provenance"]["blend"] = {"weight": weight, "start": ends[0], "end": ends[1]}
     if not description:
         sha = (ends[0]["meta_sha256"] or "")[:8]
         meta["description"] = (
@@ -296,6 +295,22 @@ def blend_models(
             f"{ends[0]['name']} ({sha}): {weight:g} of these weights and {1 - weight:g} of its"
         )
     return save_pair(meta_path, tensors, MODEL_FORMAT, MODEL_VERSION, meta)
+
+
+def _blended_provenance(start: dict[str, Any], end: dict[str, Any]) -> dict[str, Any]:
+    """``end``'s provenance with the segments of ``start`` it does not hold added, and the
+    steps and seconds counted over them all: every step the blended weights have seen once
+    (a stage and the model it started from share their first segments)."""
+    prov = dict(end.get("provenance") or {})
+    segments = list(prov.get("segments", []))
+    segments += [
+        s for s in (start.get("provenance") or {}).get("segments", []) if s not in segments
+    ]
+    if segments:
+        prov["segments"] = segments
+        prov["total_steps"] = sum(int(s.get("steps") or 0) for s in segments)
+        prov["train_seconds"] = round(sum(float(s.get("train_seconds") or 0) for s in segments), 1)
+    return prov
 
 
 def portable_config(config: dict[str, Any]) -> dict[str, Any]:

@@ -1,0 +1,30 @@
+#!/usr/bin/env bash
+# Each second-stage probe blended back towards the shipped model it started from, weight by
+# weight (splitcam models blend), and gated (docs/results/colour/README.md, "Half-way back to
+# the shipped network"). The probes' candidates are made first ("The second-stage probes
+# finished with their cool-downs": runs/colour/candidates/{bayer-quarter,bayer-quarter2,
+# bayer-halfquarter,E-halfquarter}); the probe of bayer before its cool-down is exported here.
+# Ships nothing: `splitcam models gate runs/colour/blend/soup3-0.5/bayer.json --ship` does.
+#   SPLITCAM_DATA=DIR bash studies/colour/blends.sh
+set -euo pipefail
+: "${SPLITCAM_DATA:?set SPLITCAM_DATA to the data folder (its train/ holds the photos)}"
+export OMP_NUM_THREADS=1
+C=runs/colour/candidates B=runs/colour/blend
+blend() { splitcam models blend "$1" "$2" --weight "$3" --name "$4" --out "$5" --force "${@:6}"; }
+splitcam models export runs/colour/probe/bayer-quarter/checkpoint.safetensors --name bayer \
+    --out "$B/quarter-raw" --force
+blend bayer "$B/quarter-raw/bayer.json" 0.25 bayer "$B/raw-25"
+blend bayer "$B/quarter-raw/bayer.json" 0.5 bayer "$B/raw-50"
+for c in bayer-quarter bayer-quarter2 bayer-halfquarter; do blend bayer "$C/$c/bayer.json" 0.5 bayer "$B/$c-50"; done
+blend E "$C/E-halfquarter/E.json" 0.5 E "$B/E-halfquarter-50"
+# The three cooled-down bayer probes averaged (a uniform soup), then half-way back.
+blend "$C/bayer-quarter/bayer.json" "$C/bayer-quarter2/bayer.json" 0.5 bayer "$B/soup2" --storage float32
+blend "$B/soup2/bayer.json" "$C/bayer-halfquarter/bayer.json" 0.3333333 bayer "$B/soup3"
+for w in 0.5 0.75; do blend bayer "$B/soup3/bayer.json" "$w" bayer "$B/soup3-$w"; done
+splitcam models gate "$B"/{raw-25,raw-50,bayer-quarter-50,bayer-quarter2-50,bayer-halfquarter-50}/bayer.json \
+    "$B"/{soup3,soup3-0.5,soup3-0.75}/bayer.json "$B/E-halfquarter-50/E.json" \
+    --data "$SPLITCAM_DATA/train" --threads 1 --table "$B/gate.md"
+for m in soup3-0.5/bayer bayer-quarter-50/bayer; do
+    splitcam evaluate --model "$B/$m.json" --datasets kodak24,mcmaster --sigmas 0 15 --precision fp32 \
+        --out "$B/describe-${m%%/*}" --quiet
+done
