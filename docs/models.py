@@ -148,7 +148,9 @@ def render() -> str:
         "([table](results/reproduce/evaluation/table.md)), beside the paper's after 10⁶ GPU "
         "steps ([model.md](model.md) section 8). `splitcam train --recipe MODEL --data DIR` "
         "trains a model again end to end, stage by stage, from the stages its own header "
-        "records. The last "
+        "records; a model whose weights are a blend of two (stages: *blend*; `splitcam models "
+        "blend`) records how each was trained, and is made again by training each and blending "
+        "them. The last "
         "column is each set's own mean at σ 0 and Kodak24 minus McMaster: how much a network "
         "loses on saturated colour (demosaicnet, a GPU-trained Bayer network, on the same whole "
         "images: 41.84 / 39.14, 2.70; [colour](results/colour/half-size.md)). Held-out photos: the "
@@ -166,7 +168,8 @@ def render() -> str:
     for name in model_names():
         meta = load_model(name).meta
         row = model_summary(name, meta)
-        stages = len(read_recipe(name).stages)
+        blend = (meta.get("provenance") or {}).get("blend")
+        stages = "*blend*" if blend else len(read_recipe(name).stages)
         note = " *earlier weights*" if name in stale else ""
         if name in ours:
             score = "{:.2f} / {:.2f}".format(*ours[name]) + note

@@ -15,7 +15,9 @@ from splitcam.evaluation.protocol import mean_psnr
 from splitcam.recon.loading import load_model
 from splitcam.recon.registry import build_method, build_model
 from splitcam.training import load_system, train
+from splitcam.training.config import ConfigError
 from splitcam.training.models import export_model
+from splitcam.training.recipe import shipped_recipe
 
 
 def _images(n=2, size=24):
@@ -226,6 +228,15 @@ def test_a_blend_lies_on_the_line_between_its_two_models(trained_run, run_images
         assert blend["weight"] == weight
         assert [blend["start"]["name"], blend["end"]["name"]] == ["start", "end"]
         assert blended.meta["pattern"] == load_model(end).meta["pattern"]
+        # not a chain of stages: --recipe refuses it; each end's stages are recorded whole
+        with pytest.raises(ConfigError, match="blend of two models"):
+            shipped_recipe(blended.meta, "b")
+        for end_meta, record in (
+            (load_model(start).meta, blend["start"]),
+            (load_model(end).meta, blend["end"]),
+        ):
+            assert record["provenance"]["segments"] == end_meta["provenance"]["segments"]
+            assert "validation" not in record["provenance"]
         assert blended.meta["description"].endswith(
             f"with the model start ({load_model(start).meta['meta_sha256'][:8]}): "
             f"{weight:g} of these weights and {1 - weight:g} of its"

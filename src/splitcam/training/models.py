@@ -247,7 +247,10 @@ def blend_models(
     ``storage``; buffers that are not trained parameters must be equal in both. The header
     is ``end``'s (pattern, config, provenance), its provenance given the segments of ``start``
     it lacks (a soup of stages counts each stage's steps), and the blend recorded in
-    ``provenance["blend"]``: the weight and the name, description and checksum of each end.
+    ``provenance["blend"]``: the weight and each end's name, description, checksum and
+    provenance (its stages, or its own blend; validation curves left out). A blend is not a
+    chain of stages, so ``splitcam train --recipe`` refuses it
+    (:func:`~splitcam.training.recipe.shipped_recipe`); its ends are recorded whole.
 
     Raises:
         ModelError: A weight outside [0, 1], a bad ``storage``, or models of different
@@ -276,8 +279,13 @@ def blend_models(
         else:
             raise ModelError(f"{start} and {end} differ in {key!r}, which is not trained")
     _, meta_path = paired_paths(out)
+    # each end as it was made: its stages, or its own blend (whose ends hold the stages)
     ends = [
-        {k: m.meta.get(k) for k in ("name", "description", "meta_sha256")} for m in (first, second)
+        {
+            **{k: m.meta.get(k) for k in ("name", "description", "meta_sha256")},
+            "provenance": _made_of(m.meta.get("provenance") or {}),
+        }
+        for m in (first, second)
     ]
     meta = {
         **{k: second.meta.get(k) for k in ("network", "pattern", "start_pattern", "config")},
@@ -295,6 +303,13 @@ def blend_models(
             f"{ends[0]['name']} ({sha}): {weight:g} of these weights and {1 - weight:g} of its"
         )
     return save_pair(meta_path, tensors, MODEL_FORMAT, MODEL_VERSION, meta)
+
+
+def _made_of(provenance: dict[str, Any]) -> dict[str, Any]:
+    """What a blend records of one of its ends: its provenance without the validation curve,
+    and without the segments where it is a blend itself (its own ends record them)."""
+    left_out = {"validation", "segments"} if provenance.get("blend") else {"validation"}
+    return {k: v for k, v in provenance.items() if k not in left_out}
 
 
 def _blended_provenance(start: dict[str, Any], end: dict[str, Any]) -> dict[str, Any]:
