@@ -71,7 +71,11 @@ def test_gate_decides_by_its_rule_on_the_numbers_it_prints(photos, tmp_path) -> 
     cells = rows["D"]
     before, after = ([float(v) for v in cells[i].split(" / ")] for i in (3, 4))
     rule = after[0] > before[0] and after[-1] >= before[-1] - FALL_DB
-    assert cells[-1] == ("yes" if rule else "no") == "no"
+    assert cells[6] == ("yes" if rule else "no") == "no"
+    assert [row.split("|")[-2].strip() for row in gate_table(verdicts).splitlines()[-2:]] == [
+        str(same),
+        str(worse),
+    ]  # each row names its file
     ship_to = tmp_path / "models"
     ship_to.mkdir()
     assert ship(verdicts, ship_to) == [] and not any(ship_to.iterdir())
@@ -91,6 +95,23 @@ def test_a_passing_candidate_ships_its_pair(photos, tmp_path) -> None:
     assert shipped == path.with_suffix(".safetensors").read_bytes()
 
 
+def test_two_passing_candidates_of_one_name_ship_neither(photos, tmp_path) -> None:
+    """Shipping both would leave whichever came last, silently: the gate refuses, copies
+    nothing, and names the two."""
+    from splitcam.training.gate import GateError
+
+    paths = [_candidate(tmp_path / f"c{i}", "D") for i in range(2)]
+    verdicts = gate(paths, photos, threads=1)
+    for verdict in verdicts:
+        verdict.after = [b + 0.1 for b in verdict.before]
+    ship_to = tmp_path / "models"
+    ship_to.mkdir()
+    with pytest.raises(GateError, match="2 candidates for D pass") as caught:
+        ship(verdicts, ship_to)
+    assert all(str(p) in str(caught.value) for p in paths)
+    assert not any(ship_to.iterdir())
+
+
 def test_refused_candidates_keep_their_reason(photos, tmp_path) -> None:
     # D's network named E: trained from pattern D, while the shipped E started from E.
     wrong = _candidate(tmp_path / "w", "E", source="D")
@@ -99,7 +120,7 @@ def test_refused_candidates_keep_their_reason(photos, tmp_path) -> None:
     assert "from pattern D" in verdicts[0].refused and not verdicts[0].ships
     assert "no shipped model" in verdicts[1].refused
     rows = _rows(gate_table(verdicts))
-    assert "not gated" in rows["E"][5] and rows["E"][-1] == "no"
+    assert "not gated" in rows["E"][5] and rows["E"][6] == "no"
 
 
 def test_cli_gate_is_dry_unless_told_and_refuses_bad_input(photos, tmp_path, capsys) -> None:
@@ -107,7 +128,7 @@ def test_cli_gate_is_dry_unless_told_and_refuses_bad_input(photos, tmp_path, cap
     table = tmp_path / "gates" / "gate.md"  # its folder made, as --out's are
     assert main(["models", "gate", str(path), "--data", str(photos), "--table", str(table)]) == 0
     out = capsys.readouterr().out
-    assert "would ship: nothing" in out and _rows(table.read_text())["D"][-1] == "no"
+    assert "would ship: nothing" in out and _rows(table.read_text())["D"][6] == "no"
     shutil.copy(path, tmp_path / "D.txt")
     for argv, message in [
         (["models", "gate"], "needs candidates"),

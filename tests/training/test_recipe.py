@@ -76,7 +76,7 @@ def _assert_replays(meta: dict, name: str) -> None:
     assert sum(stage.config.optim.steps for stage in recipe.stages) == sum(
         s["steps"] for s in segments
     )
-    for stage, start in zip(recipe.stages, starts):
+    for stage, start in zip(recipe.stages, starts, strict=True):
         stage.config.validate()
         assert stage.config.run.time_limit is None
         record = _record(segments[start])

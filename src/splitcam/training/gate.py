@@ -210,7 +210,7 @@ def gate_table(verdicts: Sequence[Verdict]) -> str:
     rows = []
     for v in sorted(verdicts, key=lambda v: v.refused is None):
         if v.refused is not None:
-            rows.append([v.name, "", "", "", "", f"not gated: {v.refused}", "no"])
+            rows.append([v.name, "", "", "", "", f"not gated: {v.refused}", "no", str(v.path)])
             continue
         rows.append(
             [
@@ -221,9 +221,10 @@ def gate_table(verdicts: Sequence[Verdict]) -> str:
                 fmt(f"{x:.2f}" for x in v.after),
                 fmt(f"{x:+.2f}" for x in v.change),
                 "yes" if v.ships else "no",
+                str(v.path),
             ]
         )
-    header = ["model", "photos", "levels", "shipped", "candidate", "change", "ships"]
+    header = ["model", "photos", "levels", "shipped", "candidate", "change", "ships", "file"]
     heading = (
         "# Gate: the validation photos and the last 12, whole at half size; ship when the "
         f"cleanest level rises and the noisiest falls by no more than {FALL_DB} dB"
@@ -232,9 +233,24 @@ def gate_table(verdicts: Sequence[Verdict]) -> str:
 
 
 def ship(verdicts: Sequence[Verdict], ship_to: Path) -> list[str]:
-    """Copy every candidate that passed (its JSON and tensors) into ``ship_to``; the names."""
+    """Copy every candidate that passed (its JSON and tensors) into ``ship_to``; the names.
+
+    Raises:
+        GateError: Two or more candidates of one name passed (one would silently replace the
+            other): nothing is copied, and the message names them, to ship one alone.
+    """
     from ..io.tensorfiles import paired_paths
 
+    passed: dict[str, list[str]] = {}
+    for v in verdicts:
+        if v.ships:
+            passed.setdefault(v.name, []).append(str(v.path))
+    for name, paths in passed.items():
+        if len(paths) > 1:
+            raise GateError(
+                f"{len(paths)} candidates for {name} pass ({', '.join(paths)}): gate the one "
+                "to ship alone with --ship"
+            )
     shipped = []
     for v in verdicts:
         if v.ships:
