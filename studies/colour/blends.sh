@@ -10,20 +10,37 @@ set -euo pipefail
 : "${SPLITCAM_DATA:?set SPLITCAM_DATA to the data folder (its train/ holds the photos)}"
 export OMP_NUM_THREADS=1
 C=runs/colour/candidates B=runs/colour/blend
+# The shipped models these blends start from, before the blend replaced bayer (the gate then
+# scored against them: to repeat its numbers, run this at that commit, 36f4d54).
+mkdir -p "$B/before"
+for f in bayer.json bayer.safetensors E.json E.safetensors; do
+    git show "36f4d54:src/splitcam/weights/models/$f" > "$B/before/$f"
+done
 blend() { splitcam models blend "$1" "$2" --weight "$3" --name "$4" --out "$5" --force "${@:6}"; }
 splitcam models export runs/colour/probe/bayer-quarter/checkpoint.safetensors --name bayer \
     --out "$B/quarter-raw" --force
-blend bayer "$B/quarter-raw/bayer.json" 0.25 bayer "$B/raw-25"
-blend bayer "$B/quarter-raw/bayer.json" 0.5 bayer "$B/raw-50"
-for c in bayer-quarter bayer-quarter2 bayer-halfquarter; do blend bayer "$C/$c/bayer.json" 0.5 bayer "$B/$c-50"; done
-blend E "$C/E-halfquarter/E.json" 0.5 E "$B/E-halfquarter-50"
+blend "$B/before/bayer.json" "$B/quarter-raw/bayer.json" 0.25 bayer "$B/raw-25"
+blend "$B/before/bayer.json" "$B/quarter-raw/bayer.json" 0.5 bayer "$B/raw-50"
+for c in bayer-quarter bayer-quarter2 bayer-halfquarter; do blend "$B/before/bayer.json" "$C/$c/bayer.json" 0.5 bayer "$B/$c-50"; done
+blend "$B/before/E.json" "$C/E-halfquarter/E.json" 0.5 E "$B/E-halfquarter-50"
+# E's control, its second stage at half size alone (stages.sh E-half), and its blends.
+[ -f "$C/E-half/E.json" ] || splitcam models export runs/colour/E-half-cooldown/checkpoint.safetensors \
+    --name E --out "$C/E-half"
+blend "$B/before/E.json" "$C/E-half/E.json" 0.5 E "$B/E-half-50"
+blend "$C/E-halfquarter/E.json" "$C/E-half/E.json" 0.5 E "$B/Esoup"
+blend "$B/before/E.json" "$B/Esoup/E.json" 0.5 E "$B/Esoup-0.5"
 # The three cooled-down bayer probes averaged (a uniform soup), then half-way back.
 blend "$C/bayer-quarter/bayer.json" "$C/bayer-quarter2/bayer.json" 0.5 bayer "$B/soup2" --storage float32
 blend "$B/soup2/bayer.json" "$C/bayer-halfquarter/bayer.json" 0.3333333 bayer "$B/soup3"
-for w in 0.5 0.75; do blend bayer "$B/soup3/bayer.json" "$w" bayer "$B/soup3-$w"; done
+# (the shipped soup3-0.5 was written with --description, the one line its header holds)
+for w in 0.5 0.75; do blend "$B/before/bayer.json" "$B/soup3/bayer.json" "$w" bayer "$B/soup3-$w"; done
 splitcam models gate "$B"/{raw-25,raw-50,bayer-quarter-50,bayer-quarter2-50,bayer-halfquarter-50}/bayer.json \
     "$B"/{soup3,soup3-0.5,soup3-0.75}/bayer.json "$B/E-halfquarter-50/E.json" \
     --data "$SPLITCAM_DATA/train" --threads 1 --table "$B/gate.md"
+splitcam models gate "$C/E-half/E.json" "$B"/{E-half-50,Esoup,Esoup-0.5}/E.json \
+    --data "$SPLITCAM_DATA/train" --threads 1 --table "$B/gate-E.md"
+splitcam evaluate --model "$C/E-half/E.json" --datasets kodak24,mcmaster --sigmas 0 15 --precision fp32 \
+    --out runs/colour/describe-E-half --quiet
 for m in soup3-0.5/bayer bayer-quarter-50/bayer; do
     splitcam evaluate --model "$B/$m.json" --datasets kodak24,mcmaster --sigmas 0 15 --precision fp32 \
         --out "$B/describe-${m%%/*}" --quiet
