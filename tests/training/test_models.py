@@ -243,7 +243,7 @@ def test_a_blend_lies_on_the_line_between_its_two_models(trained_run, run_images
         )
 
 
-def test_a_blend_refuses_models_of_different_patterns_or_a_weight_off_the_line(
+def test_a_blend_refuses_models_of_different_patterns_light_or_a_weight_off_the_line(
     trained_run, run_images, tmp_path
 ):
     from splitcam.recon.loading import ModelError
@@ -255,6 +255,9 @@ def test_a_blend_refuses_models_of_different_patterns_or_a_weight_off_the_line(
     end = export_model(other, tmp_path / "end")
     with pytest.raises(ModelError, match="different patterns"):
         blend_models(start, end, 0.5, tmp_path / "b")
+    # the shipped Bayer networks: one in photo-electrons in linear light, one in sRGB values
+    with pytest.raises(ModelError, match="linear light with photon noise and bayer in srgb"):
+        blend_models("bayer-photon", "bayer", 0.5, tmp_path / "b")
     with pytest.raises(ModelError, match=r"in \[0, 1\]"):
         blend_models(start, start, 1.5, tmp_path / "b")
     assert not (tmp_path / "b.json").exists()

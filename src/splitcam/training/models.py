@@ -254,7 +254,7 @@ def blend_models(
 
     Raises:
         ModelError: A weight outside [0, 1], a bad ``storage``, or models of different
-            networks, patterns or buffers.
+            networks, patterns, light or noise, or buffers.
     """
     if not 0.0 <= weight <= 1.0:
         raise ModelError(f"the blend's weight must be in [0, 1], got {weight}")
@@ -267,6 +267,13 @@ def blend_models(
                 f"{start} and {end} are models of different {part}s: only two models of one "
                 f"network and pattern can be blended"
             )
+    if _trained_on(first.meta)[1:] != _trained_on(second.meta)[1:]:
+        light, noise = _trained_on(first.meta)[1:], _trained_on(second.meta)[1:]
+        raise ModelError(
+            f"{start} was trained in {light[0]} light with {light[1]} noise and {end} in "
+            f"{noise[0]} light with {noise[1]} noise: only networks of one light and noise "
+            "can be blended"
+        )
     ours, theirs = first.network.state_dict(), second.network.state_dict()
     params = {n for n, _ in second.network.named_parameters()}
     tensors = {}
