@@ -243,6 +243,25 @@ def test_a_blend_lies_on_the_line_between_its_two_models(trained_run, run_images
         )
 
 
+def test_a_network_trained_on_from_a_blend_keeps_the_blend_on_record(
+    trained_run, run_images, tmp_path
+):
+    """Its provenance's segments are no chain (the blend's two ends are in them), so a run
+    from a blend records the blend and its recipe is refused, as the blend's is."""
+    from splitcam.training.models import blend_models
+
+    start = export_model(trained_run, tmp_path / "start")
+    blended = blend_models(start, start, 0.5, tmp_path / "blend")
+    assert load_model(blended).meta["provenance"]["validation"] == []  # never validated
+    run = tmp_path / "after"
+    train(small_config(run_images, run, **{"run.init_from": str(blended)}), progress=False)
+    after = load_model(export_model(run, tmp_path / "after-model")).meta
+    assert after["provenance"]["from_blend"]["weight"] == 0.5
+    assert after["provenance"]["total_steps"] == 8
+    with pytest.raises(ConfigError, match="were trained on from a blend of two models"):
+        shipped_recipe(after, "after")
+
+
 def test_a_blend_refuses_models_of_different_patterns_light_or_a_weight_off_the_line(
     trained_run, run_images, tmp_path
 ):

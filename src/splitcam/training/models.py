@@ -155,12 +155,17 @@ def provenance_of(loaded: ckpt_io.Checkpoint, run_dir: Path | None = None) -> di
     if run_dir is not None:
         # A continued run (start_step > 0) already logs the steps of the whole.
         curve += _validation_curve(run_dir, done - int(meta.get("start_step", 0)))
-    return {
+    out = {
         "total_steps": done + segment["steps"],
         "train_seconds": round(sum(float(s.get("train_seconds") or 0) for s in segments), 1),
         "segments": segments,
         "validation": curve,
     }
+    # trained on from a blend (blend_models), or from a model trained from one: the blend
+    # stays recorded, so no recipe replays the segments as if they were one chain
+    if blend := before.get("blend") or before.get("from_blend"):
+        out["from_blend"] = blend
+    return out
 
 
 def export_model(
@@ -267,24 +272,16 @@ def blend_models(
                 f"{start} and {end} are models of different {part}s: only two models of one "
                 f"network and pattern can be blended"
             )
-    if _trained_on(first.meta)[1:] != _trained_on(second.meta)[1:]:
-        light, noise = _trained_on(first.meta)[1:], _trained_on(second.meta)[1:]
+    first_on, second_on = _trained_on(first.meta)[1:], _trained_on(second.meta)[1:]
+    if first_on != second_on:
         raise ModelError(
-            f"{start} was trained in {light[0]} light with {light[1]} noise and {end} in "
-            f"{noise[0]} light with {noise[1]} noise: only networks of one light and noise "
-            "can be blended"
+            f"{start} was trained in {first_on[0]} light with {first_on[1]} noise and {end} "
+            f"in {second_on[0]} light with {second_on[1]} noise: only networks of one light "
+            "and noise can be blended"
         )
-    ours, theirs = first.network.state_dict(), second.network.state_dict()
-    params = {n for n, _ in second.network.named_parameters()}
-    tensors = {}
-    for key, value in theirs.items():
-        if key in params:
-            mixed = torch.lerp(ours[key].float(), value.float(), weight)
-            tensors[key] = mixed.to(STORAGE[storage])
-        elif torch.equal(ours[key], value):
-            tensors[key] = value
-        else:
-            raise ModelError(f"{start} and {end} differ in {key!r}, which is not trained")
+    tensors = _blended_tensors(first.network, second.network, weight, STORAGE[storage])
+    if isinstance(tensors, str):
+        raise ModelError(f"{start} and {end} differ in {tensors!r}, which is not trained")
     _, meta_path = paired_paths(out)
     # each end as it was made: its stages, or its own blend (whose ends hold the stages)
     ends = [
@@ -312,6 +309,25 @@ def blend_models(
     return save_pair(meta_path, tensors, MODEL_FORMAT, MODEL_VERSION, meta)
 
 
+def _blended_tensors(
+    first: torch.nn.Module, second: torch.nn.Module, weight: float, dtype: torch.dtype
+) -> dict[str, torch.Tensor] | str:
+    """The state of ``second`` with every trained parameter ``(1 - weight)`` of ``first``'s
+    and ``weight`` of its own (blended in float32, stored as ``dtype``), or the name of a
+    buffer that is not trained and differs between the two."""
+    ours, theirs = first.state_dict(), second.state_dict()
+    params = {n for n, _ in second.named_parameters()}
+    tensors = {}
+    for key, value in theirs.items():
+        if key in params:
+            tensors[key] = torch.lerp(ours[key].float(), value.float(), weight).to(dtype)
+        elif torch.equal(ours[key], value):
+            tensors[key] = value
+        else:
+            return key
+    return tensors
+
+
 def _made_of(provenance: dict[str, Any]) -> dict[str, Any]:
     """What a blend records of one of its ends: its provenance without the validation curve,
     and without the segments where it is a blend itself (its own ends record them)."""
@@ -322,7 +338,8 @@ def _made_of(provenance: dict[str, Any]) -> dict[str, Any]:
 def _blended_provenance(start: dict[str, Any], end: dict[str, Any]) -> dict[str, Any]:
     """``end``'s provenance with the segments of ``start`` it does not hold added, and the
     steps and seconds counted over them all: every step the blended weights have seen once
-    (a stage and the model it started from share their first segments)."""
+    (a stage and the model it started from share their first segments). No validation curve:
+    the blend was never validated during training."""
     prov = dict(end.get("provenance") or {})
     segments = list(prov.get("segments", []))
     segments += [
@@ -332,6 +349,8 @@ def _blended_provenance(start: dict[str, Any], end: dict[str, Any]) -> dict[str,
         prov["segments"] = segments
         prov["total_steps"] = sum(int(s.get("steps") or 0) for s in segments)
         prov["train_seconds"] = round(sum(float(s.get("train_seconds") or 0) for s in segments), 1)
+    prov["validation"] = []  # the ends' curves are not the blend's
+    prov.pop("from_blend", None)  # recorded in the end's own record
     return prov
 
 

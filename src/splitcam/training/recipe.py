@@ -105,16 +105,18 @@ def shipped_recipe(meta: dict[str, Any], name: str = "model") -> Recipe:
     Raises:
         ConfigError: A segment that records no settings (a model exported before segments
             recorded them, and not filled in by ``scripts/name_stage_files.py``), or a model
-            whose weights are a blend of two (:func:`~splitcam.training.models.blend_models`).
+            whose weights are (or were trained on from) a blend of two
+            (:func:`~splitcam.training.models.blend_models`).
     """
-    blend = (meta.get("provenance") or {}).get("blend")
-    if blend:
+    provenance = meta.get("provenance") or {}
+    if blend := provenance.get("blend") or provenance.get("from_blend"):
         ends = " and ".join(str(blend[end].get("name")) for end in ("start", "end"))
+        how = "are" if provenance.get("blend") else "were trained on from"
         raise ConfigError(
-            f"{name}: its weights are a blend of two models ({ends}, weight "
+            f"{name}: its weights {how} a blend of two models ({ends}, weight "
             f"{blend.get('weight')}; splitcam models blend), not a chain of stages, so it "
             "cannot be trained again with --recipe; its provenance records how each end was "
-            "trained (provenance.blend.start and .end): train each, then blend them"
+            "trained (its blend's start and end): train each, then blend them"
         )
     stages: list[tuple[str, dict[str, Any], int]] = []
     for index, segment in enumerate((meta.get("provenance") or {}).get("segments") or []):
