@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 import torch
-from conftest import small_config
+from conftest import small_config, tiny_config
 
 from splitcam.evaluation.protocol import mean_psnr
 from splitcam.recon.loading import load_model
@@ -241,6 +241,27 @@ def test_a_blend_lies_on_the_line_between_its_two_models(trained_run, run_images
             f"with the model start ({load_model(start).meta['meta_sha256'][:8]}): "
             f"{weight:g} of these weights and {1 - weight:g} of its"
         )
+
+
+def test_networks_of_any_pattern_blend_whatever_pattern_they_drew_last(tiny_universal, tmp_path):
+    """A network of any pattern records the last pattern it drew; two of them blend (their
+    kind agrees), and a network of one pattern does not blend with one of any."""
+    from splitcam.recon.loading import ModelError
+    from splitcam.training.models import blend_models
+
+    model, data = tiny_universal
+    settings = {"pattern.name": "random", "network.arch": "universal", "optim.steps": 3}
+    train(tiny_config(data, tmp_path / "run", **settings, **{"run.seed": 7}), progress=False)
+    other = export_model(tmp_path / "run", tmp_path / "other")
+    assert load_model(model).meta["pattern"] != load_model(other).meta["pattern"]
+    blended = load_model(blend_models(model, other, 0.5, tmp_path / "b", storage="float32"))
+    one, two = load_model(model).network.state_dict(), load_model(other).network.state_dict()
+    key = next(k for k, _ in load_model(model).network.named_parameters())
+    torch.testing.assert_close(blended.network.state_dict()[key], (one[key] + two[key]) / 2)
+    fixed = tmp_path / "fixed"
+    train(tiny_config(data, fixed, **{"optim.steps": 2}), progress=False)
+    with pytest.raises(ModelError, match="different networks|different patterns"):
+        blend_models(model, export_model(fixed, tmp_path / "fixed-model"), 0.5, tmp_path / "c")
 
 
 def test_a_network_trained_on_from_a_blend_keeps_the_blend_on_record(

@@ -242,7 +242,8 @@ def blend_models(
     description: str = "",
 ) -> Path:
     """A model whose trained weights lie on the straight line between two models of one
-    network and pattern: ``(1 - weight) * start + weight * end``, written as ``out``.
+    network and pattern (both networks of any pattern, or of one pattern with the same kernels),
+    light and noise: ``(1 - weight) * start + weight * end``, written as ``out``.
 
     Two networks where one was trained on from the other (a stage of its recipe) sit in one
     basin of the loss, and the points between them are networks too, trading what the stage
@@ -266,13 +267,20 @@ def blend_models(
     if storage not in STORAGE:
         raise ModelError(f"storage must be one of {', '.join(STORAGE)}, got {storage!r}")
     first, second = load_model(start), load_model(end)
-    for part in ("network", "pattern"):
-        if first.meta[part] != second.meta[part]:
+    (pattern, *first_on), (other, *second_on) = _trained_on(first.meta), _trained_on(second.meta)
+    # a network of any pattern records the last one it drew: only its kind must agree
+    patterns = pattern == other and (
+        pattern == "any" or first.meta["pattern"] == second.meta["pattern"]
+    )
+    for part, same in (
+        ("network", first.meta["network"] == second.meta["network"]),
+        ("pattern", patterns),
+    ):
+        if not same:
             raise ModelError(
                 f"{start} and {end} are models of different {part}s: only two models of one "
                 f"network and pattern can be blended"
             )
-    first_on, second_on = _trained_on(first.meta)[1:], _trained_on(second.meta)[1:]
     if first_on != second_on:
         raise ModelError(
             f"{start} was trained in {first_on[0]} light with {first_on[1]} noise and {end} "
