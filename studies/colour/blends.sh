@@ -45,6 +45,25 @@ for m in soup3-0.5/bayer bayer-quarter-50/bayer; do
     splitcam evaluate --model "$B/$m.json" --datasets kodak24,mcmaster --sigmas 0 15 --precision fp32 \
         --out "$B/describe-${m%%/*}" --quiet
 done
+# A fourth probe (the quarter-size one again, seed 2, from the bayer before the blend) averaged
+# in; gated against the blend shipped from the three (run after it shipped).
+if [ ! -f "$C/bayer-quarter-s2/bayer.json" ]; then
+    splitcam train --config experiments/colour/bayer-quarter.toml --init-from "$B/before/bayer.json" \
+        --seed 2 --data "$SPLITCAM_DATA/train" --out runs/colour/probe/bayer-quarter-s2 --quiet
+    splitcam train --config experiments/colour/bayer-half2-cooldown.toml --seed 2 \
+        --init-from runs/colour/probe/bayer-quarter-s2 --data "$SPLITCAM_DATA/train" \
+        --out runs/colour/probe/bayer-quarter-s2-cooldown --quiet
+    splitcam models export runs/colour/probe/bayer-quarter-s2-cooldown/checkpoint.safetensors \
+        --name bayer --out "$C/bayer-quarter-s2"
+fi
+blend "$B/soup3/bayer.json" "$C/bayer-quarter-s2/bayer.json" 0.25 bayer "$B/soup4"
+blend "$B/before/bayer.json" "$B/soup4/bayer.json" 0.5 bayer "$B/soup4-0.5"
+blend "$B/before/bayer.json" "$C/bayer-quarter-s2/bayer.json" 0.5 bayer "$B/bayer-quarter-s2-50"
+splitcam models gate "$C/bayer-quarter-s2/bayer.json" "$B"/{bayer-quarter-s2-50,soup4,soup4-0.5,before}/bayer.json \
+    --data "$SPLITCAM_DATA/train" --threads 1 --table "$B/gate-soup4.md"
+splitcam evaluate --model "$B/soup4-0.5/bayer.json" --datasets kodak24,mcmaster --sigmas 0 15 \
+    --precision fp32 --out "$B/describe-soup4-0.5" --quiet
+
 # Every shipped network half-way back to the model before its last stage (the commit that
 # shipped that model), gated; A described on the test sets.
 P="$B/prev"
