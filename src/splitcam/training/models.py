@@ -267,26 +267,7 @@ def blend_models(
     if storage not in STORAGE:
         raise ModelError(f"storage must be one of {', '.join(STORAGE)}, got {storage!r}")
     first, second = load_model(start), load_model(end)
-    (pattern, *first_on), (other, *second_on) = _trained_on(first.meta), _trained_on(second.meta)
-    # a network of any pattern records the last one it drew: only its kind must agree
-    patterns = pattern == other and (
-        pattern == "any" or first.meta["pattern"] == second.meta["pattern"]
-    )
-    for part, same in (
-        ("network", first.meta["network"] == second.meta["network"]),
-        ("pattern", patterns),
-    ):
-        if not same:
-            raise ModelError(
-                f"{start} and {end} are models of different {part}s: only two models of one "
-                f"network and pattern can be blended"
-            )
-    if first_on != second_on:
-        raise ModelError(
-            f"{start} was trained in {first_on[0]} light with {first_on[1]} noise and {end} "
-            f"in {second_on[0]} light with {second_on[1]} noise: only networks of one light "
-            "and noise can be blended"
-        )
+    _check_blendable(first.meta, second.meta, start, end)
     tensors = _blended_tensors(first.network, second.network, weight, STORAGE[storage])
     if isinstance(tensors, str):
         raise ModelError(f"{start} and {end} differ in {tensors!r}, which is not trained")
@@ -315,6 +296,29 @@ def blend_models(
             f"{ends[0]['name']} ({sha}): {weight:g} of these weights and {1 - weight:g} of its"
         )
     return save_pair(meta_path, tensors, MODEL_FORMAT, MODEL_VERSION, meta)
+
+
+def _check_blendable(first: dict[str, Any], second: dict[str, Any], start: Any, end: Any) -> None:
+    """Refuse two model headers of different networks, patterns, light or noise
+    (:func:`blend_models`)."""
+    (pattern, *first_on), (other, *second_on) = _trained_on(first), _trained_on(second)
+    # a network of any pattern records the last one it drew: only its kind must agree
+    patterns = pattern == other and (pattern == "any" or first["pattern"] == second["pattern"])
+    for part, same in (
+        ("network", first["network"] == second["network"]),
+        ("pattern", patterns),
+    ):
+        if not same:
+            raise ModelError(
+                f"{start} and {end} are models of different {part}s: only two models of one "
+                f"network and pattern can be blended"
+            )
+    if first_on != second_on:
+        raise ModelError(
+            f"{start} was trained in {first_on[0]} light with {first_on[1]} noise and {end} "
+            f"in {second_on[0]} light with {second_on[1]} noise: only networks of one light "
+            "and noise can be blended"
+        )
 
 
 def _blended_tensors(
