@@ -67,14 +67,14 @@ splitcam evaluate --model "$B/soup4-0.5/bayer.json" --datasets kodak24,mcmaster 
 # Every shipped network half-way back to the model before its last stage (the commit that
 # shipped that model), gated; A described on the test sets.
 P="$B/prev"
-for spec in A:28ad82a C:2c3f297 D:fd381d1 E:11a2f4f D-photon:312506d A-photon:1ba829a \
+for spec in A:28ad82a B:30dce49 C:2c3f297 D:fd381d1 E:11a2f4f D-photon:312506d A-photon:1ba829a \
     bayer-photon:d883ced router-zou-photon:f8d6b3c router-best-photon:42c9ddc universal-photon:c0747de; do
     m=${spec%%:*} commit=${spec#*:}
     mkdir -p "$P/$m"
     for f in json safetensors; do git show "$commit:src/splitcam/weights/models/$m.$f" > "$P/$m/$m.$f"; done
     blend "$P/$m/$m.json" "$m" 0.5 "$m" "$P/half-$m"
 done
-splitcam models gate "$P"/half-{A/A,C/C,D/D,E/E}.json --data "$SPLITCAM_DATA/train" --threads 1 \
+splitcam models gate "$P"/half-{A/A,B/B,C/C,D/D,E/E}.json --data "$SPLITCAM_DATA/train" --threads 1 \
     --table "$P/gate-srgb.md"
 splitcam models gate "$P"/half-{D-photon/D-photon,A-photon/A-photon,bayer-photon/bayer-photon}.json \
     "$P"/half-{router-zou-photon/router-zou-photon,router-best-photon/router-best-photon}.json \
