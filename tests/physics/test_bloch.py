@@ -133,6 +133,9 @@ def test_a_cache_continues_without_solving_again(tmp_path):
     again = pixel_kernels(design, [500.0], cache=cache, **SMALL)
     assert again["cost"]["reused"] == again["cost"]["solves"] == 4
     np.testing.assert_allclose(again["kernels"], first["kernels"], rtol=1e-12)
+    # the numbers kept beside each solve come back from the log with it
+    np.testing.assert_allclose(again["misfit"], first["misfit"], rtol=1e-12)
+    assert again["terms"] == first["terms"]
     other = pixel_kernels(design, [500.0], cache=cache, **{**SMALL, "positions": 1})
     assert other["cost"]["reused"] == 0  # another setting is solved, not reused
 

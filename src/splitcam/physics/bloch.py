@@ -54,7 +54,7 @@ from .fullwave import (
     _off_grazing,
     _periodic_solve,
     _permittivities,
-    _solve_logged,
+    _solved,
     _SolveLog,
     check_solver,
     cone_directions,
@@ -413,15 +413,15 @@ def pixel_kernels(
     misfit = np.zeros(len(wavelengths))
     cost = {"solves": 0, "reused": 0, "seconds": 0.0}
     count = int(terms)
-    for li, lam in enumerate(wavelengths):
 
-        def solve(lam=lam):
-            found, reflected, fit, used = _one_wavelength(design, lam, setting)
-            return found, reflected, {"misfit": fit, "terms": used}
+    def solve(lam: float, *_: float) -> tuple[np.ndarray, float, dict[str, Any]]:
+        found, reflected, fit, used = _one_wavelength(design, lam, setting)
+        return found, reflected, {"misfit": fit, "terms": used}
 
-        kernels, reflected, notes, seconds, reused = _solve_logged(
-            log, (lam, chief_ray, azimuth), solve
-        )
+    keys = [(lam, chief_ray, azimuth) for lam in wavelengths]
+    for li, (kernels, reflected, seconds, reused, notes) in enumerate(
+        _solved(keys, log, solve, (), 1)
+    ):
         misfit[li], count = notes["misfit"], notes["terms"]
         cost["reused"] += cells * cells * reused
         cost["solves"] += cells * cells

@@ -368,7 +368,7 @@ def quadrant_spectra(
     cost = {"solves": 0, "reused": 0, "seconds": 0.0}
     for li, _ in enumerate(wavelengths):
         for weight in weights:
-            quads, reflected, seconds, reused = next(solved)
+            quads, reflected, seconds, reused, _ = next(solved)
             cost["reused"] += reused
             cost["solves"] += 1
             cost["seconds"] += seconds
@@ -417,26 +417,35 @@ def _solved(
     setting: tuple[Any, ...],
     workers: int,
 ) -> Iterator[tuple[np.ndarray, float, float, bool]]:
-    """``(quadrants, reflected, seconds, reused)`` of each key in order: from ``log`` where
-    it holds the solve, else solved (here, or by ``workers`` processes when more than one solve
-    is missing), each new solve logged as it is taken."""
+    """``(array, reflected, seconds, reused, notes)`` of each key in order: from ``log``
+    where it holds the solve, else solved (here, or by ``workers`` processes when more than one
+    solve is missing), each new solve timed and logged as it is taken. ``solve(*key)`` gives
+    ``(array, reflected)``, or ``(array, reflected, notes)`` where a solve has more numbers to
+    keep beside it (a dict; the worker processes' solves have none). The one place a solve is
+    looked up, timed and logged: the spectra's and the Bloch kernels' alike."""
     todo = list(dict.fromkeys(k for k in keys if log is None or log.get(*k) is None))
     pool = None
     if workers > 1 and len(todo) > 1:
         from .solvepool import SolvePool
 
         pool = SolvePool(solve_quadrants, setting, min(workers, len(todo)))
-        results = pool.solutions(np.asarray(setting[0].grid, dtype=np.float64), todo)
+        solutions = pool.solutions(np.asarray(setting[0].grid, dtype=np.float64), todo)
+        results = ((*found, {}) for found in solutions)
     else:
         results = (_timed(solve, *key) for key in todo)
     try:
-        fresh: dict[tuple[float, float, float], tuple[np.ndarray, float, float]] = {}
+        fresh: dict[tuple[float, float, float], tuple[np.ndarray, float, float, dict]] = {}
         for key in keys:  # the missing ones come back in the order of todo: the order of keys
             if key in todo and key not in fresh:
                 fresh[key] = next(results)
                 if log is not None:
                     log.add(*key, *fresh[key])
-            yield (*fresh[key], False) if key in fresh else (*log.get(*key), True)
+            if key in fresh:
+                array, reflected, seconds, notes = fresh[key]
+                yield array, reflected, seconds, False, dict(notes or {})
+            else:
+                notes = log.notes.get(log._key(*key), {})
+                yield (*log.get(*key), True, dict(notes))
     finally:
         if pool is not None:
             pool.close()
@@ -451,10 +460,10 @@ def check_workers(workers: Any) -> int:
         raise FullwaveError(str(exc)) from None
 
 
-def _timed(solve: _Solve, *key: float) -> tuple[np.ndarray, float, float]:
+def _timed(solve: Callable[..., tuple], *key: float) -> tuple[np.ndarray, float, float, dict]:
     start = time.perf_counter()
-    quads, reflected = solve(*key)
-    return quads, reflected, time.perf_counter() - start
+    array, reflected, *notes = solve(*key)
+    return array, reflected, time.perf_counter() - start, (notes[0] if notes else {})
 
 
 def solve_quadrants(
@@ -565,26 +574,6 @@ class _SolveLog:
             os.fsync(f.fileno())
         self.done[self._key(lam, theta, phi)] = (np.asarray(quads), float(reflected), seconds)
         self.notes[self._key(lam, theta, phi)] = dict(notes or {})
-
-
-def _solve_logged(
-    log: _SolveLog | None,
-    key: tuple[float, float, float],
-    solve: Callable[[], tuple[np.ndarray, float, dict[str, Any] | None]],
-) -> tuple[np.ndarray, float, dict[str, Any], float, bool]:
-    """One solve at ``key`` (wavelength, polar angle, azimuth): ``solve()`` gives ``(array,
-    reflected share, notes)``, timed and appended to ``log``, unless ``log`` holds it already.
-    Returns ``(array, reflected, notes, seconds, reused)``."""
-    found = log.get(*key) if log is not None else None
-    if found is not None:
-        array, reflected, seconds = found
-        return array, reflected, log.notes[log._key(*key)], seconds, True
-    start = time.perf_counter()
-    array, reflected, notes = solve()
-    seconds = time.perf_counter() - start
-    if log is not None:
-        log.add(*key, array, reflected, seconds, notes)
-    return array, reflected, dict(notes or {}), seconds, False
 
 
 #: One solve: ``(wavelength nm, polar angle, azimuth)`` → ``((2, 2, 2)`` quadrant transmissions
