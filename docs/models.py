@@ -31,7 +31,7 @@ from splitcam.io.domains import LINEAR
 from splitcam.recon.loading import load_model, model_names
 from splitcam.recon.registry import trained_domain
 from splitcam.training.models import model_summary
-from splitcam.training.recipe import read_recipe
+from splitcam.training.recipe import blend_of, read_recipe
 
 DOCS = Path(__file__).resolve().parent
 EVALUATION = DOCS / "results" / "reproduce" / "evaluation"
@@ -168,8 +168,7 @@ def render() -> str:
     for name in model_names():
         meta = load_model(name).meta
         row = model_summary(name, meta)
-        blend = (meta.get("provenance") or {}).get("blend")
-        stages = "*blend*" if blend else len(read_recipe(name).stages)
+        stages = "*blend*" if blend_of(meta) else len(read_recipe(name).stages)
         note = " *earlier weights*" if name in stale else ""
         if name in ours:
             score = "{:.2f} / {:.2f}".format(*ours[name]) + note

@@ -416,7 +416,7 @@ def _solved(
     solve: _Solve,
     setting: tuple[Any, ...],
     workers: int,
-) -> Iterator[tuple[np.ndarray, float, float, bool]]:
+) -> Iterator[tuple[np.ndarray, float, float, bool, dict[str, Any]]]:
     """``(array, reflected, seconds, reused, notes)`` of each key in order: from ``log``
     where it holds the solve, else solved (here, or by ``workers`` processes when more than one
     solve is missing), each new solve timed and logged as it is taken. ``solve(*key)`` gives
@@ -440,12 +440,9 @@ def _solved(
                 fresh[key] = next(results)
                 if log is not None:
                     log.add(*key, *fresh[key])
-            if key in fresh:
-                array, reflected, seconds, notes = fresh[key]
-                yield array, reflected, seconds, False, dict(notes or {})
-            else:
-                notes = log.notes.get(log._key(*key), {})
-                yield (*log.get(*key), True, dict(notes))
+            reused = key not in fresh
+            array, reflected, seconds, notes = log.get(*key) if reused else fresh[key]
+            yield array, reflected, seconds, reused, dict(notes or {})
     finally:
         if pool is not None:
             pool.close()
@@ -520,16 +517,16 @@ class _SolveLog:
         }
         self.setting = hashlib.sha256(json.dumps(setting, sort_keys=True).encode()).hexdigest()[:16]
         self.path = Path(path)
-        self.done: dict[tuple[str, str, str], tuple[np.ndarray, float, float]] = {}
-        self.notes: dict[tuple[str, str, str], dict[str, Any]] = {}
+        # each solve's (array, reflected share, seconds, notes)
+        self.done: dict[tuple[str, str, str], tuple[np.ndarray, float, float, dict]] = {}
         rows, _ = read_json_lines(self.path)  # a line cut short by a killed run is skipped
         for _, _, rec in rows:
             try:
                 if rec["setting"] == self.setting:
                     key = self._key(rec["wavelength"], rec["theta"], rec["phi"])
                     quads = np.asarray(rec["quadrants"], dtype=np.float64).reshape(shape)
-                    self.done[key] = (quads, float(rec["reflection"]), float(rec["seconds"]))
-                    self.notes[key] = dict(rec.get("notes", {}))
+                    notes = dict(rec.get("notes", {}))
+                    self.done[key] = (quads, float(rec["reflection"]), float(rec["seconds"]), notes)
             except (ValueError, KeyError, TypeError):
                 continue  # not a solve of this module
 
@@ -538,6 +535,7 @@ class _SolveLog:
         return tuple(f"{float(v):.12g}" for v in (lam, theta, phi))
 
     def get(self, lam: float, theta: float, phi: float):
+        """The logged ``(array, reflected share, seconds, notes)`` of a solve, or None."""
         return self.done.get(self._key(lam, theta, phi))
 
     def add(
@@ -550,7 +548,7 @@ class _SolveLog:
         seconds: float,
         notes: dict[str, Any] | None = None,
     ) -> None:
-        """``notes``: more numbers of the solve, kept beside it (:attr:`notes`)."""
+        """``notes``: more numbers of the solve, kept beside it (the last of :meth:`get`)."""
         import json
 
         rec = {
@@ -572,8 +570,8 @@ class _SolveLog:
             f.write(("\n" if cut else "") + json.dumps(rec) + "\n")
             f.flush()
             os.fsync(f.fileno())
-        self.done[self._key(lam, theta, phi)] = (np.asarray(quads), float(reflected), seconds)
-        self.notes[self._key(lam, theta, phi)] = dict(notes or {})
+        key = self._key(lam, theta, phi)
+        self.done[key] = (np.asarray(quads), float(reflected), seconds, dict(notes or {}))
 
 
 #: One solve: ``(wavelength nm, polar angle, azimuth)`` → ``((2, 2, 2)`` quadrant transmissions

@@ -31,7 +31,7 @@ from ..io import checkpoints as ckpt_io
 from ..io.domains import SRGB
 from ..io.tensorfiles import paired_paths, save_pair
 from ..recon.loading import MODEL_FORMAT, MODEL_VERSION, ModelError, load_model, load_network
-from .recipe import MACHINE_KEYS, replayable
+from .recipe import MACHINE_KEYS, blend_of, replayable
 from .rundir import METRICS_NAME, changes_rows, failure_of, last_metrics, metrics_rows
 
 __all__ = [
@@ -163,7 +163,7 @@ def provenance_of(loaded: ckpt_io.Checkpoint, run_dir: Path | None = None) -> di
     }
     # trained on from a blend (blend_models), or from a model trained from one: the blend
     # stays recorded, so no recipe replays the segments as if they were one chain
-    if blend := before.get("blend") or before.get("from_blend"):
+    if blend := blend_of(previous):
         out["from_blend"] = blend
     return out
 

@@ -45,6 +45,7 @@ __all__ = [
     "MACHINE_KEYS",
     "Recipe",
     "Stage",
+    "blend_of",
     "read_recipe",
     "recipe_names",
     "replayable",
@@ -98,6 +99,14 @@ def recipe_names() -> list[str]:
     return sorted(p.stem for p in MODELS_DIR.glob("*.json")) if MODELS_DIR.is_dir() else []
 
 
+def blend_of(meta: dict[str, Any]) -> dict[str, Any] | None:
+    """The blend a model header records (:func:`~splitcam.training.models.blend_models`):
+    of its own weights, or of the weights it was trained on from; None for a chain of stages,
+    which a recipe replays."""
+    provenance = meta.get("provenance") or {}
+    return provenance.get("blend") or provenance.get("from_blend")
+
+
 def shipped_recipe(meta: dict[str, Any], name: str = "model") -> Recipe:
     """The recipe a model's header records (:func:`read_recipe` on a shipped model): one stage
     per run of its provenance, consecutive segments of one file and settings merged.
@@ -108,10 +117,9 @@ def shipped_recipe(meta: dict[str, Any], name: str = "model") -> Recipe:
             whose weights are (or were trained on from) a blend of two
             (:func:`~splitcam.training.models.blend_models`).
     """
-    provenance = meta.get("provenance") or {}
-    if blend := provenance.get("blend") or provenance.get("from_blend"):
+    if blend := blend_of(meta):
         ends = " and ".join(str(blend[end].get("name")) for end in ("start", "end"))
-        how = "are" if provenance.get("blend") else "were trained on from"
+        how = "are" if (meta.get("provenance") or {}).get("blend") else "were trained on from"
         raise ConfigError(
             f"{name}: its weights {how} a blend of two models ({ends}, weight "
             f"{blend.get('weight')}; splitcam models blend), not a chain of stages, so it "
