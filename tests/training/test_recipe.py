@@ -19,6 +19,7 @@ from splitcam.training.config import ConfigError
 from splitcam.training.models import export_model, provenance_of
 from splitcam.training.recipe import (
     MACHINE_KEYS,
+    blend_of,
     read_recipe,
     recipe_names,
     run_recipe,
@@ -53,14 +54,13 @@ def test_every_shipped_model_is_its_own_recipe_agreeing_with_its_files(name):
     are a blend of two is refused, and each of its ends is such a chain (or a blend again)."""
     assert name in recipe_names()
     meta = load_model(name).meta
-    if not meta["provenance"].get("blend"):
+    if not blend_of(meta):
         read_recipe(name)  # the shipped file by name, as --recipe reads it
     _assert_replays(meta, name)
 
 
 def _assert_replays(meta: dict, name: str) -> None:
-    blend = meta["provenance"].get("blend")
-    if blend:
+    if blend := blend_of(meta):  # its own weights' blend, or the one it was trained from
         with pytest.raises(ConfigError, match="a blend of two models"):
             shipped_recipe(meta, name)
         for end in ("start", "end"):
