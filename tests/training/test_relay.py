@@ -73,6 +73,11 @@ def test_relay_trains_exports_and_tables_within_its_minutes(relayed) -> None:
     assert learned["start_pattern"]["name"] == "A" and learned["pattern"]["name"] == "A-learned"
 
 
+def _cells(row: str) -> list[str]:
+    """A markdown table row's cells, stripped."""
+    return [c.strip() for c in row.strip().strip("|").split("|")]
+
+
 @pytest.mark.slow
 def test_gate_ships_exactly_what_its_table_says(relayed, photos, tmp_path) -> None:
     relay = _relay()
@@ -83,19 +88,20 @@ def test_gate_ships_exactly_what_its_table_says(relayed, photos, tmp_path) -> No
     assert not (relayed / "gate.md").exists() and not any(ship_to.iterdir())
     assert relay.main(args) == 0
     rows = (relayed / "gate.md").read_text().splitlines()
+    columns = _cells(next(line for line in rows if line.startswith("| model |")))
     for name in ("D", "A-opt"):
-        row = next(line for line in rows if line.startswith(f"| {name} |"))
-        cells = [c.strip() for c in row.strip("|").split("|")]
-        before, after = ([float(v) for v in cells[i].split(" / ")] for i in (3, 4))
+        row = dict(zip(columns, _cells(next(r for r in rows if r.startswith(f"| {name} |")))))
+        before, after = ([float(v) for v in row[c].split(" / ")] for c in ("shipped", "candidate"))
         ships = after[0] > before[0] and after[-1] >= before[-1] - 0.05
-        assert cells[-1] == ("yes" if ships else "no")
+        assert row["ships"] == ("yes" if ships else "no")
+        assert row["file"] == str(relayed / "candidates" / f"{name}.json")
         assert (ship_to / f"{name}.json").exists() == ships
         # A shipped model's relay stage lands beside it, never in the current folder.
         started = json.loads((relayed / "relay.json").read_text())["started"][:10]
         stage = Path(relay.STAGE_DIR, started, f"{name}.toml")
         assert (ship_to / stage).exists() == ships and not stage.exists()
         # The run's validation photo (1 of 14 held out: the last) and the last 12, whole.
-        assert cells[1] == "12"
+        assert row["photos"] == "12"
 
 
 @pytest.mark.slow
@@ -129,8 +135,10 @@ def test_bad_input_gets_one_line_and_changes_nothing(relayed, photos, tmp_path, 
     (wrong / "candidates" / "E.json").write_text(json.dumps(meta))
     assert relay.main(["--gate", str(wrong), "--data", str(photos), "--dry-run"]) == 0
     out = capsys.readouterr().out
-    skipped = next(line for line in out.splitlines() if line.startswith("| E |"))
-    assert "not gated" in skipped and "from pattern D" in skipped and skipped.endswith("| no |")
+    columns = _cells(next(line for line in out.splitlines() if line.startswith("| model |")))
+    skipped = dict(zip(columns, _cells(next(r for r in out.splitlines() if r.startswith("| E |")))))
+    assert "not gated" in skipped["change"] and "from pattern D" in skipped["change"]
+    assert skipped["ships"] == "no"
     assert any(line.startswith("| A-opt | 12 |") for line in out.splitlines())
     assert "would ship: " in out and "E" not in out.split("would ship: ")[1]
 
