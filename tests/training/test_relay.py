@@ -73,9 +73,15 @@ def test_relay_trains_exports_and_tables_within_its_minutes(relayed) -> None:
     assert learned["start_pattern"]["name"] == "A" and learned["pattern"]["name"] == "A-learned"
 
 
-def _cells(row: str) -> list[str]:
-    """A markdown table row's cells, stripped."""
-    return [c.strip() for c in row.strip().strip("|").split("|")]
+def _row(table: list[str], name: str) -> dict[str, str]:
+    """The row of model ``name`` in a Markdown gate table, by the table's column names."""
+
+    def cells(row: str) -> list[str]:
+        return [c.strip() for c in row.strip().strip("|").split("|")]
+
+    header = next(line for line in table if line.startswith("| model |"))
+    row = next(line for line in table if line.startswith(f"| {name} |"))
+    return dict(zip(cells(header), cells(row), strict=True))
 
 
 @pytest.mark.slow
@@ -88,9 +94,8 @@ def test_gate_ships_exactly_what_its_table_says(relayed, photos, tmp_path) -> No
     assert not (relayed / "gate.md").exists() and not any(ship_to.iterdir())
     assert relay.main(args) == 0
     rows = (relayed / "gate.md").read_text().splitlines()
-    columns = _cells(next(line for line in rows if line.startswith("| model |")))
     for name in ("D", "A-opt"):
-        row = dict(zip(columns, _cells(next(r for r in rows if r.startswith(f"| {name} |")))))
+        row = _row(rows, name)
         before, after = ([float(v) for v in row[c].split(" / ")] for c in ("shipped", "candidate"))
         ships = after[0] > before[0] and after[-1] >= before[-1] - 0.05
         assert row["ships"] == ("yes" if ships else "no")
@@ -135,8 +140,7 @@ def test_bad_input_gets_one_line_and_changes_nothing(relayed, photos, tmp_path, 
     (wrong / "candidates" / "E.json").write_text(json.dumps(meta))
     assert relay.main(["--gate", str(wrong), "--data", str(photos), "--dry-run"]) == 0
     out = capsys.readouterr().out
-    columns = _cells(next(line for line in out.splitlines() if line.startswith("| model |")))
-    skipped = dict(zip(columns, _cells(next(r for r in out.splitlines() if r.startswith("| E |")))))
+    skipped = _row(out.splitlines(), "E")
     assert "not gated" in skipped["change"] and "from pattern D" in skipped["change"]
     assert skipped["ships"] == "no"
     assert any(line.startswith("| A-opt | 12 |") for line in out.splitlines())
