@@ -160,6 +160,7 @@ def test_a_model_of_one_pattern_refuses_another_pattern_in_the_api() -> None:
         build_method("D", pattern="A")
 
 
+@pytest.mark.slow
 def test_messages_that_help(tmp_path, capsys) -> None:
     """After a time-limit stop the run says to raise --time-limit, and so does --resume; a
     corrupt file among good photos is skipped by name in one line and training goes on; an

@@ -12,6 +12,7 @@ from splitcam.cli import main
 from splitcam.evaluation.tables import CSV_NAME, read_rows
 
 
+@pytest.mark.slow
 def test_study_exposure_is_in_linear_light_by_default(tmp_path) -> None:
     args = ["study", "exposure", "--max-images", "1", "--photons", "30", "3000"]
     args += ["--patterns", "D,bayer", "--quiet"]

@@ -324,6 +324,7 @@ def test_solves_shared_by_worker_processes_give_the_same_loss_spectra_and_gradie
     assert pooled._pool is None  # the with-block stopped the workers
 
 
+@pytest.mark.slow
 def test_the_design_command_writes_a_solved_binary_design_and_continues_a_stopped_run(
     tmp_path, capsys, monkeypatch
 ):

@@ -605,9 +605,8 @@ def _fmmax():
     pytest.importorskip("fmmax")
 
 
-@pytest.mark.parametrize(
-    "solver", ["fmmax-fft", pytest.param("fmmax-jones", marks=pytest.mark.slow)]
-)
+@pytest.mark.slow
+@pytest.mark.parametrize("solver", ["fmmax-fft", "fmmax-jones"])
 def test_fmmax_transmits_what_a_thin_film_does(solver):
     _fmmax()
     lam = 530.0

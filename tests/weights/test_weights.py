@@ -30,11 +30,16 @@ def _photon_models() -> list[str]:
     return [name for name in model_names() if model_domain(name) == "linear"]
 
 
+#: The photon networks checked in the default suite: one behind a filter array, one behind a
+#: router. The others (and a network for any sensor, checked on every sensor it trained on) are
+#: ``slow``: each costs about 3.5 s, and ``.ci/run`` runs them all.
+_PHOTON_QUICK = {"bayer-photon", "router-zou-photon"}
+
+
 def _photon_cases() -> list:
-    """:func:`_photon_models`, a network for any sensor marked slow: it is checked on every
-    sensor it trained on, several times one sensor's cost."""
+    """:func:`_photon_models`, those outside :data:`_PHOTON_QUICK` marked slow."""
     return [
-        pytest.param(name, marks=pytest.mark.slow) if model_serves_any_pattern(name) else name
+        name if name in _PHOTON_QUICK else pytest.param(name, marks=pytest.mark.slow)
         for name in _photon_models()
     ]
 
