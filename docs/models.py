@@ -31,7 +31,7 @@ from splitcam.io.domains import LINEAR
 from splitcam.recon.loading import load_model, model_names
 from splitcam.recon.registry import trained_domain
 from splitcam.training.models import model_summary
-from splitcam.training.recipe import blend_of, read_recipe
+from splitcam.training.recipe import read_recipe
 
 DOCS = Path(__file__).resolve().parent
 EVALUATION = DOCS / "results" / "reproduce" / "evaluation"
@@ -148,9 +148,9 @@ def render() -> str:
         "([table](results/reproduce/evaluation/table.md)), beside the paper's after 10⁶ GPU "
         "steps ([model.md](model.md) section 8). `splitcam train --recipe MODEL --data DIR` "
         "trains a model again end to end, stage by stage, from the stages its own header "
-        "records; a model whose weights are a blend of two (stages: *blend*; `splitcam models "
-        "blend`) records how each was trained, and is made again by training each and blending "
-        "them. The last "
+        "records; a model whose weights are a blend of two (`splitcam models blend`; stages: "
+        "its runs + its blends, a run two ends share counted once) is made again by training "
+        "each end and blending them. The last "
         "column is each set's own mean at σ 0 and Kodak24 minus McMaster: how much a network "
         "loses on saturated colour (demosaicnet, a GPU-trained Bayer network, on the same whole "
         "images: 41.84 / 39.14, 2.70; [colour](results/colour/half-size.md)). Held-out photos: the "
@@ -168,7 +168,8 @@ def render() -> str:
     for name in model_names():
         meta = load_model(name).meta
         row = model_summary(name, meta)
-        stages = "*blend*" if blend_of(meta) else len(read_recipe(name).stages)
+        runs, blends = read_recipe(name).count()
+        stages = f"{runs} + {blends} blends" if blends else str(runs)
         note = " *earlier weights*" if name in stale else ""
         if name in ours:
             score = "{:.2f} / {:.2f}".format(*ours[name]) + note

@@ -228,9 +228,11 @@ def test_a_blend_lies_on_the_line_between_its_two_models(trained_run, run_images
         assert blend["weight"] == weight
         assert [blend["start"]["name"], blend["end"]["name"]] == ["start", "end"]
         assert blended.meta["pattern"] == load_model(end).meta["pattern"]
-        # not a chain of stages: --recipe refuses it; each end's stages are recorded whole
-        with pytest.raises(ConfigError, match="blend of two models"):
+        # --recipe replays a blend's two ends (tests/training/test_recipe.py): these two ran
+        # from no configuration file, and the refusal names the end it cannot replay
+        with pytest.raises(ConfigError, match="b, its blend's start: segment 1 .* no config"):
             shipped_recipe(blended.meta, "b")
+        # each end's stages are recorded whole
         for end_meta, record in (
             (load_model(start).meta, blend["start"]),
             (load_model(end).meta, blend["end"]),
@@ -268,7 +270,7 @@ def test_a_network_trained_on_from_a_blend_keeps_the_blend_on_record(
     trained_run, run_images, tmp_path
 ):
     """Its provenance's segments are no chain (the blend's two ends are in them), so a run
-    from a blend records the blend and its recipe is refused, as the blend's is."""
+    from a blend records the blend, which its recipe replays before its own stage."""
     from splitcam.training.models import blend_models
 
     start = export_model(trained_run, tmp_path / "start")
@@ -279,7 +281,8 @@ def test_a_network_trained_on_from_a_blend_keeps_the_blend_on_record(
     after = load_model(export_model(run, tmp_path / "after-model")).meta
     assert after["provenance"]["from_blend"]["weight"] == 0.5
     assert after["provenance"]["total_steps"] == 8
-    with pytest.raises(ConfigError, match="were trained on from a blend of two models"):
+    # the ends ran from no configuration file: the refusal names the blend's end
+    with pytest.raises(ConfigError, match="after, its blend's start: segment 1"):
         shipped_recipe(after, "after")
 
 

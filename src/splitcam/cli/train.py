@@ -21,11 +21,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--recipe",
         metavar="MODEL|FILE",
-        help="train a shipped model again end to end: every stage its header records, with "
+        help="train a shipped model (or a model's .json) again end to end: every stage its "
+        "header records, with "
         "the settings and steps it recorded, in order, each from the last, into "
-        '--out/<n>-<stage> (or the stages of a recipe FILE: stages = ["a.toml", ...]); '
-        "finished stages are skipped and an interrupted one resumed; other flags apply to "
-        "every stage",
+        '--out/<n>-<stage> (or the stages of a recipe FILE: stages = ["a.toml", ...]); a '
+        "model blended from two trains each end and blends them; finished stages are skipped "
+        "and an interrupted one resumed; other flags apply to every stage",
     )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     from ..training.config import train_flags
@@ -118,7 +119,7 @@ def run(args: argparse.Namespace) -> int:
 
 def _run_recipe(args: argparse.Namespace) -> int:
     from ..training.config import train_flags
-    from ..training.recipe import read_recipe, run_recipe
+    from ..training.recipe import read_recipe, recipe_model, run_recipe
     from ..training.sweep import STOPPED
 
     if args.config or args.resume:
@@ -133,12 +134,14 @@ def _run_recipe(args: argparse.Namespace) -> int:
         if value is not None and flag.key != "run.out":
             overrides[flag.key] = value
     out = args.out or f"runs/{recipe.model}"
-    print(f"recipe {recipe.model}: {len(recipe.stages)} stages into {out}")
+    runs, blends = recipe.count()
+    made_of = f"{runs} stages" + (f" and {blends} blend{'s' * (blends > 1)}" if blends else "")
+    print(f"recipe {recipe.model}: {made_of} into {out}")
     results = run_recipe(recipe, out, overrides, progress=not args.quiet)
     if any(r.failure for r in results):
         print(f"splitcam train: failed: {results[-1].failure}", file=sys.stderr)
         return 1
     if any(r.interrupted for r in results):
         return STOPPED
-    print(f"recipe {recipe.model}: every stage done; the model: {out} (its last stage)")
+    print(f"recipe {recipe.model}: every stage done; the model: {recipe_model(recipe, out)}")
     return 0

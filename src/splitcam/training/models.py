@@ -253,10 +253,10 @@ def blend_models(
     ``storage``; buffers that are not trained parameters must be equal in both. The header
     is ``end``'s (pattern, config, provenance), its provenance given the segments of ``start``
     it lacks (a soup of stages counts each stage's steps), and the blend recorded in
-    ``provenance["blend"]``: the weight and each end's name, description, checksum and
-    provenance (its stages, or its own blend; validation curves left out). A blend is not a
-    chain of stages, so ``splitcam train --recipe`` refuses it
-    (:func:`~splitcam.training.recipe.shipped_recipe`); its ends are recorded whole.
+    ``provenance["blend"]``: the weight, the storage and each end's name, description,
+    checksum and provenance (its stages, or its own blend; validation curves left out), so
+    ``splitcam train --recipe`` replays it: each end, then the blend
+    (:func:`~splitcam.training.recipe.shipped_recipe`).
 
     Raises:
         ModelError: A weight outside [0, 1], a bad ``storage``, or models of different
@@ -288,7 +288,12 @@ def blend_models(
         "exported": time.strftime("%Y-%m-%dT%H:%M:%S"),
         "provenance": _blended_provenance(first.meta, second.meta),
     }
-    meta["provenance"]["blend"] = {"weight": weight, "start": ends[0], "end": ends[1]}
+    meta["provenance"]["blend"] = {
+        "weight": weight,
+        "storage": storage,
+        "start": ends[0],
+        "end": ends[1],
+    }
     if not description:
         sha = (ends[0]["meta_sha256"] or "")[:8]
         meta["description"] = (
