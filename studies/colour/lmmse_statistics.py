@@ -1,9 +1,9 @@
 """The closed-form LMMSE's prior with colour the photos never show: its image statistics
-estimated on the training photos and on chroma-moved copies of them, mixed, scored on held-out
-photos (and described on the test sets).
+estimated on the training photos and on chroma-moved copies of them, mixed, or on the photos at
+a smaller size, scored on held-out photos (and described on the test sets).
 
     python studies/colour/lmmse_statistics.py [--weights 0 0.25 0.5] [--patterns bayer D A B E]
-        [--sigmas 0 15] [--testsets] [--out docs/results/colour/lmmse-statistics.md]
+        [--sizes 1 0.5] [--sigmas 0 15] [--testsets] [--out docs/results/colour/lmmse-statistics.md]
 
 The LMMSE is the one reconstruction whose prior is written down: the mean and autocovariance of
 the photos (``src/splitcam/weights/image_statistics``, estimated on the 400 training photos no
@@ -12,10 +12,14 @@ colour lever moves patches (``splitcam.data.colour.chroma_moved_copies``: channe
 hue turned, chroma scaled 1-2.2x in the BT.601 opponent space, seed 0), the copies'
 statistics are estimated the same way, and the prior becomes the mixture
 ``(1 - w) photos + w copies`` (``ImageStatistics.mixed``: the moments of a mixture are the
-mixed moments; ``w = 0.5`` is about the networks' ``data.colour_statistics``). Every weight is
-scored, closed-form, on:
+mixed moments; ``w = 0.5`` is about the networks' ``data.colour_statistics``). With ``--sizes``, the
+photos' own statistics are estimated again on the same photos at each of those sizes (``0.5``:
+half, where their JPEG chroma, stored at half resolution, is as fine as their luma; the
+training's ``data.scales``), the offsets as many pixels as before. Every prior is scored,
+closed-form, on:
 
-- the 32 held-out training photos, whole (the rule of every shipped model: these must not fall);
+- the 32 held-out training photos, whole (the rule of every shipped model: these must not fall),
+  and at half size as the gate scores photos (:func:`splitcam.training.gate.gate_size`);
 - the 12 most colourful of them (Hasler and Suesstrunk's measure);
 - the six colour photographs inside scikit-image (the held-out set that ranked the networks'
   colour levers as McMaster did);
@@ -26,20 +30,23 @@ LMMSE inside, :class:`splitcam.recon.networks.PhysicsReconNet`), the LMMSE solve
 mixture and nothing trained: what the prior alone does to a network trained on the other.
 
 PSNR of 8-bit whole images, mean over images, σ in 8-bit units (the paper's protocol). The
-copies' statistics are kept in ``runs/colour/lmmse-statistics/moved`` and reused.
+copies' statistics are kept in ``runs/colour/lmmse-statistics/moved``, those at a smaller size
+in ``.../size-<s>``, and reused.
 """
 
 from __future__ import annotations
 
 import argparse
+import itertools
+import sys
 import time
 from pathlib import Path
 
 import torch
 
 from splitcam.data.colour import chroma_moved_copies, colourfulness
-from splitcam.data.imageio import read_image
-from splitcam.data.patches import list_images
+from splitcam.data.imageio import decode_image, read_image
+from splitcam.data.patches import ImageCache, list_images
 from splitcam.data.registry import training_folder
 from splitcam.data.testsets import default_images, load_images
 from splitcam.evaluation.protocol import mean_psnr
@@ -52,6 +59,7 @@ from splitcam.recon.closed_form import (
     shipped_image_statistics,
 )
 from splitcam.recon.registry import build_method
+from splitcam.training.gate import gate_size
 
 HELD_OUT = 32
 COLOURFUL = 12
@@ -63,12 +71,7 @@ def moved_statistics(data: str, cache: Path, seed: int = 0) -> ImageStatistics:
     if cache.with_suffix(".json").exists():
         return ImageStatistics.load(cache)
     shipped = shipped_image_statistics()
-    photos = list_images(data)[:-HELD_OUT]
-    if len(photos) != shipped.info.get("images"):
-        raise SystemExit(
-            f"{data} has {len(photos)} photos outside the held-out {HELD_OUT}; the shipped "
-            f"statistics were estimated on {shipped.info.get('images')}"
-        )
+    photos = _estimated_on(data, shipped)
     images = [torch.from_numpy(read_image(p)).permute(2, 0, 1).float() for p in photos]
     moved = chroma_moved_copies(images, torch.Generator().manual_seed(seed))
     stats = estimate_image_statistics(moved, max_offset=shipped.max_offset, progress=True)
@@ -76,6 +79,36 @@ def moved_statistics(data: str, cache: Path, seed: int = 0) -> ImageStatistics:
     cache.parent.mkdir(parents=True, exist_ok=True)
     stats.save(cache)
     return stats
+
+
+def sized_statistics(data: str, size: float, cache: Path) -> ImageStatistics:
+    """The statistics of the photos the shipped statistics were estimated on, each at ``size``
+    of its own (:class:`ImageCache`'s ``scales``, as training keeps them), the same offsets; the
+    shipped ones at size 1. Read from ``cache`` when there."""
+    shipped = shipped_image_statistics()
+    if size == 1:
+        return shipped
+    if cache.with_suffix(".json").exists():
+        return ImageStatistics.load(cache)
+    photos = _estimated_on(data, shipped)
+    lo = shipped.max_offset
+    images = ImageCache(photos, min_size=2 * lo + 2, scales=[size], progress=True)
+    stats = estimate_image_statistics(images, max_offset=lo, progress=True)
+    stats.info.update({"size": size})
+    cache.parent.mkdir(parents=True, exist_ok=True)
+    stats.save(cache)
+    return stats
+
+
+def _estimated_on(data: str, shipped: ImageStatistics) -> list[Path]:
+    """The photos the shipped statistics were estimated on: all but the held-out last."""
+    photos = list_images(data)[:-HELD_OUT]
+    if len(photos) != shipped.info.get("images"):
+        raise SystemExit(
+            f"{data} has {len(photos)} photos outside the held-out {HELD_OUT}; the shipped "
+            f"statistics were estimated on {shipped.info.get('images')}"
+        )
+    return photos
 
 
 def reconstructor(name: str, statistics: ImageStatistics, network: bool) -> Reconstructor:
@@ -89,16 +122,28 @@ def reconstructor(name: str, statistics: ImageStatistics, network: bool) -> Reco
 
 
 def held_out_sets(data: str) -> dict[str, list[tuple[str, torch.Tensor]]]:
-    held = [
-        (p.stem, torch.from_numpy(read_image(p)).permute(2, 0, 1).float())
-        for p in list_images(data)[-HELD_OUT:]
-    ]
+    paths = list_images(data)[-HELD_OUT:]
+    held = [(p.stem, torch.from_numpy(read_image(p)).permute(2, 0, 1).float()) for p in paths]
     ranked = sorted(held, key=lambda item: colourfulness(item[1]), reverse=True)
     return {
         f"held-out BSD ({HELD_OUT})": held,
+        f"held-out BSD, half size ({HELD_OUT})": [
+            (p.stem, gate_size(decode_image(p))) for p in paths
+        ],
         f"colourful BSD ({COLOURFUL})": ranked[:COLOURFUL],
         "skimage (6)": default_images(),
     }
+
+
+def _argv() -> list[str]:
+    """The command's own arguments but where it writes, as the table's heading gives them."""
+    argv, skip = [], False
+    for arg in sys.argv[1:]:
+        if skip or arg.startswith("--out"):
+            skip = arg == "--out"
+            continue
+        argv.append(arg)
+    return argv
 
 
 def main() -> None:
@@ -106,6 +151,13 @@ def main() -> None:
     parser.add_argument("--data", default=str(training_folder()))
     parser.add_argument("--weights", type=float, nargs="+", default=[0.0, 0.25, 0.5])
     parser.add_argument("--patterns", nargs="+", default=["bayer", "D", "A", "B", "E"])
+    parser.add_argument(
+        "--sizes",
+        type=float,
+        nargs="+",
+        default=[1.0],
+        help="the sizes the photos' own statistics are estimated at (1: the shipped ones)",
+    )
     parser.add_argument("--sigmas", type=float, nargs="+", default=[0.0, 15.0])
     parser.add_argument(
         "--networks",
@@ -119,9 +171,12 @@ def main() -> None:
     args = parser.parse_args()
     if any(not 0 <= w <= 1 for w in args.weights):
         parser.error("--weights: each a fraction in [0, 1]")
+    if any(not 0 < s <= 1 for s in args.sizes):
+        parser.error("--sizes: each a fraction in (0, 1]")
     start = time.time()
-    photos = shipped_image_statistics()
-    moved = moved_statistics(args.data, Path(args.cache))
+    cache = Path(args.cache)
+    priors = {s: sized_statistics(args.data, s, cache.parent / f"size-{s:g}") for s in args.sizes}
+    moved = moved_statistics(args.data, cache) if any(args.weights) else None
     sets = held_out_sets(args.data)
     if args.testsets:
         sets |= {"Kodak24 (described)": load_images("kodak24")}
@@ -132,22 +187,23 @@ def main() -> None:
         "# The LMMSE's prior with chroma-moved photos mixed in",
         "",
         ("Shipped networks, the LMMSE inside them from" if args.networks else "Closed-form LMMSE,")
-        + " image statistics `(1 - w) photos + w chroma-moved copies`, PSNR dB "
-        f"at {levels}, whole images (`python studies/colour/lmmse_statistics.py"
-        f"{' --networks' if args.networks else ''}{' --testsets' if args.testsets else ''}`).",
+        + " image statistics `(1 - w) photos + w chroma-moved copies`, the photos' estimated "
+        f"at a size of their own, PSNR dB at {levels}, whole images "
+        f"(`python studies/colour/lmmse_statistics.py {' '.join(_argv())}`).",
         "",
-        "| pattern | w | " + " | ".join(names) + " |",
-        "|---|---|" + "---|" * len(names),
+        "| pattern | size | w | " + " | ".join(names) + " |",
+        "|---|---|---|" + "---|" * len(names),
     ]
     for name in args.patterns:
-        for weight in args.weights:
-            method = reconstructor(name, photos.mixed(moved, weight), args.networks)
+        for (size, photos), weight in itertools.product(priors.items(), args.weights):
+            prior = photos.mixed(moved, weight) if weight else photos
+            method = reconstructor(name, prior, args.networks)
             cells = []
             for images in sets.values():
                 psnr = mean_psnr(method, images, args.sigmas)
                 cells.append(" / ".join(f"{psnr[s]:.2f}" for s in args.sigmas))
             label = f"network `{name}`" if args.networks else name
-            lines.append(f"| {label} | {weight:g} | " + " | ".join(cells) + " |")
+            lines.append(f"| {label} | {size:g} | {weight:g} | " + " | ".join(cells) + " |")
             print(lines[-1], flush=True)
     lines += ["", f"{time.time() - start:.0f} s, one process.", ""]
     Path(args.out).write_text("\n".join(lines))
