@@ -12,6 +12,7 @@ from splitcam import patterns
 from splitcam.io import checkpoints as ckpt_io
 from splitcam.physics.optics import pattern_of
 from splitcam.training import CheckpointError, load_system, train
+from splitcam.training.config import ConfigError
 
 
 def test_training_a_metasurface_with_the_network(tmp_path) -> None:
@@ -150,3 +151,47 @@ def test_colour_statistics_give_the_network_a_prior_of_free_colour(tmp_path) -> 
     train(resumed, resume=True, progress=False)
     again = load_system(tmp_path / "r").network
     assert torch.equal(again.stat_second.double(), second)
+
+
+def test_photo_statistics_are_the_photos_as_the_run_keeps_them(tmp_path) -> None:
+    """data.photo_statistics: the LMMSE inside the network is solved from the statistics of the
+    run's own training photos at its data.scales (estimated independently here from the same
+    files at half size), also when the run starts from another's weights, whose statistics
+    (the shipped ones) it would otherwise take."""
+    from PIL import Image
+
+    from splitcam.data.patches import ImageCache, list_images
+    from splitcam.recon.closed_form import estimate_image_statistics, shipped_image_statistics
+    from splitcam.training.validation import held_out
+
+    data = tmp_path / "img"
+    data.mkdir()
+    rng = np.random.default_rng(0)
+    for i in range(6):  # 96x96: a 33x33 window fits at half size; noise: a full-rank prior
+        img = np.kron(rng.random((12, 12, 3)), np.ones((8, 8, 1))) * 230 + 10
+        img += rng.normal(0, 6, img.shape)
+        Image.fromarray(img.clip(0, 255).astype(np.uint8)).save(data / f"im{i}.png")
+    first = tiny_config(data, tmp_path / "a", **{"optim.steps": 2, "run.val_every": 1000})
+    train(first, progress=False)
+    settings = {
+        "data.photo_statistics": True,
+        "data.scales": [0.5],
+        "run.init_from": str(first.run.out),
+    }
+    config = first.override({**settings, "run.out": str(tmp_path / "b")})
+    result = train(config, progress=False)
+    assert not result.failure, result.failure
+    network = load_system(tmp_path / "b").network
+    files = [f for f in list_images(data) if f not in held_out(config)]
+    lo = network.stat_second.shape[-1] // 2
+    cache = ImageCache(files, min_size=2 * lo + 2, scales=[0.5], progress=False)
+    own = estimate_image_statistics(cache, max_offset=lo)
+    torch.testing.assert_close(network.stat_second.double(), own.second.double())
+    torch.testing.assert_close(network.stat_mean.double(), own.mean.double())
+    shipped = shipped_image_statistics()
+    assert not torch.allclose(network.stat_second.double(), shipped.second.double(), atol=1e-4)
+    # Photos too small for the statistics' window at that size: one line saying so.
+    small = blocky_images(tmp_path / "small", 4)  # 48x48: 24x24 at half size
+    config = config.override({"data.train": str(small), "run.out": str(tmp_path / "c")})
+    with pytest.raises(ConfigError, match=r"data.photo_statistics: .*33x33.*at 0.5 of their size"):
+        train(config, progress=False)

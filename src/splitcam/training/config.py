@@ -244,6 +244,13 @@ class DataConfig:
         "--colour-chroma, at its --colour-chroma-max), instead of the photos' alone: a prior "
         "that expects saturated colour (splitcam.training.setup)",
     )
+    photo_statistics: bool = _opt(
+        False,
+        "a new run's LMMSE inside the physics and universal networks uses image statistics of "
+        "its own training photos as it keeps them (data.scales; at half size their JPEG chroma "
+        "is as fine as their luma) instead of the shipped ones (the photos at full size); "
+        "--colour-statistics adds chroma-moved copies to them (splitcam.training.setup)",
+    )
     colour_leaves: float = _opt(
         0.0,
         "probability that a patch is replaced by a colour dead-leaves scene (discs with "

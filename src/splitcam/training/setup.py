@@ -93,8 +93,8 @@ def prepare(
                 save=dist.is_main,
             )
         )
-    if loaded is None and config.data.colour_statistics:
-        _use_colour_statistics(system, sampler.cache, config)
+    if loaded is None and (config.data.colour_statistics or config.data.photo_statistics):
+        _use_own_statistics(system, sampler.cache, config)
     run.train_images = sampler.cache.files
     state = TrainState(
         system,
@@ -166,30 +166,39 @@ def _validation(run: Run, progress: bool) -> None:
     run.val_levels = val_levels(run.config)
 
 
-def _use_colour_statistics(system: ImagingSystem, cache: ImageCache, config: TrainConfig) -> None:
-    """The network's LMMSE solved from the statistics of the training photos and of a copy of
-    each with its chroma moved (``data.colour_statistics``): channels reordered, hue turned and
-    chroma scaled as :class:`~splitcam.data.colour.ColourMix` moves patches, drawn from the
-    run's seed, in the run's light domain."""
+def _use_own_statistics(system: ImagingSystem, cache: ImageCache, config: TrainConfig) -> None:
+    """The network's LMMSE solved from the statistics of the run's training photos as its
+    cache keeps them (``data.photo_statistics``; at ``data.scales``), and with
+    ``data.colour_statistics`` of a copy of each with its chroma moved too: channels reordered,
+    hue turned and chroma scaled as :class:`~splitcam.data.colour.ColourMix` moves patches,
+    drawn from the run's seed, in the run's light domain."""
+    setting = "colour_statistics" if config.data.colour_statistics else "photo_statistics"
     if not hasattr(system.network, "use_statistics"):
         raise ConfigError(
-            "data.colour_statistics sets the statistics of the LMMSE inside the physics and "
+            f"data.{setting} sets the statistics of the LMMSE inside the physics and "
             f"universal networks; the {config.network.arch} network has none"
         )
-    generator = torch.Generator().manual_seed(seeds.global_seed(config))
     photos = [cache.image(i) for i in range(len(cache))]
-    moved = chroma_moved_copies(
-        photos, generator, chroma_max=config.data.colour_chroma_max, space=config.data.domain
-    )
-    stats = estimate_image_statistics(
-        photos + moved,
-        max_offset=system.network.stat_second.shape[-1] // 2,
-        domain=config.data.domain,
-    )
+    moved = []
+    if config.data.colour_statistics:
+        generator = torch.Generator().manual_seed(seeds.global_seed(config))
+        moved = chroma_moved_copies(
+            photos, generator, chroma_max=config.data.colour_chroma_max, space=config.data.domain
+        )
+    sizes = ", ".join(f"{s:g}" for s in config.data.scales)
+    try:
+        stats = estimate_image_statistics(
+            photos + moved,
+            max_offset=system.network.stat_second.shape[-1] // 2,
+            domain=config.data.domain,
+        )
+    except ValueError as exc:  # no photo larger than the statistics' window
+        raise ConfigError(f"data.{setting}: {exc} (the photos at {sizes} of their size)") from None
     system.network.use_statistics(stats)
     logger.info(
-        f"the LMMSE inside the network uses the statistics of {len(photos)} photos and their "
-        "chroma-moved copies (data.colour_statistics)"
+        f"the LMMSE inside the network uses the statistics of {len(photos)} photos (at "
+        f"{sizes} of their size){' and their chroma-moved copies' if moved else ''} "
+        f"(data.{setting})"
     )
 
 
