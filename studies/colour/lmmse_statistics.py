@@ -184,7 +184,7 @@ def main() -> None:
     names = list(sets)
     levels = " / ".join(f"σ {s:g}" for s in args.sigmas)
     lines = [
-        "# The LMMSE's prior with chroma-moved photos mixed in",
+        "# The LMMSE's prior: chroma-moved photos mixed in, the photos at other sizes",
         "",
         ("Shipped networks, the LMMSE inside them from" if args.networks else "Closed-form LMMSE,")
         + " image statistics `(1 - w) photos + w chroma-moved copies`, the photos' estimated "
