@@ -36,3 +36,31 @@ def test_the_mixture_reaches_the_closed_form_and_the_network_alike():
     net = study.reconstructor("D", half, network=True).network
     torch.testing.assert_close(net.stat_second.double(), half.second)
     torch.testing.assert_close(net.stat_mean.double(), half.mean)
+
+
+@pytest.mark.slow  # 432 photos written and their statistics estimated twice: about 5 s
+def test_statistics_at_a_smaller_size_are_of_the_same_photos_at_that_size(tmp_path):
+    """--sizes: size 1 is the shipped statistics; another is estimated on the shipped list of
+    photos kept at that size (here from a folder of as many, 96x96), once, then read back."""
+    import numpy as np
+    from PIL import Image
+
+    from splitcam.data.patches import ImageCache, list_images
+    from splitcam.recon.closed_form import estimate_image_statistics
+
+    folder = tmp_path / "train"
+    folder.mkdir()
+    rng = np.random.default_rng(0)
+    for i in range(432):
+        img = np.kron(rng.random((12, 12, 3)), np.ones((8, 8, 1)))
+        Image.fromarray((img * 255).astype(np.uint8)).save(folder / f"{i:03d}.png")
+    study = _study()
+    assert study.sized_statistics(str(folder), 1.0, tmp_path / "one") is shipped_image_statistics()
+    half = study.sized_statistics(str(folder), 0.5, tmp_path / "half")
+    assert half.info["size"] == 0.5 and half.info["images"] == 400
+    cache = ImageCache(list_images(folder)[:400], min_size=34, scales=[0.5], progress=False)
+    expected = estimate_image_statistics([cache.image(i) for i in range(400)], max_offset=16)
+    assert [cache.image(0).shape[-1]] == [48]
+    torch.testing.assert_close(half.second, expected.second)
+    again = study.sized_statistics(str(folder), 0.5, tmp_path / "half")  # read from its file
+    torch.testing.assert_close(again.second, half.second)
