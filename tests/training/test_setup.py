@@ -190,6 +190,17 @@ def test_photo_statistics_are_the_photos_as_the_run_keeps_them(tmp_path) -> None
     torch.testing.assert_close(network.stat_mean.double(), own.mean.double())
     shipped = shipped_image_statistics()
     assert not torch.allclose(network.stat_second.double(), shipped.second.double(), atol=1e-4)
+    # A run from it without the setting keeps them: the statistics come with the weights.
+    after = config.override(
+        {
+            "data.photo_statistics": False,
+            "run.init_from": str(tmp_path / "b"),
+            "run.out": str(tmp_path / "d"),
+        }
+    )
+    assert not train(after, progress=False).failure
+    kept = load_system(tmp_path / "d").network
+    assert torch.equal(kept.stat_second, network.stat_second)
     # Photos too small for the statistics' window at that size: one line saying so.
     small = blocky_images(tmp_path / "small", 4)  # 48x48: 24x24 at half size
     config = config.override({"data.train": str(small), "run.out": str(tmp_path / "c")})
