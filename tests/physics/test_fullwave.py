@@ -618,6 +618,7 @@ def test_fmmax_transmits_what_a_thin_film_does(solver):
     assert out["reflection"][0] == pytest.approx(1 - expect, abs=1e-6)
 
 
+@pytest.mark.slow  # about 5 s; the fast suite solves with fmmax through the command
 def test_fmmax_conserves_light_at_an_angle_and_agrees_with_torcwa():
     """fmmax's FFT formulation conserves light through a patterned layer at oblique incidence,
     and lands near torcwa at the same order (the truncations differ: a circle of about

@@ -103,6 +103,7 @@ def test_every_shipped_model_loads_matches_its_json_and_beats_its_lmmse(name, sh
 UNIVERSAL_LEAD = 1.5
 
 
+@pytest.mark.slow  # about 6 s: every library pattern
 @pytest.mark.skipif("universal" not in model_names(), reason="no universal model shipped")
 def test_the_shipped_universal_model_beats_the_lmmse_of_every_library_pattern(shared_data):
     """The model for any pattern: a few MB, and on held-out crops with odd sides (127 px: every
