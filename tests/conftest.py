@@ -136,15 +136,16 @@ class Spy:
         return raw.expand(-1, 3, -1, -1) / 4
 
 
-def blocky_images(folder: Path, count: int, seed: int = 0) -> Path:
-    """``count`` smooth random 48x48 colour images (learnable in a few steps) in ``folder``."""
+def blocky_images(folder: Path, count: int, seed: int = 0, blocks: int = 6) -> Path:
+    """``count`` smooth random colour images of ``blocks`` x ``blocks`` blocks of 8x8 pixels
+    (48x48 by default; learnable in a few steps) in ``folder``."""
     import numpy as np
     from PIL import Image
 
     folder.mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(seed)
     for i in range(count):
-        img = np.kron(rng.random((6, 6, 3)), np.ones((8, 8, 1)))
+        img = np.kron(rng.random((blocks, blocks, 3)), np.ones((8, 8, 1)))
         Image.fromarray((img * 255).astype(np.uint8)).save(folder / f"im{i}.png")
     return folder
 

@@ -42,18 +42,10 @@ def test_the_mixture_reaches_the_closed_form_and_the_network_alike():
 def test_statistics_at_a_smaller_size_are_of_the_same_photos_at_that_size(tmp_path):
     """--sizes: size 1 is the shipped statistics; another is estimated on the shipped list of
     photos kept at that size (here from a folder of as many, 96x96), once, then read back."""
-    import numpy as np
-    from PIL import Image
-
     from splitcam.data.patches import ImageCache, list_images
     from splitcam.recon.closed_form import estimate_image_statistics
 
-    folder = tmp_path / "train"
-    folder.mkdir()
-    rng = np.random.default_rng(0)
-    for i in range(432):
-        img = np.kron(rng.random((12, 12, 3)), np.ones((8, 8, 1)))
-        Image.fromarray((img * 255).astype(np.uint8)).save(folder / f"{i:03d}.png")
+    folder = blocky_images(tmp_path / "train", 432, blocks=12)  # 96x96
     study = _study()
     assert study.sized_statistics(str(folder), 1.0, tmp_path / "one") is shipped_image_statistics()
     half = study.sized_statistics(str(folder), 0.5, tmp_path / "half")
