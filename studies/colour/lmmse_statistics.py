@@ -15,7 +15,8 @@ statistics are estimated the same way, and the prior becomes the mixture
 mixed moments; ``w = 0.5`` is about the networks' ``data.colour_statistics``). With ``--sizes``, the
 photos' own statistics are estimated again on the same photos at each of those sizes (``0.5``:
 half, where their JPEG chroma, stored at half resolution, is as fine as their luma; the
-training's ``data.scales``), the offsets as many pixels as before. Every prior is scored,
+training's ``data.scales``), the offsets as many pixels as before; ``1+0.5`` is the photos at
+both sizes, their moments mixed half and half. Every prior is scored,
 closed-form, on:
 
 - the 32 held-out training photos, whole (the rule of every shipped model: these must not fall),
@@ -50,6 +51,7 @@ from splitcam.data.patches import ImageCache, list_images
 from splitcam.data.registry import training_folder
 from splitcam.data.testsets import default_images, load_images
 from splitcam.evaluation.protocol import mean_psnr
+from splitcam.io.tensorfiles import paired_paths
 from splitcam.patterns import get
 from splitcam.recon.base import Reconstructor
 from splitcam.recon.closed_form import (
@@ -88,7 +90,7 @@ def sized_statistics(data: str, size: float, cache: Path) -> ImageStatistics:
     shipped = shipped_image_statistics()
     if size == 1:
         return shipped
-    if cache.with_suffix(".json").exists():
+    if paired_paths(cache)[1].exists():  # (a size's dot is no suffix: paired_paths knows)
         return ImageStatistics.load(cache)
     photos = _estimated_on(data, shipped)
     lo = shipped.max_offset
@@ -135,6 +137,19 @@ def held_out_sets(data: str) -> dict[str, list[tuple[str, torch.Tensor]]]:
     }
 
 
+def _sizes(text: str) -> tuple[float, ...]:
+    """``--sizes``' value: one size, or several joined by ``+`` (their moments mixed equally)."""
+    try:
+        sizes = tuple(float(part) for part in text.split("+"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected sizes such as 0.5 or 1+0.5, got {text!r}"
+        ) from None
+    if not all(0 < s <= 1 for s in sizes):
+        raise argparse.ArgumentTypeError(f"each size a fraction in (0, 1], got {text!r}")
+    return sizes
+
+
 def _argv() -> list[str]:
     """The command's own arguments but where it writes, as the table's heading gives them."""
     argv, skip = [], False
@@ -153,10 +168,11 @@ def main() -> None:
     parser.add_argument("--patterns", nargs="+", default=["bayer", "D", "A", "B", "E"])
     parser.add_argument(
         "--sizes",
-        type=float,
+        type=_sizes,
         nargs="+",
-        default=[1.0],
-        help="the sizes the photos' own statistics are estimated at (1: the shipped ones)",
+        default=[(1.0,)],
+        help="the sizes the photos' own statistics are estimated at (1: the shipped ones; "
+        "1+0.5: the two mixed half and half)",
     )
     parser.add_argument("--sigmas", type=float, nargs="+", default=[0.0, 15.0])
     parser.add_argument(
@@ -171,11 +187,15 @@ def main() -> None:
     args = parser.parse_args()
     if any(not 0 <= w <= 1 for w in args.weights):
         parser.error("--weights: each a fraction in [0, 1]")
-    if any(not 0 < s <= 1 for s in args.sizes):
-        parser.error("--sizes: each a fraction in (0, 1]")
     start = time.time()
     cache = Path(args.cache)
-    priors = {s: sized_statistics(args.data, s, cache.parent / f"size-{s:g}") for s in args.sizes}
+    priors = {}
+    for sizes in args.sizes:
+        parts = [sized_statistics(args.data, s, cache.parent / f"size-{s:g}") for s in sizes]
+        prior = parts[0]
+        for k, part in enumerate(parts[1:], start=2):  # the k-th of k equal shares
+            prior = prior.mixed(part, 1 / k)
+        priors["+".join(f"{s:g}" for s in sizes)] = prior
     moved = moved_statistics(args.data, cache) if any(args.weights) else None
     sets = held_out_sets(args.data)
     if args.testsets:
@@ -203,7 +223,7 @@ def main() -> None:
                 psnr = mean_psnr(method, images, args.sigmas)
                 cells.append(" / ".join(f"{psnr[s]:.2f}" for s in args.sigmas))
             label = f"network `{name}`" if args.networks else name
-            lines.append(f"| {label} | {size:g} | {weight:g} | " + " | ".join(cells) + " |")
+            lines.append(f"| {label} | {size} | {weight:g} | " + " | ".join(cells) + " |")
             print(lines[-1], flush=True)
     lines += ["", f"{time.time() - start:.0f} s, one process.", ""]
     Path(args.out).write_text("\n".join(lines))

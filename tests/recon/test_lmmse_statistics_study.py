@@ -48,11 +48,23 @@ def test_statistics_at_a_smaller_size_are_of_the_same_photos_at_that_size(tmp_pa
     folder = blocky_images(tmp_path / "train", 432, blocks=12)  # 96x96
     study = _study()
     assert study.sized_statistics(str(folder), 1.0, tmp_path / "one") is shipped_image_statistics()
-    half = study.sized_statistics(str(folder), 0.5, tmp_path / "half")
+    half = study.sized_statistics(str(folder), 0.5, tmp_path / "size-0.5")
     assert half.info["size"] == 0.5 and half.info["images"] == 400
     cache = ImageCache(list_images(folder)[:400], min_size=34, scales=[0.5], progress=False)
     expected = estimate_image_statistics([cache.image(i) for i in range(400)], max_offset=16)
     assert [cache.image(0).shape[-1]] == [48]
     torch.testing.assert_close(half.second, expected.second)
-    again = study.sized_statistics(str(folder), 0.5, tmp_path / "half")  # read from its file
+    # Read from its file the second time, not estimated again (the size's dot is no suffix).
+    study.estimate_image_statistics = None  # fails if called
+    again = study.sized_statistics(str(folder), 0.5, tmp_path / "size-0.5")
     torch.testing.assert_close(again.second, half.second)
+
+
+def test_sizes_are_one_or_several_joined_by_a_plus():
+    import argparse
+
+    sizes = _study()._sizes
+    assert sizes("0.5") == (0.5,) and sizes("1+0.5") == (1.0, 0.5)
+    for bad in ("0", "1.5", "half", "1+"):
+        with pytest.raises(argparse.ArgumentTypeError):
+            sizes(bad)
