@@ -268,6 +268,19 @@ def _digest(*parts: Any) -> str:
     return hashlib.sha256(text.encode()).hexdigest()[:8]
 
 
+def _changed(config: TrainConfig) -> dict[str, Any]:
+    """The settings of ``config`` that differ from the defaults: what names a stage in a tree,
+    so a setting added to the package later (at a default that keeps the old behaviour) leaves
+    the names of runs already trained as they were."""
+    default = TrainConfig().to_dict()
+    return {
+        f"{section}.{key}": value
+        for section, values in config.to_dict().items()
+        for key, value in values.items()
+        if default.get(section, {}).get(key) != value
+    }
+
+
 def _places(recipe: Recipe, out: Path, tree: bool) -> tuple[Path | None, list[Path], str | None]:
     """Where a recipe's blend (None without one) and each of its stages land under ``out``,
     and the key of what it makes: in a tree (``tree``), each run folder and blend file is
@@ -281,7 +294,7 @@ def _places(recipe: Recipe, out: Path, tree: bool) -> tuple[Path | None, list[Pa
         blend_file = out / f"blend-{key}.json"
     folders = []
     for index, stage in enumerate(recipe.stages):
-        key = _digest(key, stage.file, stage.config.to_dict()) if tree else None
+        key = _digest(key, stage.file, _changed(stage.config)) if tree else None
         folders.append(stage_folder(out, index, stage, key))
     return blend_file, folders, key
 
