@@ -11,8 +11,10 @@ from typing import Any
 import torch
 
 from ..io import checkpoints as ckpt_io
+from ..io.domains import SRGB
 from ..physics.sensor import LearnableSplitterSensor, SplitterSensor
 from ..physics.system import ImagingSystem
+from ..recon.closed_form import shipped_image_statistics
 from ..recon.loading import LoadedNetwork, ModelError, check_unambiguous, load_model, load_network
 from ..recon.networks import UniversalReconNet
 from .config import ConfigError, TrainConfig
@@ -20,25 +22,32 @@ from .config import ConfigError, TrainConfig
 logger = logging.getLogger(__name__)
 
 
-def start_from(system: ImagingSystem, spec: str) -> dict[str, Any]:
+def start_from(system: ImagingSystem, spec: str, domain: str = SRGB) -> dict[str, Any]:
     """Load the weights of a model or run into a new run's system (``run.init_from``).
 
     The network must have the same architecture (and period); a learned pattern starts from the
     source's kernels (logits ``log k``); a fixed one may be another pattern of that period (a
-    head start: most of what the network learnt is not specific to the pattern). Returns what the
-    checkpoints record: the source's name, its pattern if another, and accumulated provenance.
+    head start: most of what the network learnt is not specific to the pattern). The statistics
+    the network's LMMSE solves from come with the weights (``data.photo_statistics`` may have
+    made them the photos' own); for a run in another light ``domain`` than the source's, they
+    are the shipped ones of the run's. Returns what the checkpoints record: the source's name,
+    its pattern if another, and accumulated provenance.
     """
     source, record = _load_source(spec)
     own_device = next(system.network.parameters()).device
     if isinstance(system.network, UniversalReconNet):
-        return _start_universal(system.network, source.network, spec, record, own_device)
-    if source.network.config() != system.network.config():
-        raise ConfigError(
-            f"--init-from {spec}: its network {source.network.config()} differs from this "
-            f"run's {system.network.config()}"
-        )
-    _start_pattern(system, source, spec, record)
-    system.network.load_state_dict(source.network.to(own_device).state_dict())
+        _start_universal(system.network, source.network, spec, record, own_device)
+    else:
+        if source.network.config() != system.network.config():
+            raise ConfigError(
+                f"--init-from {spec}: its network {source.network.config()} differs from this "
+                f"run's {system.network.config()}"
+            )
+        _start_pattern(system, source, spec, record)
+        system.network.load_state_dict(source.network.to(own_device).state_dict())
+    saved = (source.meta.get("config") or {}).get("data") or {}
+    if hasattr(system.network, "use_statistics") and saved.get("domain", SRGB) != domain:
+        system.network.use_statistics(shipped_image_statistics(domain))
     return record
 
 

@@ -23,7 +23,6 @@ from ..data.colour import ColourMix, chroma_moved_copies
 from ..data.patches import ImageCache, PatchSampler, list_images
 from ..design.kernels import design_pattern
 from ..io import checkpoints as ckpt_io
-from ..io.domains import SRGB
 from ..patterns.random import PatternMix
 from ..physics.noise import TrainingNoise
 from ..physics.sensor import LearnableSplitterSensor, SplitterSensor, SwitchingSensor
@@ -36,7 +35,7 @@ from .config import ConfigError, TrainConfig
 from .distributed import DistInfo, init_distributed
 from .ema import WeightAverage
 from .guard import DivergenceGuard
-from .init_from import continue_point, source_header, start_from
+from .init_from import continue_point, start_from
 from .mining import mined_windows
 from .state import Run, TrainState, restore
 from .teachers import Teachers
@@ -225,14 +224,7 @@ def _origin(
         return meta.get("init_from"), start_step, float(meta.get("lr_scale", 1.0))
     init_from = None
     if config.run.init_from:
-        init_from = start_from(system, config.run.init_from)
-        # The weights come from the source, and with them the statistics its LMMSE learned
-        # with (data.photo_statistics may have made them the photos' own); in another light
-        # domain, the shipped statistics of this run's.
-        saved = source_header(config.run.init_from).get("config") or {}
-        source_domain = (saved.get("data") or {}).get("domain", SRGB)
-        if hasattr(system.network, "use_statistics") and source_domain != config.data.domain:
-            system.network.use_statistics(shipped_image_statistics(config.data.domain))
+        init_from = start_from(system, config.run.init_from, config.data.domain)
     if config.run.continue_schedule:
         return (init_from, *continue_point(init_from, config))
     return init_from, 0, 1.0
