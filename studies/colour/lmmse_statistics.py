@@ -70,7 +70,7 @@ COLOURFUL = 12
 def moved_statistics(data: str, cache: Path, seed: int = 0) -> ImageStatistics:
     """The statistics of a chroma-moved copy of each photo the shipped statistics were
     estimated on (the same list, offsets and domain); read from ``cache`` when there."""
-    if cache.with_suffix(".json").exists():
+    if paired_paths(cache)[1].exists():
         return ImageStatistics.load(cache)
     shipped = shipped_image_statistics()
     photos = _estimated_on(data, shipped)
@@ -90,7 +90,7 @@ def sized_statistics(data: str, size: float, cache: Path) -> ImageStatistics:
     shipped = shipped_image_statistics()
     if size == 1:
         return shipped
-    if paired_paths(cache)[1].exists():  # (a size's dot is no suffix: paired_paths knows)
+    if paired_paths(cache)[1].exists():  # (a dot in the name, size-0.5, is no suffix)
         return ImageStatistics.load(cache)
     photos = _estimated_on(data, shipped)
     lo = shipped.max_offset
