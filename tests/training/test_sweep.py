@@ -22,7 +22,8 @@ from conftest import (
 from splitcam.io import checkpoints as ckpt_io
 from splitcam.training import ConfigError, train
 from splitcam.training.models import export_model
-from splitcam.training.sweep import load_experiments, run_sweep, status
+from splitcam.training.config import TrainConfig
+from splitcam.training.sweep import load_experiments, run_sweep, status, train_command
 
 
 def _logged_lr(run_dir):
@@ -60,6 +61,11 @@ def test_sweep_runs_skips_finished_and_resumes_interrupted(run_images, tmp_path)
     steps = [json.loads(x)["step"] for x in (runs / "b" / "metrics.jsonl").read_text().splitlines()]
     assert steps == sorted(steps) and steps[-1] == 4 and steps.count(2) <= 2  # log + val rows
     assert ckpt_io.load(runs / "b").meta["step"] == 4
+    # Each run records its experiment file, as `train --config FILE` does (a recipe needs it).
+    for name, file in zip("ab", files, strict=True):
+        assert ckpt_io.read_meta(runs / name / "checkpoint.safetensors")["config"]["run"][
+            "config_file"
+        ] == str(file)
     said.clear()
     assert run_sweep(experiments, jobs=2, threads=2, say=said.append) == result
     assert all("done already" in s for s in said) and len(said) == 2
@@ -197,6 +203,21 @@ def test_sweep_refuses_bad_input(run_images, tmp_path):
         run_sweep(experiments, executor="pbs")
     with pytest.raises(ConfigError, match="jobs"):
         run_sweep(experiments, jobs=0)
+
+
+def test_a_sweep_job_records_its_experiment_file_not_the_resolved_copy(run_images, tmp_path):
+    """The job trains from RUN/sweep_config.json; the provenance must name the experiment file
+    (a run whose segment names no file cannot be trained again by `train --recipe`)."""
+    own = experiment_file(tmp_path, "own", **{"optim.steps": 2, "run.config_file": "x.toml"})
+    plain = experiment_file(tmp_path, "plain", **{"optim.steps": 2})
+    experiments = load_experiments([plain, own], tmp_path / "runs", data=str(run_images))
+    recorded = []
+    for exp in experiments:
+        cmd = train_command(exp, threads=1, resume=False)
+        resolved = cmd[cmd.index("--config") + 1]
+        assert resolved.endswith("sweep_config.json")
+        recorded.append(TrainConfig.from_file(resolved).run.config_file)
+    assert recorded == [str(plain), "x.toml"]  # a file naming its own keeps it, as in `train`
 
 
 def test_sweep_slurm_path_through_submitit(run_images, tmp_path):

@@ -101,7 +101,12 @@ def load_experiments(
         settings = {**(overrides or {}), "run.out": str(run_dir)}
         if data is not None:
             settings["data.train"] = str(data)
-        config = TrainConfig.from_file(path).override(settings)
+        config = TrainConfig.from_file(path)
+        # Recorded in the run's provenance as `train --config FILE` records it, so a model
+        # exported from the run can be trained again from its recipe (the job itself reads the
+        # resolved copy, RUN/sweep_config.json).
+        settings.setdefault("run.config_file", config.run.config_file or str(path))
+        config = config.override(settings)
         if not config.data.train:
             raise ConfigError(f"{path}: no training images (data.train); give --data DIR")
         experiments.append(Experiment(path.stem, path, config, run_dir))
