@@ -64,6 +64,10 @@ def test_relay_trains_exports_and_tables_within_its_minutes(relayed) -> None:
     # The run had its half of the 0.7 minutes, less the first network's assumed overhead.
     assert 0 < segment["train_seconds"] <= 0.35 * 60
     assert candidate["config"]["run"]["init_from"] == "D"
+    # The description appends the relay's segment with its own device (a CPU here, not a GPU).
+    appended = candidate["description"].rsplit("; then ", 1)[1]
+    assert appended.startswith(f"{segment['train_seconds'] / 60:.1f} minutes of training (")
+    assert f"{segment['steps']} steps of batch 2, cpu" in appended and "GPU" not in appended
     table = (relayed / "relay.md").read_text()
     assert "| D |" in table and "| A-opt |" in table and "→" in table
     assert (relayed / "runs" / "D" / "checkpoint.safetensors").exists()

@@ -292,8 +292,9 @@ def run_relay(args: argparse.Namespace) -> int:
                 result.run_dir,
                 out / "candidates" / name,
                 name=name,
-                description=f"{shipped}; then {row['train_s'] / 60:.1f} GPU minutes "
-                f"({row['steps']} steps of batch {row['batch']}, {row['device']}) of {what}",
+                description=f"{shipped}; then {row['train_s'] / 60:.1f} minutes of training "
+                f"({row['steps']} steps of batch {row['batch']}, {row['device']}) of {what} "
+                "by the relay",
             )
         rows.append(row)
         write_table(out / "relay.md", rows, args)
