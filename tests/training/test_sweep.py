@@ -21,8 +21,8 @@ from conftest import (
 
 from splitcam.io import checkpoints as ckpt_io
 from splitcam.training import ConfigError, train
-from splitcam.training.models import export_model
 from splitcam.training.config import TrainConfig
+from splitcam.training.models import export_model
 from splitcam.training.sweep import load_experiments, run_sweep, status, train_command
 
 
