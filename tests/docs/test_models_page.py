@@ -42,3 +42,29 @@ def test_a_model_missing_from_the_evaluation_says_so(tmp_path, monkeypatch):
     assert drop == "–"
     assert "photons, linear light" in _row(rendered, "bayer-photon")[7]
     assert _row(rendered, "E")[7][0].isdigit()  # the others keep their scores
+
+
+def test_the_drop_column_is_the_evaluations_own_drop():
+    """Each model's Kodak24-minus-McMaster on the page is the evaluation table's drop at σ 0
+    (computed there from unrounded means), not the difference of the two rounded cells beside
+    it, which can differ by 0.01 dB; the two still agree to that rounding."""
+    page = _page_module()
+    table = page.TABLE.read_text(encoding="utf-8").splitlines()
+    start = next(i for i, x in enumerate(table) if x.startswith("### kodak24 minus mcmaster"))
+    drops = {}
+    for line in table[start + 1 :]:
+        if line.startswith("### "):
+            break
+        if line.startswith("| net-"):
+            cells = [c.strip() for c in line.strip("|").split("|")]
+            drops[cells[0][len("net-") :]] = cells[1]
+    rendered = page.render()
+    checked = 0
+    for name, drop in drops.items():
+        cell = _row(rendered, name)[9]
+        kodak, rest = cell.split(" / ")
+        mcmaster, shown = rest.split(" (")
+        assert shown.split(")")[0] == drop, name
+        assert abs(float(kodak) - float(mcmaster) - float(drop)) <= 0.0100001, name
+        checked += 1
+    assert checked >= 9  # A-E, bayer, A-opt, D-opt, D-opt-random
