@@ -241,3 +241,20 @@ def test_stage_files_of_segments_recorded_before_a_setting_was_added(tmp_path) -
         assert read.data.val_scale == 1.0
         assert read.data.scales == segment["settings"]["data"]["scales"]
         assert read.optim.steps == segment["settings"]["optim"]["steps"]
+
+
+def test_threads_reach_every_run_and_the_gate_keeps_its_own_default(tmp_path) -> None:
+    """``--threads`` sets each run's CPU threads (two relays side by side on a CPU, each at
+    torch's own count, share its cores at a fraction of the speed); without it a run keeps
+    torch's count and the gate scores with its own default."""
+    relay = _relay()
+    argv = ["--minutes", "1", "--data", str(tmp_path), "--queue", "D", "--device", "cpu"]
+    threads = {}
+    for flags in ([], ["--threads", "1"]):
+        out = tmp_path / ("one" if flags else "default")
+        args = relay.parse([*argv, "--out", str(out), "--colour", *flags])
+        relay.start_folder(out, args)
+        threads[bool(flags)] = [run.run.threads for run in relay.relay_configs("D", args, out, 1)]
+    assert threads == {False: [None, None], True: [1, 1]}
+    assert relay.parse(["--gate", str(tmp_path)]).threads is None
+    assert relay.GATE_THREADS == 2

@@ -190,6 +190,10 @@ def stages_root(ship_to: Path) -> Path | None:
     return root if (root / STAGE_DIR).is_dir() else None
 
 
+#: CPU threads the gate scores with unless ``--threads`` says otherwise.
+GATE_THREADS = 2
+
+
 def relay_config(name: str, args: argparse.Namespace, out: Path, minutes: float):
     """The run of one queued network: its shipped recipe from its weights, at the relay's
     batch, rate, time slot, device and photos."""
@@ -219,7 +223,7 @@ def relay_config(name: str, args: argparse.Namespace, out: Path, minutes: float)
             "run.checkpoint_every": 10**9,
             "run.val_every": 10**9,  # at the start and the end only
             "run.log_every": 50,
-            "run.threads": None,
+            "run.threads": args.threads,  # None: torch's own count (all of a GPU host's cores)
             "run.precision": args.precision,
             "run.compile": args.compile,
             **(
@@ -383,7 +387,7 @@ def run_gate(args: argparse.Namespace) -> int:
     found = sorted((folder / "candidates").glob("*.json"))
     if not (folder / MARKER).exists() or not found:
         raise RelayError(f"{folder} holds no relay candidates (candidates/NAME.json)")
-    verdicts = gate(found, Path(args.data), threads=args.threads)
+    verdicts = gate(found, Path(args.data), threads=args.threads or GATE_THREADS)
     for verdict in verdicts:
         if verdict.refused is not None:
             print(f"skipped: {verdict.refused}", flush=True)
@@ -444,7 +448,13 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--progress", action="store_true", help="progress bars")
     parser.add_argument("--gate", metavar="DIR", help="score a relay's candidates (on a CPU)")
     parser.add_argument("--dry-run", action="store_true", help="with --gate: change nothing")
-    parser.add_argument("--threads", type=int, default=2, help="with --gate: CPU threads")
+    parser.add_argument(
+        "--threads",
+        type=int,
+        help="CPU threads of each run (default: torch's own count; give 1 to each of two "
+        "relays side by side on a CPU, which otherwise share its cores at a fraction of the "
+        f"speed) or, with --gate, of the scoring (default {GATE_THREADS})",
+    )
     parser.add_argument(
         "--ship-to", help="with --gate: ship into this folder (default: the package's)"
     )
