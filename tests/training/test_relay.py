@@ -200,20 +200,25 @@ def test_colour_relay_appends_the_colour_stage_and_its_cooldown(photos, tmp_path
 
 def test_half_size_relay_trains_every_run_on_the_photos_at_half_size(photos, tmp_path) -> None:
     relay = _relay()
-    argv = ["--minutes", "1", "--data", str(photos), "--queue", "D", "--device", "cpu"]
+    argv = ["--minutes", "1", "--data", str(photos), "--queue", "B", "--device", "cpu"]
     runs = {}
     for flags in ([], ["--half-size"]):
         out = tmp_path / ("half" if flags else "whole")
         args = relay.parse([*argv, "--out", str(out), "--colour", *flags])
         relay.start_folder(out, args)
-        runs[bool(flags)] = relay.relay_configs("D", args, out, 1.0)
+        runs[bool(flags)] = relay.relay_configs("B", args, out, 1.0)
         assert json.loads((out / "relay.json").read_text())["half_size"] is bool(flags)
     from splitcam.recon.loading import load_model
+    from splitcam.training import TrainConfig
 
-    shipped = load_model("D").meta["config"]["data"]["scales"]
+    # B's last stage trained on whole photos and halves (D's, since its relay slot, at half size
+    # only, like the relay's --half-size: it would not tell the two apart).
+    saved = TrainConfig.from_saved(load_model("B").meta["config"]).data
+    assert saved.scales != [0.5] and saved.val_scale == 1.0
+    shipped = saved.scales
     assert [run.data.scales for run in runs[False]] == [shipped, shipped]
     assert [run.data.scales for run in runs[True]] == [[0.5], [0.5]]
-    # Validated at the gate's size where the runs train at half size, on whole photos elsewhere.
+    # Validated at the gate's size where the runs train at half size, else as the recipe did.
     assert [run.data.val_scale for run in runs[True]] == [SCALE, SCALE]
     assert [run.data.val_scale for run in runs[False]] == [1.0, 1.0]
 
