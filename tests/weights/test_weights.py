@@ -76,10 +76,13 @@ def test_every_shipped_model_loads_matches_its_json_and_beats_its_lmmse(name, sh
     assert meta["provenance"]["total_steps"] == sum(s["steps"] for s in segments)
     # a run continued on one schedule has several segments; a fine-tuning adds its own budget,
     # in steps or, where the last segment had a time limit, in minutes of training, which it
-    # may stop short of (universal's GPU segment: 7.0 of 10 minutes) but never exceeds
+    # may stop short of (universal's GPU segment: 7.0 of 10 minutes) but never exceeds by more
+    # than the step under way when the time ran out (D's CPU relay cool-down: 8 s steps, 6 s over)
     limit = stored["config"]["run"].get("time_limit")
     if limit:
-        assert 0 < segments[-1]["train_seconds"] <= 60 * limit + 1
+        last = segments[-1]
+        step = last["train_seconds"] / last["steps"]
+        assert 0 < last["train_seconds"] <= 60 * limit + step + 1
     else:
         assert meta["provenance"]["total_steps"] >= stored["config"]["optim"]["steps"]
 
