@@ -22,6 +22,15 @@ def _relay():
     return relay
 
 
+def _slot_runs(argv: list[str], out: Path, name: str) -> list:
+    """The configurations of ``name``'s runs in a relay started with ``argv`` into ``out``
+    (nothing trained)."""
+    relay = _relay()
+    args = relay.parse([*argv, "--out", str(out), "--colour"])
+    relay.start_folder(out, args)
+    return relay.relay_configs(name, args, out, 1.0)
+
+
 @pytest.fixture(scope="module")
 def photos(tmp_path_factory) -> Path:
     """14 smooth photos of odd sizes (so the held-out ones end part-way through periods), large
@@ -204,14 +213,11 @@ def test_colour_relay_appends_the_colour_stage_and_its_cooldown(photos, tmp_path
 
 
 def test_half_size_relay_trains_every_run_on_the_photos_at_half_size(photos, tmp_path) -> None:
-    relay = _relay()
     argv = ["--minutes", "1", "--data", str(photos), "--queue", "B", "--device", "cpu"]
     runs = {}
     for flags in ([], ["--half-size"]):
         out = tmp_path / ("half" if flags else "whole")
-        args = relay.parse([*argv, "--out", str(out), "--colour", *flags])
-        relay.start_folder(out, args)
-        runs[bool(flags)] = relay.relay_configs("B", args, out, 1.0)
+        runs[bool(flags)] = _slot_runs([*argv, *flags], out, "B")
         assert json.loads((out / "relay.json").read_text())["half_size"] is bool(flags)
     from splitcam.recon.loading import load_model
     from splitcam.training import TrainConfig
@@ -253,18 +259,32 @@ def test_stage_files_of_segments_recorded_before_a_setting_was_added(tmp_path) -
         assert read.optim.steps == segment["settings"]["optim"]["steps"]
 
 
-def test_threads_reach_every_run_and_the_gate_keeps_its_own_default(tmp_path) -> None:
+def test_threads_reach_every_run_and_the_gate_keeps_its_own_default(tmp_path, monkeypatch):
     """``--threads`` sets each run's CPU threads (two relays side by side on a CPU, each at
     torch's own count, share its cores at a fraction of the speed); without it a run keeps
-    torch's count and the gate scores with its own default."""
+    torch's count, and the gate scores with the count given or else its own default."""
     relay = _relay()
     argv = ["--minutes", "1", "--data", str(tmp_path), "--queue", "D", "--device", "cpu"]
     threads = {}
     for flags in ([], ["--threads", "1"]):
         out = tmp_path / ("one" if flags else "default")
-        args = relay.parse([*argv, "--out", str(out), "--colour", *flags])
-        relay.start_folder(out, args)
-        threads[bool(flags)] = [run.run.threads for run in relay.relay_configs("D", args, out, 1)]
+        threads[bool(flags)] = [run.run.threads for run in _slot_runs([*argv, *flags], out, "D")]
     assert threads == {False: [None, None], True: [1, 1]}
-    assert relay.parse(["--gate", str(tmp_path)]).threads is None
-    assert relay.GATE_THREADS == 2
+
+    # What the gate is handed: a relay folder with one candidate, the scoring itself stubbed.
+    from splitcam.training import gate
+
+    folder = tmp_path / "default"
+    (folder / "candidates").mkdir()
+    (folder / "candidates" / "D.json").write_text("{}")
+    handed = []
+
+    def scoring(found, data, threads):
+        handed.append(threads)
+        raise KeyboardInterrupt  # stop before any table is written
+
+    monkeypatch.setattr(gate, "gate", scoring)
+    for flags in ([], ["--threads", "3"]):
+        with pytest.raises(KeyboardInterrupt):
+            relay.main(["--gate", str(folder), "--data", str(tmp_path), *flags])
+    assert handed == [relay.GATE_THREADS, 3] and relay.GATE_THREADS == 2
