@@ -79,6 +79,9 @@ def test_relay_trains_exports_and_tables_within_its_minutes(relayed) -> None:
     assert f"{segment['steps']} steps of batch 2, cpu" in appended and "GPU" not in appended
     table = (relayed / "relay.md").read_text()
     assert "| D |" in table and "| A-opt |" in table and "→" in table
+    # On a CPU the table says how much of its threads each network had.
+    used = _row(table.splitlines(), "D")["CPU used"]
+    assert used.endswith(" of its threads") and 0 < float(used.split()[0]) <= 1.5
     assert (relayed / "runs" / "D" / "checkpoint.safetensors").exists()
     # A-opt learns its pattern: it went on learning it from the shipped A-opt's, so the
     # candidate's pattern moved while the pattern both started from is A.
@@ -288,3 +291,27 @@ def test_threads_reach_every_run_and_the_gate_keeps_its_own_default(tmp_path, mo
         with pytest.raises(KeyboardInterrupt):
             relay.main(["--gate", str(folder), "--data", str(tmp_path), *flags])
     assert handed == [relay.GATE_THREADS, 3] and relay.GATE_THREADS == 2
+
+
+def test_cpu_share_tells_a_busy_process_from_an_idle_one() -> None:
+    """What the relay's "CPU used" column measures: the process's CPU time over its wall time
+    and threads, near 0 for a process that waits and well above it for one that computes."""
+    import time
+
+    relay = _relay()
+
+    def share(work) -> float:
+        cpu, wall = time.process_time(), time.monotonic()
+        work()
+        return relay.cpu_share(time.process_time() - cpu, time.monotonic() - wall, 1)
+
+    def spin() -> None:
+        end = time.monotonic() + 0.3
+        while time.monotonic() < end:
+            pass
+
+    idle, busy = share(lambda: time.sleep(0.3)), share(spin)
+    assert idle < 0.1 and busy > 3 * idle and busy > 0.2
+    assert relay.cpu_share(3.0, 2.0, 3) == pytest.approx(0.5)
+    with pytest.raises(ValueError, match="threads"):
+        relay.cpu_share(1.0, 1.0, 0)

@@ -21,7 +21,9 @@ within ``--minutes`` of wall time. The training photos are decoded once and held
 - Every run checkpoints each minute of training (``run.checkpoint_minutes``) into
   ``DIR/runs/NAME``; each finished run is exported as ``DIR/candidates/NAME.json`` +
   ``.safetensors`` (provenance: device, minutes, steps and batch, so patches seen), and
-  ``DIR/relay.md`` tables the validation PSNR at the start and the end of every run.
+  ``DIR/relay.md`` tables the validation PSNR at the start and the end of every run, and on a
+  CPU how much of its threads each network had (:func:`cpu_share`: two relays side by side
+  that each ask for all the cores get about half, which the thread count alone hides).
 
 **The gate** (``--gate DIR``, on a CPU) scores the candidates by the rule every shipped model
 passes (``splitcam.training.gate``, also ``splitcam models gate``): held-out photos at half
@@ -281,13 +283,17 @@ def run_relay(args: argparse.Namespace) -> int:
             continue
         configs = relay_configs(name, args, out, minutes)
         print(f"{name}: {minutes:.2f} min at batch {args.batch}, peak lr {configs[0].optim.lr:.2g}")
-        began, parts = time.monotonic(), []
+        began, cpu_began, parts = time.monotonic(), time.process_time(), []
         for config in configs:
             result = train(config, progress=args.progress)
             parts.append(summarise(name, config, result))
             if result.failure is not None:
                 break
         row = combine(parts)
+        if args.device == "cpu":
+            row["cpu_share"] = cpu_share(
+                time.process_time() - cpu_began, time.monotonic() - began, torch_threads()
+            )
         overhead = max(0.0, time.monotonic() - began - row["train_s"])
         if row["failure"] is None:
             shipped = described(load_model(name).meta).rstrip(".")
@@ -305,6 +311,21 @@ def run_relay(args: argparse.Namespace) -> int:
     write_table(out / "relay.md", rows, args)
     print((out / "relay.md").read_text())
     return 0
+
+
+def torch_threads() -> int:
+    import torch
+
+    return torch.get_num_threads()
+
+
+def cpu_share(cpu_s: float, wall_s: float, threads: int) -> float:
+    """The share of ``threads`` a process had over ``wall_s`` seconds in which it used ``cpu_s``
+    seconds of CPU time (all its threads together): about 1 when nothing else ran on its cores,
+    about 1/2 when another busy process shared them."""
+    if threads < 1 or wall_s <= 0:
+        raise ValueError(f"threads must be >= 1 and wall_s > 0, got {threads} and {wall_s}")
+    return cpu_s / (wall_s * threads)
 
 
 def summarise(name: str, config, result) -> dict:
@@ -346,10 +367,11 @@ def write_table(path: Path, rows: list[dict], args: argparse.Namespace) -> None:
     from ..evaluation.tables import markdown_table
 
     header = ["model", "steps", "patches", "minutes", "patches/s", "validation start → end"]
+    header += ["device", "CPU used"]
     cells = []
     for r in rows:
         if r.get("skipped"):
-            cells.append([r["model"], "skipped: no time left in its slot", "", "", "", "", ""])
+            cells.append([r["model"], "skipped: no time left in its slot", *[""] * 6])
             continue
         change = ", ".join(
             f"{k.removeprefix('val_psnr_')}: {r['start'][k]:.2f} → {r['end'][k]:.2f}"
@@ -367,12 +389,13 @@ def write_table(path: Path, rows: list[dict], args: argparse.Namespace) -> None:
                 f"{r['patches_per_s']:.0f}",
                 change,
                 r["device"],
+                f"{r['cpu_share']:.2f} of its threads" if "cpu_share" in r else "",
             ]
         )
     title = f"# Relay: {args.minutes:g} minutes, batch {args.batch}, on {args.device}"
     if args.colour:
         title += " (each a colour stage, then a cool-down on the photos)"
-    lines = [title, "", *markdown_table([*header, "device"], cells)]
+    lines = [title, "", *markdown_table(header, cells)]
     path.write_text("\n".join(lines) + "\n")
 
 
