@@ -15,7 +15,7 @@ from PIL import Image
 
 from splitcam.data.patches import ImageCache, MinedWindows, PatchSampler
 from splitcam.training import train
-from splitcam.training.mining import MINED_NAME, chroma_error, mine_colour
+from splitcam.training.mining import MINED_NAME, SCORES, chroma_error, mine_colour, rgb_error
 
 
 def test_chroma_error_is_the_colour_difference_error_written_out() -> None:
@@ -68,6 +68,52 @@ def test_mining_keeps_the_windows_the_network_errs_on_in_colour(grey_and_colour)
     # The sampler's own sequence is untouched by mining.
     again = PatchSampler(grey_and_colour, patch_size=16, seed=0, period=(2, 2))
     assert torch.equal(sampler.sample(4), again.sample(4))
+
+
+def test_rgb_error_is_the_channel_error_written_out() -> None:
+    from splitcam.training.config import MINE_SCORES
+
+    gen = torch.Generator().manual_seed(1)
+    a, b = torch.rand((2, 3, 12, 10), generator=gen), torch.rand((2, 3, 12, 10), generator=gen)
+    got = rgb_error(a, b, border=3)
+    for i in range(2):
+        d = (a[i] - b[i])[:, 3:-3, 3:-3].double().numpy()
+        assert float(got[i]) == pytest.approx(np.mean(d**2), rel=1e-5)
+    assert set(SCORES) == set(MINE_SCORES)
+
+
+class Flattener(torch.nn.Module):
+    """A "network" that keeps each window's mean colour and loses all its structure."""
+
+    def forward(self, rgb: torch.Tensor) -> torch.Tensor:
+        return rgb.mean((2, 3), keepdim=True).expand_as(rgb)
+
+
+def test_mining_by_rgb_error_finds_structure_that_chroma_error_misses(grey_and_colour) -> None:
+    """A network that loses structure errs on the grey image too: only in its channels, not in
+    colour. Mined by chroma error, every kept window is in the colourful half; by rgb error,
+    the grey image's windows are kept as well, each scored by its own rgb error."""
+    sampler = PatchSampler(grey_and_colour, patch_size=16, seed=0, period=(2, 2))
+    kept = {
+        score: mine_colour(
+            Flattener(),
+            sampler,
+            candidates=200,
+            keep=0.3,
+            share=0.5,
+            domain="srgb",
+            seed=3,
+            score=score,
+        )
+        for score in ("chroma", "rgb")
+    }
+    assert bool((kept["chroma"].index == 1).all())
+    assert bool((kept["rgb"].index == 0).any())
+    for corner, index, code, score in zip(
+        kept["rgb"].corner, kept["rgb"].index, kept["rgb"].code, kept["rgb"].score, strict=True
+    ):
+        patch = sampler.assemble(index[None], corner[None], code[None])
+        assert float(score) == pytest.approx(float(rgb_error(Flattener()(patch), patch)), rel=1e-5)
 
 
 def test_a_sampler_draws_mined_windows_with_the_stated_probability(grey_and_colour) -> None:
@@ -139,6 +185,7 @@ def test_a_run_mines_once_keeps_its_windows_and_resumes_exactly(image_folder, tm
         ({"data.colour_mined": 1.5}, "colour_mined must be a probability"),
         ({"data.colour_mined": 0.5, "data.mine_keep": 0.0}, "mine_keep a share"),
         ({"data.mine_candidates": 0}, "mine_candidates must be >= 1"),
+        ({"data.colour_mined": 0.5, "data.mine_score": "luma"}, "mine_score must be one of"),
     ],
 )
 def test_settings_mining_cannot_serve_are_refused(image_folder, tmp_path, changes, message):

@@ -32,6 +32,8 @@ from ..io.paper import PAPER_PATTERNS
 
 #: The smallest training patch: two periods of the largest patterns (4x4).
 MIN_PATCH = 8
+#: What ``data.colour_mined`` can score windows by (:data:`splitcam.training.mining.SCORES`)
+MINE_SCORES = ("chroma", "rgb")
 
 #: Training losses (``optim.loss``); :func:`splitcam.training.trainer.training_loss` computes them.
 LOSSES = ("mse", "log_mse", "l1", "charbonnier")
@@ -266,6 +268,11 @@ class DataConfig:
     )
     mine_candidates: int = _opt(8192, "windows scored when --colour-mined mines")
     mine_keep: float = _opt(0.1, "share of the scored windows --colour-mined keeps, in (0, 1]")
+    mine_score: str = _opt(
+        "chroma",
+        "what --colour-mined scores a window by: chroma (the error of its Cb and Cr colour "
+        "differences) or rgb (of its three channels: fine structure as well as colour)",
+    )
     domain: str = _opt(
         DEFAULT_DOMAIN,
         "light domain (model.md §13): srgb (the paper's: the 8-bit values / 255 are the "
@@ -305,6 +312,10 @@ class DataConfig:
                 0 <= self.colour_mined <= 1 and 0 < self.mine_keep <= 1,
                 "data.colour_mined must be a probability in [0, 1] and data.mine_keep a share "
                 f"in (0, 1], got {self.colour_mined} and {self.mine_keep}",
+            ),
+            (
+                self.mine_score in MINE_SCORES,
+                f"data.mine_score must be one of {', '.join(MINE_SCORES)}, got {self.mine_score!r}",
             ),
             (
                 self.mine_candidates >= 1,

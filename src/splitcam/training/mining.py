@@ -6,7 +6,8 @@ because the artefacts that matter (moiré, zippering, false colour) live in a sm
 patches that uniform sampling rarely shows. Here the score is the error in colour: of
 ``data.mine_candidates`` windows drawn at random from the training images, each is reconstructed
 by the run's starting network at σ 0 and scored by the mean squared error of its two colour
-differences (BT.601 Cb and Cr of the display values, a few pixels of border left out); the
+differences (BT.601 Cb and Cr of the display values, a few pixels of border left out), or with
+``data.mine_score = "rgb"`` by that of all three channels (fine structure as well as colour); the
 ``data.mine_keep`` share with the largest scores is kept, and each training patch is one of them
 with probability ``data.colour_mined`` (:class:`~splitcam.data.patches.MinedWindows`).
 
@@ -28,7 +29,7 @@ from ..data.patches import MinedWindows, PatchSampler
 from ..physics.light import decode_scene, encode_estimate
 from .seeds import mining_seed
 
-__all__ = ["MINED_NAME", "chroma_error", "mine_colour", "mined_windows"]
+__all__ = ["MINED_NAME", "SCORES", "chroma_error", "mine_colour", "mined_windows", "rgb_error"]
 
 logger = logging.getLogger(__name__)
 
@@ -52,6 +53,17 @@ def chroma_error(estimate: torch.Tensor, truth: torch.Tensor, border: int = BORD
     return diff[:, 1:].square().mean((1, 2, 3))
 
 
+def rgb_error(estimate: torch.Tensor, truth: torch.Tensor, border: int = BORDER) -> torch.Tensor:
+    """Mean squared error of the three channels per image, ``border`` pixels left out on every
+    side (shapes as :func:`chroma_error`)."""
+    inner = (..., slice(border, -border or None), slice(border, -border or None))
+    return (estimate[inner].float() - truth[inner].float()).square().mean((1, 2, 3))
+
+
+#: The window scores, by ``data.mine_score``
+SCORES = {"chroma": chroma_error, "rgb": rgb_error}
+
+
 @torch.no_grad()
 def mine_colour(
     system: torch.nn.Module,
@@ -64,11 +76,13 @@ def mine_colour(
     seed: int,
     device: torch.device | str = "cpu",
     progress: bool = False,
+    score: str = "chroma",
 ) -> MinedWindows:
     """The ``keep`` share of ``candidates`` random windows of ``sampler``'s images (cut to
     whole periods as it cuts them) whose estimates by ``system`` (noise-free) have the largest
-    :func:`chroma_error`. The draws use a generator of their own (``seed``), so the sampler's
-    sequence is untouched."""
+    error, :func:`chroma_error` or (``score="rgb"``) :func:`rgb_error`. The draws use a
+    generator of their own (``seed``), so the sampler's sequence is untouched."""
+    error = SCORES[score]
     scout = PatchSampler(
         sampler.cache, patch_size=sampler.patch_size, seed=seed, period=sampler.period
     )
@@ -76,7 +90,7 @@ def mine_colour(
     was_training = system.training
     system.eval()
     drawn, scores = [], []
-    bar = tqdm(total=candidates, desc="mining colour errors", unit="window", disable=not progress)
+    bar = tqdm(total=candidates, desc=f"mining {score} errors", unit="window", disable=not progress)
     try:
         left = candidates
         while left > 0:
@@ -85,7 +99,7 @@ def mine_colour(
             scene = decode_scene(scout.assemble(*choice)[..., :rows, :cols].to(device), domain)
             estimate = encode_estimate(system(scene), domain)
             truth = encode_estimate(scene, domain)
-            scores.append(chroma_error(estimate.clamp(0, 1), truth).cpu())
+            scores.append(error(estimate.clamp(0, 1), truth).cpu())
             drawn.append(choice)
             left -= n
             bar.update(n)
@@ -124,13 +138,15 @@ def mined_windows(
         seed=mining_seed(config),
         device=device,
         progress=progress,
+        score=data.mine_score,
     )
     if save:
         save_file(mined.tensors(), path)
     logger.info(
-        "mined %d windows of %d by colour error (kept scores %.2e .. %.2e) into %s",
+        "mined %d windows of %d by %s error (kept scores %.2e .. %.2e) into %s",
         len(mined.index),
         data.mine_candidates,
+        data.mine_score,
         float(mined.score.min()),
         float(mined.score.max()),
         path,
