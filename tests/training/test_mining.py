@@ -18,18 +18,29 @@ from splitcam.training import train
 from splitcam.training.mining import MINED_NAME, SCORES, chroma_error, mine_colour, rgb_error
 
 
-def test_chroma_error_is_the_colour_difference_error_written_out() -> None:
+def _pairs(border: int):
+    """Two random batches, each score of them, and each pair's difference inside ``border``."""
     gen = torch.Generator().manual_seed(0)
     a, b = torch.rand((2, 3, 12, 10), generator=gen), torch.rand((2, 3, 12, 10), generator=gen)
-    got = chroma_error(a, b, border=2)
-    for i in range(2):
-        d = (a[i] - b[i])[:, 2:-2, 2:-2].double().numpy()
+    inner = (a - b)[:, :, border:-border, border:-border].double().numpy()
+    return a, b, {name: score(a, b, border=border) for name, score in SCORES.items()}, inner
+
+
+def test_each_mining_score_is_its_error_written_out() -> None:
+    from splitcam.training.config import MINE_SCORES
+
+    assert set(SCORES) == set(MINE_SCORES)
+    a, _, got, inner = _pairs(2)
+    for i, d in enumerate(inner):
         y = 0.299 * d[0] + 0.587 * d[1] + 0.114 * d[2]
         cb, cr = (d[2] - y) / 1.772, (d[0] - y) / 1.402
-        assert float(got[i]) == pytest.approx(np.mean(np.concatenate([cb, cr]) ** 2), rel=1e-5)
+        chroma = np.mean(np.concatenate([cb, cr]) ** 2)
+        assert float(got["chroma"][i]) == pytest.approx(chroma, rel=1e-5)
+        assert float(got["rgb"][i]) == pytest.approx(np.mean(d**2), rel=1e-5)
     grey = a.mean(1, keepdim=True).expand(-1, 3, -1, -1)
-    # A luma-only error is no colour error.
+    # A luma-only error is no colour error, and all of it an rgb error.
     assert torch.allclose(chroma_error(grey + 0.1, grey), torch.zeros(2), atol=1e-10)
+    assert torch.allclose(rgb_error(grey + 0.1, grey), torch.full((2,), 0.01), atol=1e-7)
 
 
 class Greyer(torch.nn.Module):
@@ -68,18 +79,6 @@ def test_mining_keeps_the_windows_the_network_errs_on_in_colour(grey_and_colour)
     # The sampler's own sequence is untouched by mining.
     again = PatchSampler(grey_and_colour, patch_size=16, seed=0, period=(2, 2))
     assert torch.equal(sampler.sample(4), again.sample(4))
-
-
-def test_rgb_error_is_the_channel_error_written_out() -> None:
-    from splitcam.training.config import MINE_SCORES
-
-    gen = torch.Generator().manual_seed(1)
-    a, b = torch.rand((2, 3, 12, 10), generator=gen), torch.rand((2, 3, 12, 10), generator=gen)
-    got = rgb_error(a, b, border=3)
-    for i in range(2):
-        d = (a[i] - b[i])[:, 3:-3, 3:-3].double().numpy()
-        assert float(got[i]) == pytest.approx(np.mean(d**2), rel=1e-5)
-    assert set(SCORES) == set(MINE_SCORES)
 
 
 class Flattener(torch.nn.Module):
