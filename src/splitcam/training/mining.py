@@ -41,6 +41,11 @@ BORDER = 4
 CHUNK = 32
 
 
+def _inside(images: torch.Tensor, border: int) -> torch.Tensor:
+    """``images`` without ``border`` pixels on every side, in float32."""
+    return images[..., border : -border or None, border : -border or None].float()
+
+
 def chroma_error(estimate: torch.Tensor, truth: torch.Tensor, border: int = BORDER) -> torch.Tensor:
     """Mean squared error of the colour differences (Cb, Cr) per image, ``border`` pixels left
     out on every side.
@@ -48,16 +53,14 @@ def chroma_error(estimate: torch.Tensor, truth: torch.Tensor, border: int = BORD
     Shape:
         estimate, truth: ``(B, 3, H, W)`` display values; output: ``(B,)``.
     """
-    inner = (..., slice(border, -border or None), slice(border, -border or None))
-    diff = rgb_to_opponent(estimate[inner].float()) - rgb_to_opponent(truth[inner].float())
+    diff = rgb_to_opponent(_inside(estimate, border)) - rgb_to_opponent(_inside(truth, border))
     return diff[:, 1:].square().mean((1, 2, 3))
 
 
 def rgb_error(estimate: torch.Tensor, truth: torch.Tensor, border: int = BORDER) -> torch.Tensor:
     """Mean squared error of the three channels per image, ``border`` pixels left out on every
     side (shapes as :func:`chroma_error`)."""
-    inner = (..., slice(border, -border or None), slice(border, -border or None))
-    return (estimate[inner].float() - truth[inner].float()).square().mean((1, 2, 3))
+    return (_inside(estimate, border) - _inside(truth, border)).square().mean((1, 2, 3))
 
 
 #: The window scores, by ``data.mine_score``

@@ -291,8 +291,10 @@ def run_relay(args: argparse.Namespace) -> int:
                 break
         row = combine(parts)
         if args.device == "cpu":
+            import torch
+
             row["cpu_share"] = cpu_share(
-                time.process_time() - cpu_began, time.monotonic() - began, torch_threads()
+                time.process_time() - cpu_began, time.monotonic() - began, torch.get_num_threads()
             )
         overhead = max(0.0, time.monotonic() - began - row["train_s"])
         if row["failure"] is None:
@@ -311,12 +313,6 @@ def run_relay(args: argparse.Namespace) -> int:
     write_table(out / "relay.md", rows, args)
     print((out / "relay.md").read_text())
     return 0
-
-
-def torch_threads() -> int:
-    import torch
-
-    return torch.get_num_threads()
 
 
 def cpu_share(cpu_s: float, wall_s: float, threads: int) -> float:
