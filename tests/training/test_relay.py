@@ -237,6 +237,32 @@ def test_half_size_relay_trains_every_run_on_the_photos_at_half_size(photos, tmp
     assert [run.data.val_scale for run in runs[False]] == [1.0, 1.0]
 
 
+def test_colour_mined_reaches_the_colour_part_only(photos, tmp_path, capsys) -> None:
+    """``--colour-mined P --mine-score S`` mines P of the colour part's patches by S, recorded in
+    the relay's folder; the cool-down trains on the photos alone; without it the colour part
+    mines nothing. Mining without the colour stage, or a share outside [0, 1], is refused."""
+    relay = _relay()
+    argv = ["--minutes", "1", "--data", str(photos), "--queue", "D", "--device", "cpu"]
+    plain = _slot_runs(argv, tmp_path / "plain", "D")
+    mined = _slot_runs(
+        [*argv, "--colour-mined", "0.5", "--mine-score", "rgb"], tmp_path / "mined", "D"
+    )
+    assert [(r.data.colour_mined, r.data.mine_score) for r in mined] == [
+        (0.5, "rgb"),
+        (0.0, "chroma"),
+    ]
+    assert [r.data.colour_mined for r in plain] == [0.0, 0.0]
+    # The rest of the colour part is the same stage.
+    assert [r.data.colour_swap for r in mined] == [r.data.colour_swap for r in plain]
+    record = json.loads((tmp_path / "mined" / "relay.json").read_text())
+    assert (record["colour_mined"], record["mine_score"]) == (0.5, "rgb")
+    for bad in (["--colour-mined", "0.5"], ["--colour-mined", "1.5", "--colour"]):
+        with pytest.raises(SystemExit):
+            relay.parse([*argv, "--out", str(tmp_path / "bad"), *bad])
+        assert "--colour-mined" in capsys.readouterr().err
+    assert not (tmp_path / "bad").exists()
+
+
 def test_stage_files_of_segments_recorded_before_a_setting_was_added(tmp_path) -> None:
     """A shipped model's relay segment recorded before a setting existed (here data.val_scale,
     popped from the record) is written out with the value that reproduces it, and reads back

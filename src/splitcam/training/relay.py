@@ -36,6 +36,9 @@ becomes the stage ``bayer`` shipped with, scaled to the GPU: two thirds of it wi
 the patches taking another patch's chroma and a quarter chroma-moved (``COLOUR_STAGE``), then a
 third on the photos alone at half the rate, continued from the first (``runs/NAME-colour``, then
 ``runs/NAME``); the candidate is the second, its provenance holding both segments.
+``--colour-mined P`` adds to the colour part the third lever, patches mined where the shipped
+network errs most (``data.colour_mined``, scored by ``--mine-score``: ``chroma`` or ``rgb``;
+:mod:`splitcam.training.mining`); the cool-down trains on the photos alone, as without it.
 
 **Half size** (``--half-size``): every run trains on the photos at half their size
 (``data.scales = [0.5]``), where the JPEG photos' chroma is as fine as their luma
@@ -62,6 +65,7 @@ import sys
 import time
 from pathlib import Path
 
+from .config import MINE_SCORES
 from .gate import SCALE
 
 QUEUE = ["universal", "universal-photon", "A", "D", "D-opt", "B", "A-opt"]
@@ -119,6 +123,8 @@ def relay_configs(name: str, args: argparse.Namespace, out: Path, minutes: float
     stage = config.override(
         {
             **COLOUR_STAGE,
+            "data.colour_mined": args.colour_mined,
+            "data.mine_score": args.mine_score,
             "run.out": str(colour_dir),
             "run.config_file": stage_file(out, colour_dir.name),
             "run.time_limit": minutes * (1 - COOLDOWN_SHARE),
@@ -253,6 +259,8 @@ def start_folder(out: Path, args: argparse.Namespace) -> None:
         "device": args.device,
         "data": str(args.data),
         "colour": args.colour,
+        "colour_mined": args.colour_mined,
+        "mine_score": args.mine_score,
         "half_size": args.half_size,
     }
     marker.write_text(json.dumps(record, indent=1) + "\n")
@@ -300,6 +308,8 @@ def run_relay(args: argparse.Namespace) -> int:
         if row["failure"] is None:
             shipped = described(load_model(name).meta).rstrip(".")
             what = "a colour stage and a cool-down" if args.colour else "the relay"
+            if args.colour and args.colour_mined:
+                what = f"a colour stage with mined patches ({args.mine_score}) and a cool-down"
             export_model(
                 result.run_dir,
                 out / "candidates" / name,
@@ -390,7 +400,12 @@ def write_table(path: Path, rows: list[dict], args: argparse.Namespace) -> None:
         )
     title = f"# Relay: {args.minutes:g} minutes, batch {args.batch}, on {args.device}"
     if args.colour:
-        title += " (each a colour stage, then a cool-down on the photos)"
+        mined = (
+            f", {args.colour_mined:g} of its patches mined by {args.mine_score} error"
+            if args.colour_mined
+            else ""
+        )
+        title += f" (each a colour stage{mined}, then a cool-down on the photos)"
     lines = [title, "", *markdown_table(header, cells)]
     path.write_text("\n".join(lines) + "\n")
 
@@ -457,6 +472,21 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
         "chroma-moved), then a third on the photos alone at half the rate",
     )
     parser.add_argument(
+        "--colour-mined",
+        type=float,
+        default=0.0,
+        metavar="P",
+        help="with --colour: the share of the colour part's patches drawn from windows mined "
+        "where the shipped network errs most (data.colour_mined)",
+    )
+    parser.add_argument(
+        "--mine-score",
+        choices=MINE_SCORES,
+        default=MINE_SCORES[0],
+        help="with --colour-mined: score the windows by their chroma error or by the error of "
+        "all three channels (data.mine_score)",
+    )
+    parser.add_argument(
         "--half-size",
         action="store_true",
         help="train on the photos at half size, where their JPEG chroma is as fine as their luma",
@@ -482,6 +512,10 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
         parser.error("give --minutes and --out (a relay) or --gate DIR")
     if args.gate is not None and args.minutes is not None:
         parser.error("--gate scores a finished relay: leave --minutes out")
+    if not 0 <= args.colour_mined <= 1:
+        parser.error(f"--colour-mined must be a share in [0, 1], got {args.colour_mined}")
+    if args.colour_mined and not args.colour:
+        parser.error("--colour-mined mines patches for the colour stage: give --colour too")
     return args
 
 
