@@ -262,8 +262,8 @@ class DataConfig:
         0.0,
         "probability that a patch is drawn from windows mined where the starting network's "
         "colour error is largest: of --mine-candidates windows drawn at random, the "
-        "--mine-keep share with the largest chroma error of its estimate at σ 0 (demosaicnet's "
-        "hard-patch mining, scored by colour; mined once at the run's start and kept in the "
+        "--mine-keep share with the largest error of its estimate at σ 0, by --mine-score "
+        "(demosaicnet's hard-patch mining; mined once at the run's start and kept in the "
         "run folder; splitcam.training.mining)",
     )
     mine_candidates: int = _opt(8192, "windows scored when --colour-mined mines")
