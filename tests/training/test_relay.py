@@ -261,6 +261,16 @@ def test_colour_mined_reaches_the_colour_part_only(photos, tmp_path, capsys) -> 
             relay.parse([*argv, "--out", str(tmp_path / "bad"), *bad])
         assert "--colour-mined" in capsys.readouterr().err
     assert not (tmp_path / "bad").exists()
+    # A queued network that cannot mine (universal trains on a new pattern each step) is
+    # refused before the network ahead of it trains, in one line, leaving no folder.
+    both = ["--minutes", "1", "--data", str(photos), "--queue", "D", "universal", "--device", "cpu"]
+    assert (
+        relay.main([*both, "--colour", "--colour-mined", "0.5", "--out", str(tmp_path / "bad")])
+        == 2
+    )
+    err = capsys.readouterr().err.strip()
+    assert "universal: data.colour_mined" in err and len(err.splitlines()) == 1
+    assert not (tmp_path / "bad").exists()
 
 
 def test_stage_files_of_segments_recorded_before_a_setting_was_added(tmp_path) -> None:

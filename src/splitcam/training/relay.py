@@ -113,6 +113,20 @@ def check_queue(queue: list[str]) -> None:
         raise RelayError("a model is named twice in the queue")
 
 
+def check_configs(args: argparse.Namespace, out: Path) -> None:
+    """Every queued network's runs validated before any trains, so that a setting one of them
+    cannot take (``--colour-mined`` for ``universal``, which trains on a new pattern each
+    step) is refused at the start, not after the networks before it have trained."""
+    from .config import ConfigError
+
+    for name in args.queue:
+        for config in relay_configs(name, args, out, 1.0):
+            try:
+                config.validate()
+            except ConfigError as exc:
+                raise RelayError(f"{name}: {exc}") from None
+
+
 def relay_configs(name: str, args: argparse.Namespace, out: Path, minutes: float) -> list:
     """The runs of one queued network, in order, each continuing the one before: its recipe
     alone, or (``--colour``) the colour stage and the cool-down on the photos."""
@@ -279,7 +293,15 @@ def run_relay(args: argparse.Namespace) -> int:
     check_queue(args.queue)
     list_images(args.data)  # a missing or empty photo folder, before anything is written
     out = Path(args.out)
+    existed = out.exists()
     start_folder(out, args)
+    try:
+        check_configs(args, out)
+    except RelayError:
+        (out / MARKER).unlink()
+        if not existed:
+            out.rmdir()
+        raise
     deadline = time.monotonic() + 60 * args.minutes
     overhead, rows = min(FIRST_OVERHEAD_S, 12 * args.minutes), []
     for i, name in enumerate(args.queue):
