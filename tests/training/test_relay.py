@@ -240,7 +240,8 @@ def test_half_size_relay_trains_every_run_on_the_photos_at_half_size(photos, tmp
 def test_colour_mined_reaches_the_colour_part_only(photos, tmp_path, capsys) -> None:
     """``--colour-mined P --mine-score S`` mines P of the colour part's patches by S, recorded in
     the relay's folder; the cool-down trains on the photos alone; without it the colour part
-    mines nothing. Mining without the colour stage, or a share outside [0, 1], is refused."""
+    mines nothing. Mining without the colour stage, a share outside [0, 1], or a queue with a
+    network that cannot mine, is refused."""
     relay = _relay()
     argv = ["--minutes", "1", "--data", str(photos), "--queue", "D", "--device", "cpu"]
     plain = _slot_runs(argv, tmp_path / "plain", "D")
@@ -256,6 +257,15 @@ def test_colour_mined_reaches_the_colour_part_only(photos, tmp_path, capsys) -> 
     assert [r.data.colour_swap for r in mined] == [r.data.colour_swap for r in plain]
     record = json.loads((tmp_path / "mined" / "relay.json").read_text())
     assert (record["colour_mined"], record["mine_score"]) == (0.5, "rgb")
+    # The table's title (and the candidates' descriptions, in the same words) say it.
+    for folder, said in (("mined", "0.5 of its patches mined by rgb error"), ("plain", "")):
+        args = relay.parse(
+            [*argv, "--colour-mined", "0.5" if said else "0", "--mine-score", "rgb"]
+            + ["--colour", "--out", str(tmp_path / folder)]
+        )
+        relay.write_table(tmp_path / folder / "relay.md", [], args)
+        title = (tmp_path / folder / "relay.md").read_text().splitlines()[0]
+        assert ("mined" in title) == bool(said) and said in title and "cool-down" in title
     for bad in (["--colour-mined", "0.5"], ["--colour-mined", "1.5", "--colour"]):
         with pytest.raises(SystemExit):
             relay.parse([*argv, "--out", str(tmp_path / "bad"), *bad])

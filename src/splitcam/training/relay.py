@@ -329,9 +329,7 @@ def run_relay(args: argparse.Namespace) -> int:
         overhead = max(0.0, time.monotonic() - began - row["train_s"])
         if row["failure"] is None:
             shipped = described(load_model(name).meta).rstrip(".")
-            what = "a colour stage and a cool-down" if args.colour else "the relay"
-            if args.colour and args.colour_mined:
-                what = f"a colour stage with mined patches ({args.mine_score}) and a cool-down"
+            what = colour_stage_words(args) if args.colour else "the relay"
             export_model(
                 result.run_dir,
                 out / "candidates" / name,
@@ -354,6 +352,17 @@ def cpu_share(cpu_s: float, wall_s: float, threads: int) -> float:
     if threads < 1 or wall_s <= 0:
         raise ValueError(f"threads must be >= 1 and wall_s > 0, got {threads} and {wall_s}")
     return cpu_s / (wall_s * threads)
+
+
+def colour_stage_words(args: argparse.Namespace) -> str:
+    """What ``--colour`` trains each network on, in the words of the relay's table and of its
+    candidates' descriptions."""
+    mined = (
+        f", {args.colour_mined:g} of its patches mined by {args.mine_score} error,"
+        if args.colour_mined
+        else ""
+    )
+    return f"a colour stage{mined} and a cool-down on the photos"
 
 
 def summarise(name: str, config, result) -> dict:
@@ -422,12 +431,7 @@ def write_table(path: Path, rows: list[dict], args: argparse.Namespace) -> None:
         )
     title = f"# Relay: {args.minutes:g} minutes, batch {args.batch}, on {args.device}"
     if args.colour:
-        mined = (
-            f", {args.colour_mined:g} of its patches mined by {args.mine_score} error"
-            if args.colour_mined
-            else ""
-        )
-        title += f" (each a colour stage{mined}, then a cool-down on the photos)"
+        title += f" (each {colour_stage_words(args)})"
     lines = [title, "", *markdown_table(header, cells)]
     path.write_text("\n".join(lines) + "\n")
 
