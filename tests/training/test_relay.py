@@ -283,6 +283,49 @@ def test_colour_mined_reaches_the_colour_part_only(photos, tmp_path, capsys) -> 
     assert not (tmp_path / "bad").exists()
 
 
+def test_a_run_that_sets_up_long_shortens_the_next_not_the_slot(photos, tmp_path, monkeypatch):
+    """A colour slot's runs within its wall time, on a clock the fake runs advance by their
+    set-up and their training: a colour part that sets up for 90 s (mining its patches) where 15
+    were expected leaves its cool-down what is left of the slot, so the slot ends within it; one
+    that sets up as expected leaves the cool-down its planned third, never more; one that took
+    the whole slot leaves the cool-down the shortest run the relay trains."""
+    import splitcam.training as training
+
+    relay = _relay()
+    argv = ["--minutes", "31", "--data", str(photos), "--queue", "D", "--device", "cpu"]
+    args = relay.parse([*argv, "--out", str(tmp_path), "--colour"])
+    relay.start_folder(tmp_path, args)
+    configs = relay.relay_configs("D", args, tmp_path, 30.0)
+    overhead, slot_s = 30.0, 30.0 * 60 + 30.0
+
+    class Result:
+        failure, run_dir = None, None
+
+    def slot(first_setup_s: float) -> tuple[list[float], float]:
+        clock, limits = [0.0], []
+
+        def fake_train(config, progress=False):
+            limits.append(config.run.time_limit)
+            clock[0] += (first_setup_s if len(limits) == 1 else 15.0) + 60 * limits[-1]
+            return Result()
+
+        monkeypatch.setattr(training, "train", fake_train)
+        monkeypatch.setattr(relay, "summarise", lambda name, config, result: {"model": name})
+        parts, _ = relay.run_slot("D", configs, slot_s, overhead, False, clock=lambda: clock[0])
+        assert len(parts) == 2
+        return limits, clock[0]
+
+    assert [c.run.time_limit for c in configs] == pytest.approx([20.0, 10.0])
+    limits, ended = slot(90.0)
+    # 20 min + 90 s of the 30.5-min slot gone: 8.75 min left after the cool-down's own 15 s.
+    assert limits == pytest.approx([20.0, (slot_s - 20 * 60 - 90 - 15) / 60])
+    assert ended == pytest.approx(slot_s)
+    limits, ended = slot(15.0)
+    assert limits == pytest.approx([20.0, 10.0]) and ended == pytest.approx(slot_s)
+    limits, _ = slot(12.0 * 60)
+    assert limits == pytest.approx([20.0, relay.MIN_SLOT_MIN])
+
+
 def test_stage_files_of_segments_recorded_before_a_setting_was_added(tmp_path) -> None:
     """A shipped model's relay segment recorded before a setting existed (here data.val_scale,
     popped from the record) is written out with the value that reproduces it, and reads back

@@ -17,7 +17,10 @@ within ``--minutes`` of wall time. The training photos are decoded once and held
   other network. Each network in turn gets the wall time left times its share over the shares
   still to come, less the set-up and validation time measured on the network before it (for
   the first, 30 s or a fifth of the minutes, whichever is less); a slot under 0.2 minutes of
-  training is skipped and said.
+  training is skipped and said. Within a slot of two runs (``--colour``), the second gets what
+  is left of the slot when the first ends, at most its planned share (:func:`run_slot`), so a
+  first run that set up for longer than expected (mining) does not carry the relay past
+  ``--minutes``.
 - Every run checkpoints each minute of training (``run.checkpoint_minutes``) into
   ``DIR/runs/NAME``; each finished run is exported as ``DIR/candidates/NAME.json`` +
   ``.safetensors`` (provenance: device, minutes, steps and batch, so patches seen), and
@@ -67,6 +70,8 @@ from pathlib import Path
 
 from .config import MINE_SCORES
 from .gate import SCALE
+
+logger = logging.getLogger(__name__)
 
 QUEUE = ["universal", "universal-photon", "A", "D", "D-opt", "B", "A-opt"]
 SHARES = {"universal": 3, "universal-photon": 2}
@@ -283,7 +288,6 @@ def start_folder(out: Path, args: argparse.Namespace) -> None:
 def run_relay(args: argparse.Namespace) -> int:
     from ..data.patches import list_images
     from ..recon.loading import load_model
-    from . import train
     from .models import described, export_model
 
     if not args.minutes > 0:
@@ -313,12 +317,8 @@ def run_relay(args: argparse.Namespace) -> int:
             continue
         configs = relay_configs(name, args, out, minutes)
         print(f"{name}: {minutes:.2f} min at batch {args.batch}, peak lr {configs[0].optim.lr:.2g}")
-        began, cpu_began, parts = time.monotonic(), time.process_time(), []
-        for config in configs:
-            result = train(config, progress=args.progress)
-            parts.append(summarise(name, config, result))
-            if result.failure is not None:
-                break
+        began, cpu_began = time.monotonic(), time.process_time()
+        parts, result = run_slot(name, configs, 60 * minutes + overhead, overhead, args.progress)
         row = combine(parts)
         if args.device == "cpu":
             import torch
@@ -343,6 +343,33 @@ def run_relay(args: argparse.Namespace) -> int:
     write_table(out / "relay.md", rows, args)
     print((out / "relay.md").read_text())
     return 0
+
+
+def run_slot(
+    name: str, configs: list, slot_s: float, overhead_s: float, progress: bool, clock=None
+) -> tuple[list[dict], object]:
+    """Train one network's runs in order within ``slot_s`` seconds of wall time, of which
+    ``overhead_s`` is the set-up and validation expected of all of them together. Each run gets
+    its planned minutes, cut to what is left of the slot less its part of that overhead (never
+    under :data:`MIN_SLOT_MIN`, or its plan where that is shorter): so a run that set up for
+    longer than expected, mining its patches before the colour part trains, shortens the run
+    after it instead of running past the slot. Returns the runs' :func:`summarise` rows and
+    the last run's result."""
+    from . import train
+
+    clock = clock or time.monotonic
+    end, parts, result = clock() + slot_s, [], None
+    for config in configs:
+        left = (end - clock() - overhead_s / len(configs)) / 60
+        planned = config.run.time_limit
+        if left < planned:
+            logger.info("%s: %.2f of its %.2f min left in the slot", name, left, planned)
+            config = config.override({"run.time_limit": max(left, min(planned, MIN_SLOT_MIN))})
+        result = train(config, progress=progress)
+        parts.append(summarise(name, config, result))
+        if result.failure is not None:
+            break
+    return parts, result
 
 
 def cpu_share(cpu_s: float, wall_s: float, threads: int) -> float:
